@@ -1,0 +1,71 @@
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::ScanPair;
+
+/// The file formats dhct reads or writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FileFormat {
+    /// RHK Technology SM4 (binary, little-endian).
+    RhkSm4,
+    /// Nanonis SXM (text header + big-endian float32).
+    NanonisSxm,
+    /// ISO 28600 SPM data transfer format (text).
+    Iso28600,
+    /// Gwyddion Simple Field (.gsf).
+    Gsf,
+    /// NumPy array (.npy).
+    Npy,
+    /// Float or integer TIFF.
+    Tiff,
+    /// PNG image.
+    Png,
+}
+
+impl FileFormat {
+    /// A short human-readable name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FileFormat::RhkSm4 => "RHK SM4",
+            FileFormat::NanonisSxm => "Nanonis SXM",
+            FileFormat::Iso28600 => "ISO 28600",
+            FileFormat::Gsf => "Gwyddion Simple Field",
+            FileFormat::Npy => "NumPy NPY",
+            FileFormat::Tiff => "TIFF",
+            FileFormat::Png => "PNG",
+        }
+    }
+}
+
+/// Everything a reader found in one file: one [`ScanPair`] per channel, plus header metadata.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScanFile {
+    /// The format the file was read as.
+    pub format: FileFormat,
+    /// One entry per channel (topography, current, ...), in file order.
+    pub pairs: Vec<ScanPair>,
+    /// Header fields worth showing a user (free-form key → value, e.g. "date", "bias").
+    pub metadata: BTreeMap<String, String>,
+}
+
+impl ScanFile {
+    /// The topography channel: the first channel whose name contains "topo" or "height"
+    /// or "z" as a whole word (case-insensitive), else the first channel in metres, else
+    /// the first channel.
+    pub fn topography(&self) -> Option<&ScanPair> {
+        let named = |pair: &&ScanPair| {
+            let name = pair.name().to_ascii_lowercase();
+            name.contains("topo")
+                || name.contains("height")
+                || name.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| w == "z")
+        };
+        let in_metres = |pair: &&ScanPair| pair.images().any(|(_, c)| c.unit == "m");
+        self.pairs
+            .iter()
+            .find(named)
+            .or_else(|| self.pairs.iter().find(in_metres))
+            .or_else(|| self.pairs.first())
+    }
+}

@@ -1,0 +1,48 @@
+use dhct_scan::FileFormat;
+
+/// Recognises a file format from its first bytes. Returns `None` for anything else.
+pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
+    if crate::sm4::looks_like_sm4(bytes) {
+        return Some(FileFormat::RhkSm4);
+    }
+    let text_start = |magic: &str| {
+        let skip_bom = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+        skip_bom.starts_with(magic.as_bytes())
+    };
+    if text_start(":NANONIS_VERSION:") {
+        Some(FileFormat::NanonisSxm)
+    } else if text_start("ISO/TC 201 SPM data transfer format") {
+        Some(FileFormat::Iso28600)
+    } else if text_start("Gwyddion Simple Field") {
+        Some(FileFormat::Gsf)
+    } else if bytes.starts_with(b"\x93NUMPY") {
+        Some(FileFormat::Npy)
+    } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        Some(FileFormat::Tiff)
+    } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        Some(FileFormat::Png)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recognises_magic_bytes_and_rejects_others() {
+        assert_eq!(detect_format(b":NANONIS_VERSION:\n2\n"), Some(FileFormat::NanonisSxm));
+        assert_eq!(
+            detect_format(b"ISO/TC 201 SPM data transfer format\r\n"),
+            Some(FileFormat::Iso28600)
+        );
+        assert_eq!(detect_format(b"Gwyddion Simple Field 1.0\n"), Some(FileFormat::Gsf));
+        assert_eq!(detect_format(b"\x93NUMPY\x01\x00"), Some(FileFormat::Npy));
+        assert_eq!(detect_format(b"II*\0\x08\0\0\0"), Some(FileFormat::Tiff));
+        assert_eq!(detect_format(b"MM\0*\0\0\0\x08"), Some(FileFormat::Tiff));
+        assert_eq!(detect_format(b""), None);
+        assert_eq!(detect_format(b"hello world"), None);
+        assert_eq!(detect_format(&[0xFF; 64]), None);
+    }
+}

@@ -1,0 +1,90 @@
+//! Reading and writing STM image files into the [`dhct_scan`] data model.
+//!
+//! | format | read | write | module |
+//! |---|---|---|---|
+//! | RHK SM4 | yes | yes | [`sm4`] |
+//! | Nanonis SXM | yes | — | [`sxm`] |
+//! | ISO 28600 SPM transfer format | yes | — | [`iso28600`] |
+//! | Gwyddion Simple Field (.gsf) | yes | yes | [`gsf`] |
+//! | NumPy .npy | yes | yes | [`npy`] |
+//! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
+//! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
+//!
+//! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
+//! the whole file as a byte slice and checks every length against it before allocating, so
+//! truncated, foreign or hostile files give a typed [`ReadError`], never a panic.
+//! Every image comes back in display orientation (row 0 at the top) with its
+//! [`dhct_scan::ScanGeometry`]; values the format lacks are marked
+//! [`dhct_scan::ValueSource::Assumed`] and can be supplied with [`GeometryOverrides`].
+//!
+//! ```no_run
+//! let file = dhct_sm4_io::read_path("scan.sm4".as_ref()).unwrap();
+//! let topography = file.topography().unwrap();
+//! println!("{} x {} px", topography.geometry().columns(), topography.geometry().rows());
+//! ```
+
+mod atomic;
+pub mod bytes;
+mod detect;
+mod error;
+pub mod gsf;
+pub mod iso28600;
+pub mod npy;
+mod overrides;
+pub mod png_file;
+pub mod sm4;
+pub mod sxm;
+pub mod tiff_file;
+
+use std::path::Path;
+
+pub use atomic::write_atomically;
+pub use dhct_scan::{FileFormat, ScanFile};
+pub use detect::detect_format;
+pub use error::{ReadError, WriteError};
+pub use overrides::GeometryOverrides;
+
+/// Reads a file of any supported format, detected from its content.
+pub fn read_path(path: &Path) -> Result<ScanFile, ReadError> {
+    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    match detect_format(&bytes) {
+        Some(format) => read_as(format, &bytes),
+        None => Err(ReadError::UnknownFormat {
+            path: Some(path.to_path_buf()),
+        }),
+    }
+}
+
+/// Reads a file and then applies `overrides` to every channel's geometry.
+pub fn read_path_with(path: &Path, overrides: &GeometryOverrides) -> Result<ScanFile, ReadError> {
+    let file = read_path(path)?;
+    overrides.apply_to_file(file)
+}
+
+/// Reads an in-memory file of any supported format, detected from its content.
+pub fn read_bytes(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    match detect_format(bytes) {
+        Some(format) => read_as(format, bytes),
+        None => Err(ReadError::UnknownFormat { path: None }),
+    }
+}
+
+/// Reads `bytes` as the given format.
+pub fn read_as(format: FileFormat, bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    match format {
+        FileFormat::RhkSm4 => sm4::read(bytes),
+        FileFormat::NanonisSxm => sxm::read(bytes),
+        FileFormat::Iso28600 => iso28600::read(bytes),
+        FileFormat::Gsf => gsf::read(bytes),
+        FileFormat::Npy => npy::read(bytes),
+        FileFormat::Tiff => tiff_file::read(bytes),
+        FileFormat::Png => Err(ReadError::unsupported(
+            FileFormat::Png,
+            "PNG is an export format for pictures (no physical scale or float z); \
+             read the TIFF, GSF or NPY written beside it instead",
+        )),
+    }
+}

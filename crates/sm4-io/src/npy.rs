@@ -1,0 +1,6 @@
+//! (being written by a helper; placeholder so the crate compiles)
+use crate::{ReadError, ScanFile};
+use dhct_scan::FileFormat;
+pub fn read(_bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    Err(ReadError::unsupported(FileFormat::Gsf, "reader not written yet"))
+}
