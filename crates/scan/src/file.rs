@@ -59,7 +59,9 @@ impl ScanFile {
             let name = pair.name().to_ascii_lowercase();
             name.contains("topo")
                 || name.contains("height")
-                || name.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| w == "z")
+                || name
+                    .split(|c: char| !c.is_ascii_alphanumeric())
+                    .any(|w| w == "z")
         };
         let in_metres = |pair: &&ScanPair| pair.images().any(|(_, c)| c.unit == "m");
         self.pairs

@@ -141,7 +141,11 @@ impl ScanGeometry {
     }
 
     /// Sets the scan-frame centre in the instrument frame (metres).
-    pub fn with_offset(mut self, offset_x: f64, offset_y: f64) -> Result<ScanGeometry, GeometryError> {
+    pub fn with_offset(
+        mut self,
+        offset_x: f64,
+        offset_y: f64,
+    ) -> Result<ScanGeometry, GeometryError> {
         finite("x offset", offset_x)?;
         finite("y offset", offset_y)?;
         self.offset_x = offset_x;

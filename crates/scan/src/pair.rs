@@ -24,7 +24,10 @@ impl ScanPair {
     }
 
     /// A pair of which only the retrace was recorded.
-    pub fn retrace_only(geometry: ScanGeometry, retrace: ImageChannel) -> Result<ScanPair, GeometryError> {
+    pub fn retrace_only(
+        geometry: ScanGeometry,
+        retrace: ImageChannel,
+    ) -> Result<ScanPair, GeometryError> {
         Self::from_parts(geometry, None, Some(retrace))
     }
 
@@ -89,7 +92,10 @@ impl ScanPair {
 
     /// Channel name (of the trace, or of the retrace when there is no trace).
     pub fn name(&self) -> &str {
-        self.images().next().map(|(_, c)| c.name.as_str()).unwrap_or("")
+        self.images()
+            .next()
+            .map(|(_, c)| c.name.as_str())
+            .unwrap_or("")
     }
 
     /// Splits the pair into its parts.

@@ -6,12 +6,8 @@ use thiserror::Error;
 /// Why a file could not be read. Every reader returns this; none panics on bad input.
 #[derive(Debug, Error)]
 pub enum ReadError {
-    #[error("cannot read {path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("cannot read the file")]
+    Io(#[source] std::io::Error),
     #[error(
         "{format} file is truncated: {what} needs bytes {offset}..{end} but the file has only {len} bytes",
         format = .format.name(), end = .offset.saturating_add(*.needed)
@@ -32,10 +28,9 @@ pub enum ReadError {
     #[error("{format} file holds no image that dhct can use: {reason}", format = .format.name())]
     NoImage { format: FileFormat, reason: String },
     #[error(
-        "unrecognised file format{}: expected RHK SM4, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF",
-        .path.as_ref().map(|p| format!(" ({})", p.display())).unwrap_or_default()
+        "unrecognised file format: expected RHK SM4, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF content"
     )]
-    UnknownFormat { path: Option<PathBuf> },
+    UnknownFormat,
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]
     Geometry {
         format: FileFormat,
@@ -78,7 +73,7 @@ impl ReadError {
 /// Why a file could not be written.
 #[derive(Debug, Error)]
 pub enum WriteError {
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}")]
     Io {
         path: PathBuf,
         #[source]

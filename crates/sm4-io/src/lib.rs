@@ -45,17 +45,10 @@ pub use error::{ReadError, WriteError};
 pub use overrides::GeometryOverrides;
 
 /// Reads a file of any supported format, detected from its content.
+/// Errors do not repeat the path; callers add it as context.
 pub fn read_path(path: &Path) -> Result<ScanFile, ReadError> {
-    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    match detect_format(&bytes) {
-        Some(format) => read_as(format, &bytes),
-        None => Err(ReadError::UnknownFormat {
-            path: Some(path.to_path_buf()),
-        }),
-    }
+    let bytes = std::fs::read(path).map_err(ReadError::Io)?;
+    read_bytes(&bytes)
 }
 
 /// Reads a file and then applies `overrides` to every channel's geometry.
@@ -68,7 +61,7 @@ pub fn read_path_with(path: &Path, overrides: &GeometryOverrides) -> Result<Scan
 pub fn read_bytes(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     match detect_format(bytes) {
         Some(format) => read_as(format, bytes),
-        None => Err(ReadError::UnknownFormat { path: None }),
+        None => Err(ReadError::UnknownFormat),
     }
 }
 

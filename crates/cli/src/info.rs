@@ -1,0 +1,197 @@
+//! `dhct info FILE`: what a file holds, with geometry and timing.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use dhct_scan::{ScanFile, ScanGeometry, ScanPair, ValueSource};
+use serde::Serialize;
+
+/// Machine-readable summary of one channel (for `--json`).
+#[derive(Serialize)]
+struct ChannelSummary<'a> {
+    name: &'a str,
+    unit: &'a str,
+    trace: bool,
+    retrace: bool,
+    geometry: &'a ScanGeometry,
+    width_m: f64,
+    height_m: f64,
+    line_period_s: f64,
+    frame_duration_s: f64,
+    z_range: Option<(f64, f64)>,
+    non_finite_values: usize,
+}
+
+#[derive(Serialize)]
+struct FileSummary<'a> {
+    path: &'a Path,
+    format: &'static str,
+    metadata: &'a std::collections::BTreeMap<String, String>,
+    channels: Vec<ChannelSummary<'a>>,
+}
+
+fn summarise<'a>(path: &'a Path, file: &'a ScanFile) -> FileSummary<'a> {
+    let channels = file
+        .pairs
+        .iter()
+        .map(|pair: &ScanPair| {
+            let g = pair.geometry();
+            let unit = pair.images().next().map(|(_, c)| c.unit.as_str());
+            let z_range = pair
+                .images()
+                .filter_map(|(_, c)| c.finite_range())
+                .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+            ChannelSummary {
+                name: pair.name(),
+                unit: unit.unwrap_or(""),
+                trace: pair.trace().is_some(),
+                retrace: pair.retrace().is_some(),
+                geometry: g,
+                width_m: g.width(),
+                height_m: g.height(),
+                line_period_s: g.line_period(),
+                frame_duration_s: g.frame_duration(),
+                z_range,
+                non_finite_values: pair.images().map(|(_, c)| c.non_finite_count()).sum(),
+            }
+        })
+        .collect();
+    FileSummary {
+        path,
+        format: file.format.name(),
+        metadata: &file.metadata,
+        channels,
+    }
+}
+
+/// Formats a value in SI with a prefix that keeps it readable: 2.205e-8 m → "22.05 nm".
+pub fn si(value: f64, unit: &str) -> String {
+    if value == 0.0 || !value.is_finite() {
+        return format!("{value} {unit}");
+    }
+    let prefixes = [
+        (1e-15, "f"),
+        (1e-12, "p"),
+        (1e-9, "n"),
+        (1e-6, "µ"),
+        (1e-3, "m"),
+        (1.0, ""),
+        (1e3, "k"),
+    ];
+    let magnitude = value.abs();
+    let (scale, prefix) = prefixes
+        .iter()
+        .rev()
+        .find(|(scale, _)| magnitude >= *scale)
+        .copied()
+        .unwrap_or(prefixes[0]);
+    let digits = format!("{:.4}", value / scale);
+    let digits = digits.trim_end_matches('0').trim_end_matches('.');
+    format!("{digits} {prefix}{unit}")
+}
+
+fn source_note(source: ValueSource) -> &'static str {
+    match source {
+        ValueSource::Stated => "",
+        ValueSource::Assumed => "  [assumed: not in the file; override with options]",
+    }
+}
+
+fn human(summary: &FileSummary) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "{}: {}", summary.path.display(), summary.format);
+    for (key, value) in summary.metadata {
+        let _ = writeln!(out, "  {key}: {value}");
+    }
+    for (index, c) in summary.channels.iter().enumerate() {
+        let g = c.geometry;
+        let passes = match (c.trace, c.retrace) {
+            (true, true) => "trace + retrace",
+            (true, false) => "trace only",
+            _ => "retrace only",
+        };
+        let _ = writeln!(out, "channel {index}: {} [{}] ({passes})", c.name, c.unit);
+        let _ = writeln!(
+            out,
+            "  size:        {} x {} px, {} x {}",
+            g.columns(),
+            g.rows(),
+            si(c.width_m, "m"),
+            si(c.height_m, "m")
+        );
+        let _ = writeln!(
+            out,
+            "  pixel pitch: {} (x), {} (y){}",
+            si(g.pitch_x(), "m"),
+            si(g.pitch_y(), "m"),
+            source_note(g.scale_source())
+        );
+        let _ = writeln!(
+            out,
+            "  scan:        trace fast {:?}, slow {:?}, angle {:.2}°{}",
+            g.trace_fast(),
+            g.slow_direction(),
+            g.scan_angle().to_degrees(),
+            source_note(g.timing_source())
+        );
+        let _ = writeln!(
+            out,
+            "  timing:      {} per pixel, {} per line (incl. {} turnaround), frame {}",
+            si(g.pixel_period(), "s"),
+            si(c.line_period_s, "s"),
+            si(g.turnaround_time(), "s"),
+            si(c.frame_duration_s, "s")
+        );
+        let _ = writeln!(
+            out,
+            "  speeds:      fast {}, slow {}",
+            si(g.fast_speed(), "m/s"),
+            si(g.slow_speed(), "m/s")
+        );
+        match c.z_range {
+            Some((lo, hi)) => {
+                let _ = writeln!(
+                    out,
+                    "  z range:     {} to {} (span {})",
+                    si(lo, c.unit),
+                    si(hi, c.unit),
+                    si(hi - lo, c.unit)
+                );
+            }
+            None => {
+                let _ = writeln!(out, "  z range:     no finite values");
+            }
+        }
+        if c.non_finite_values > 0 {
+            let _ = writeln!(out, "  missing:     {} NaN/inf values", c.non_finite_values);
+        }
+    }
+    out
+}
+
+/// Reads `path` and prints its summary (JSON when `json`).
+pub fn run(path: &Path, overrides: &dhct_sm4_io::GeometryOverrides, json: bool) -> Result<()> {
+    let file =
+        dhct_sm4_io::read_path_with(path, overrides).with_context(|| path.display().to_string())?;
+    let summary = summarise(path, &file);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print!("{}", human(&summary));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::si;
+
+    #[test]
+    fn si_prefixes() {
+        assert_eq!(si(2.205e-8, "m"), "22.05 nm");
+        assert_eq!(si(1.51e-3, "s"), "1.51 ms");
+        assert_eq!(si(-3.2e-10, "m"), "-320 pm");
+        assert_eq!(si(2.0, "s"), "2 s");
+    }
+}

@@ -1,0 +1,120 @@
+use serde::{Deserialize, Serialize};
+
+use crate::LatticeError;
+
+/// The 17 plane (wallpaper) groups, in International (Hermann–Mauguin) short notation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum PlaneGroup {
+    P1,
+    P2,
+    Pm,
+    Pg,
+    Cm,
+    P2mm,
+    P2mg,
+    P2gg,
+    C2mm,
+    P4,
+    P4mm,
+    P4gm,
+    P3,
+    P3m1,
+    P31m,
+    P6,
+    P6mm,
+}
+
+impl PlaneGroup {
+    /// All 17 groups, ordered by crystal system.
+    pub const ALL: [PlaneGroup; 17] = [
+        PlaneGroup::P1,
+        PlaneGroup::P2,
+        PlaneGroup::Pm,
+        PlaneGroup::Pg,
+        PlaneGroup::Cm,
+        PlaneGroup::P2mm,
+        PlaneGroup::P2mg,
+        PlaneGroup::P2gg,
+        PlaneGroup::C2mm,
+        PlaneGroup::P4,
+        PlaneGroup::P4mm,
+        PlaneGroup::P4gm,
+        PlaneGroup::P3,
+        PlaneGroup::P3m1,
+        PlaneGroup::P31m,
+        PlaneGroup::P6,
+        PlaneGroup::P6mm,
+    ];
+
+    /// The short symbol, e.g. "p3m1".
+    pub fn symbol(self) -> &'static str {
+        match self {
+            PlaneGroup::P1 => "p1",
+            PlaneGroup::P2 => "p2",
+            PlaneGroup::Pm => "pm",
+            PlaneGroup::Pg => "pg",
+            PlaneGroup::Cm => "cm",
+            PlaneGroup::P2mm => "p2mm",
+            PlaneGroup::P2mg => "p2mg",
+            PlaneGroup::P2gg => "p2gg",
+            PlaneGroup::C2mm => "c2mm",
+            PlaneGroup::P4 => "p4",
+            PlaneGroup::P4mm => "p4mm",
+            PlaneGroup::P4gm => "p4gm",
+            PlaneGroup::P3 => "p3",
+            PlaneGroup::P3m1 => "p3m1",
+            PlaneGroup::P31m => "p31m",
+            PlaneGroup::P6 => "p6",
+            PlaneGroup::P6mm => "p6mm",
+        }
+    }
+
+    /// Order of the point group (number of symmetry operations per primitive cell, counting
+    /// the centring translation of cm and c2mm).
+    pub fn order(self) -> usize {
+        match self {
+            PlaneGroup::P1 => 1,
+            PlaneGroup::P2 | PlaneGroup::Pm | PlaneGroup::Pg | PlaneGroup::Cm => 2,
+            PlaneGroup::P3 => 3,
+            PlaneGroup::P2mm
+            | PlaneGroup::P2mg
+            | PlaneGroup::P2gg
+            | PlaneGroup::C2mm
+            | PlaneGroup::P4 => 4,
+            PlaneGroup::P3m1 | PlaneGroup::P31m | PlaneGroup::P6 => 6,
+            PlaneGroup::P4mm | PlaneGroup::P4gm => 8,
+            PlaneGroup::P6mm => 12,
+        }
+    }
+}
+
+impl std::fmt::Display for PlaneGroup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.symbol())
+    }
+}
+
+impl std::str::FromStr for PlaneGroup {
+    type Err = LatticeError;
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let wanted = text.trim().to_ascii_lowercase();
+        PlaneGroup::ALL
+            .into_iter()
+            .find(|g| g.symbol() == wanted)
+            .ok_or_else(|| LatticeError::UnknownPlaneGroup(text.to_string()))
+    }
+}
+
+impl TryFrom<String> for PlaneGroup {
+    type Error = LatticeError;
+    fn try_from(text: String) -> Result<Self, Self::Error> {
+        text.parse()
+    }
+}
+
+impl From<PlaneGroup> for String {
+    fn from(group: PlaneGroup) -> String {
+        group.symbol().to_string()
+    }
+}

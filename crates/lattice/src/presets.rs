@@ -1,0 +1,201 @@
+//! The built-in lattices.
+
+use nalgebra::Vector2;
+use serde::{Deserialize, Serialize};
+
+use crate::{Lattice, LatticeError, MotifSite, PlaneGroup};
+
+fn check_length(what: &'static str, value: f64) -> Result<(), LatticeError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(LatticeError::BadLength { what, value })
+    }
+}
+
+fn hexagonal_vectors(a: f64) -> [Vector2<f64>; 2] {
+    [
+        Vector2::new(a, 0.0),
+        Vector2::new(0.5 * a, 0.5 * 3f64.sqrt() * a),
+    ]
+}
+
+/// A hexagonal (trigonal) lattice with one imaged feature per cell and 6 nearest neighbours
+/// at distance `a`: graphite's imaged atoms, close-packed adsorbates, SAMs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Hexagonal {
+    name: String,
+    a: f64,
+    plane_group: PlaneGroup,
+    motif: Vec<MotifSite>,
+}
+
+impl Hexagonal {
+    /// A hexagonal lattice with constant `a` (metres) and the given plane group.
+    pub fn new(
+        name: impl Into<String>,
+        a: f64,
+        plane_group: PlaneGroup,
+    ) -> Result<Hexagonal, LatticeError> {
+        check_length("a", a)?;
+        Ok(Hexagonal {
+            name: name.into(),
+            a,
+            plane_group,
+            motif: vec![MotifSite::new(0.0, 0.0, "")],
+        })
+    }
+
+    /// HOPG as STM images it: one bright atom (the β site) per cell, a = 2.46 Å, plane
+    /// group p3m1 (the AB stacking makes the image three-fold, not six-fold).
+    pub fn graphite() -> Hexagonal {
+        Hexagonal {
+            name: "graphite".into(),
+            a: 2.46e-10,
+            plane_group: PlaneGroup::P3m1,
+            motif: vec![MotifSite::new(0.0, 0.0, "C")],
+        }
+    }
+
+    /// The (√3×√3)R30° alkanethiol SAM on Au(111): one molecule per cell, a = 4.99 Å.
+    pub fn sam_sqrt3() -> Hexagonal {
+        Hexagonal {
+            name: "sam-sqrt3".into(),
+            a: 4.99e-10,
+            plane_group: PlaneGroup::P6mm,
+            motif: vec![MotifSite::new(0.0, 0.0, "S")],
+        }
+    }
+
+    /// The lattice constant, metres.
+    pub fn a(&self) -> f64 {
+        self.a
+    }
+}
+
+impl Lattice for Hexagonal {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        hexagonal_vectors(self.a)
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        self.plane_group
+    }
+}
+
+/// The honeycomb lattice of graphene with both sublattices imaged: two sites per hexagonal
+/// cell of constant `a`, 3 nearest neighbours at `a/√3`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Honeycomb {
+    a: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl Honeycomb {
+    /// A honeycomb lattice with cell constant `a` (metres).
+    pub fn new(a: f64) -> Result<Honeycomb, LatticeError> {
+        check_length("a", a)?;
+        Ok(Honeycomb {
+            a,
+            motif: vec![
+                MotifSite::new(0.0, 0.0, "A"),
+                MotifSite::new(1.0 / 3.0, 1.0 / 3.0, "B"),
+            ],
+        })
+    }
+
+    /// Graphene: a = 2.46 Å, C–C distance 1.42 Å.
+    pub fn graphene() -> Honeycomb {
+        Honeycomb::new(2.46e-10).expect("2.46 Å is a valid lattice constant")
+    }
+}
+
+impl Lattice for Honeycomb {
+    fn name(&self) -> &str {
+        "honeycomb"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        hexagonal_vectors(self.a)
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::P6mm
+    }
+}
+
+/// A square lattice, one feature per cell, 4 nearest neighbours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Square {
+    a: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl Square {
+    /// A square lattice with constant `a` (metres).
+    pub fn new(a: f64) -> Result<Square, LatticeError> {
+        check_length("a", a)?;
+        Ok(Square {
+            a,
+            motif: vec![MotifSite::new(0.0, 0.0, "")],
+        })
+    }
+}
+
+impl Lattice for Square {
+    fn name(&self) -> &str {
+        "square"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        [Vector2::new(self.a, 0.0), Vector2::new(0.0, self.a)]
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::P4mm
+    }
+}
+
+/// A rectangular lattice `a x b`, one feature per cell; 2 nearest neighbours along the
+/// shorter side (4 when `a = b`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rectangular {
+    a: f64,
+    b: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl Rectangular {
+    /// A rectangular lattice with sides `a` along x and `b` along y (metres).
+    pub fn new(a: f64, b: f64) -> Result<Rectangular, LatticeError> {
+        check_length("a", a)?;
+        check_length("b", b)?;
+        Ok(Rectangular {
+            a,
+            b,
+            motif: vec![MotifSite::new(0.0, 0.0, "")],
+        })
+    }
+}
+
+impl Lattice for Rectangular {
+    fn name(&self) -> &str {
+        "rectangular"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        [Vector2::new(self.a, 0.0), Vector2::new(0.0, self.b)]
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::P2mm
+    }
+}
