@@ -102,7 +102,13 @@ fn human(summary: &FileSummary) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "{}: {}", summary.path.display(), summary.format);
     for (key, value) in summary.metadata {
-        let _ = writeln!(out, "  {key}: {value}");
+        // Multi-line values (RHK session texts, comments) stay indented under their key.
+        let value: Vec<&str> = value
+            .lines()
+            .map(str::trim_end)
+            .filter(|l| !l.is_empty())
+            .collect();
+        let _ = writeln!(out, "  {key}: {}", value.join("\n      "));
     }
     for (index, c) in summary.channels.iter().enumerate() {
         let g = c.geometry;

@@ -35,7 +35,7 @@ impl ImageChannel {
         columns: usize,
         values: Vec<f64>,
     ) -> Result<ImageChannel, GeometryError> {
-        let expected = rows.checked_mul(columns).unwrap_or(usize::MAX);
+        let expected = rows.saturating_mul(columns);
         if values.len() != expected {
             return Err(GeometryError::DataLength {
                 len: values.len(),

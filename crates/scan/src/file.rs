@@ -10,6 +10,8 @@ use crate::ScanPair;
 pub enum FileFormat {
     /// RHK Technology SM4 (binary, little-endian).
     RhkSm4,
+    /// RHK Technology SM3 (the older "STiMage 004" format; read only).
+    RhkSm3,
     /// Nanonis SXM (text header + big-endian float32).
     NanonisSxm,
     /// ISO 28600 SPM data transfer format (text).
@@ -29,6 +31,7 @@ impl FileFormat {
     pub fn name(self) -> &'static str {
         match self {
             FileFormat::RhkSm4 => "RHK SM4",
+            FileFormat::RhkSm3 => "RHK SM3",
             FileFormat::NanonisSxm => "Nanonis SXM",
             FileFormat::Iso28600 => "ISO 28600",
             FileFormat::Gsf => "Gwyddion Simple Field",

@@ -41,16 +41,16 @@ impl ScanPair {
             return Err(GeometryError::NoImages);
         }
         for (image, channel) in [("trace", &trace), ("retrace", &retrace)] {
-            if let Some(channel) = channel {
-                if channel.rows() != geometry.rows() || channel.columns() != geometry.columns() {
-                    return Err(GeometryError::ShapeMismatch {
-                        image,
-                        columns: channel.columns(),
-                        rows: channel.rows(),
-                        geometry_columns: geometry.columns(),
-                        geometry_rows: geometry.rows(),
-                    });
-                }
+            if let Some(channel) = channel
+                && (channel.rows() != geometry.rows() || channel.columns() != geometry.columns())
+            {
+                return Err(GeometryError::ShapeMismatch {
+                    image,
+                    columns: channel.columns(),
+                    rows: channel.rows(),
+                    geometry_columns: geometry.columns(),
+                    geometry_rows: geometry.rows(),
+                });
             }
         }
         Ok(ScanPair {

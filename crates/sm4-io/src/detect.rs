@@ -5,6 +5,9 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
     if crate::sm4::looks_like_sm4(bytes) {
         return Some(FileFormat::RhkSm4);
     }
+    if crate::sm4::sm3::looks_like_sm3(bytes) {
+        return Some(FileFormat::RhkSm3);
+    }
     let text_start = |magic: &str| {
         let skip_bom = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
         skip_bom.starts_with(magic.as_bytes())
@@ -32,12 +35,18 @@ mod tests {
 
     #[test]
     fn recognises_magic_bytes_and_rejects_others() {
-        assert_eq!(detect_format(b":NANONIS_VERSION:\n2\n"), Some(FileFormat::NanonisSxm));
+        assert_eq!(
+            detect_format(b":NANONIS_VERSION:\n2\n"),
+            Some(FileFormat::NanonisSxm)
+        );
         assert_eq!(
             detect_format(b"ISO/TC 201 SPM data transfer format\r\n"),
             Some(FileFormat::Iso28600)
         );
-        assert_eq!(detect_format(b"Gwyddion Simple Field 1.0\n"), Some(FileFormat::Gsf));
+        assert_eq!(
+            detect_format(b"Gwyddion Simple Field 1.0\n"),
+            Some(FileFormat::Gsf)
+        );
         assert_eq!(detect_format(b"\x93NUMPY\x01\x00"), Some(FileFormat::Npy));
         assert_eq!(detect_format(b"II*\0\x08\0\0\0"), Some(FileFormat::Tiff));
         assert_eq!(detect_format(b"MM\0*\0\0\0\x08"), Some(FileFormat::Tiff));

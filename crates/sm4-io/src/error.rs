@@ -28,7 +28,7 @@ pub enum ReadError {
     #[error("{format} file holds no image that dhct can use: {reason}", format = .format.name())]
     NoImage { format: FileFormat, reason: String },
     #[error(
-        "unrecognised file format: expected RHK SM4, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF content"
+        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF content"
     )]
     UnknownFormat,
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]

@@ -1,6 +1,434 @@
-//! (being written by a helper; placeholder so the crate compiles)
-use crate::{ReadError, ScanFile};
-use dhct_scan::FileFormat;
-pub fn read(_bytes: &[u8]) -> Result<ScanFile, ReadError> {
-    Err(ReadError::unsupported(FileFormat::Gsf, "reader not written yet"))
+//! Gwyddion Simple Field (`.gsf`) reader and writer.
+//!
+//! # Format (Gwyddion user guide, "Simple Field Files")
+//!
+//! 1. The magic line `Gwyddion Simple Field 1.0` and a line feed.
+//! 2. Header lines `name = value` (LF-terminated, UTF-8; whitespace around names and values
+//!    is ignored; names are case-sensitive). `XRes` and `YRes` (pixels along x and y) are
+//!    mandatory; `XReal`, `YReal` (physical size), `XOffset`, `YOffset`, `XYUnits`, `ZUnits`
+//!    and `Title` are optional. Readers ignore names they do not know.
+//! 3. One to four NUL bytes, so that the data start at a multiple of 4 bytes.
+//! 4. `XRes · YRes` little-endian IEEE 32-bit floats, row by row, the first row at the top.
+//!
+//! # dhct keys
+//!
+//! GSF has no scan timing. dhct's writer adds keys Gwyddion ignores, so that a file written by
+//! dhct reads back with the same [`ScanGeometry`]:
+//!
+//! | key | value |
+//! |---|---|
+//! | `DHCT_Pass` | `trace` or `retrace` |
+//! | `DHCT_PixelPeriod` | seconds per pixel along the fast axis |
+//! | `DHCT_TurnaroundTime` | seconds at each end of a line |
+//! | `DHCT_TraceFast`, `DHCT_SlowDirection` | `right`, `left`, `down` or `up` |
+//! | `DHCT_ScanAngle` | radians, counter-clockwise |
+//! | `DHCT_OffsetX`, `DHCT_OffsetY` | scan-frame centre, metres |
+//! | `DHCT_ScaleSource`, `DHCT_TimingSource` | `stated` or `assumed` |
+//!
+//! A GSF file without them (e.g. written by Gwyddion) gets the placeholder pixel period
+//! [`ASSUMED_PIXEL_PERIOD`], fast direction right, slow direction down, timing
+//! [`ValueSource::Assumed`]. Its scale is [`ValueSource::Stated`] when `XReal`/`YReal` are
+//! given in a length unit (or without `XYUnits`), otherwise [`ASSUMED_PITCH`], assumed.
+//! Unit prefixes (`XYUnits = nm`, `ZUnits = pA`) are folded into the values.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+
+use dhct_scan::{
+    FileFormat, ImageChannel, ScanDirection, ScanGeometry, ScanPair, ScanPass, ValueSource,
+};
+
+use crate::bytes::checked_data_len;
+use crate::iso28600::{parse_number, parse_unit};
+use crate::{ReadError, ScanFile, WriteError};
+
+pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+
+const FORMAT: FileFormat = FileFormat::Gsf;
+const MAGIC: &[u8] = b"Gwyddion Simple Field 1.0\n";
+
+/// Name given to the channel when the file has no `Title`.
+pub const DEFAULT_TITLE: &str = "GSF image";
+
+/// Reads a GSF file as one image (see the module docs for the geometry rules).
+pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    let start = if bytes.starts_with(b"\xEF\xBB\xBF") {
+        3
+    } else {
+        0
+    };
+    let header_start = start + MAGIC.len();
+    if bytes.get(start..header_start) != Some(MAGIC) {
+        let reason = "the file does not start with the line \"Gwyddion Simple Field 1.0\"";
+        return Err(ReadError::wrong_format(FORMAT, reason));
+    }
+    let nul = bytes
+        .get(header_start..)
+        .and_then(|rest| rest.iter().position(|&b| b == 0))
+        .map(|i| header_start + i)
+        .ok_or_else(|| ReadError::Truncated {
+            format: FORMAT,
+            what: "NUL padding that ends the header".to_string(),
+            offset: bytes.len() as u64,
+            needed: 1,
+            len: bytes.len() as u64,
+        })?;
+    let data_start = nul + (4 - nul % 4);
+    match bytes.get(nul..data_start) {
+        Some(padding) if padding.iter().all(|&b| b == 0) => {}
+        Some(_) => {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                format!("header padding at bytes {nul}..{data_start} is not all NUL"),
+            ));
+        }
+        None => {
+            return Err(ReadError::Truncated {
+                format: FORMAT,
+                what: "NUL padding that ends the header".to_string(),
+                offset: nul as u64,
+                needed: (data_start - nul) as u64,
+                len: bytes.len() as u64,
+            });
+        }
+    }
+    let header_text = String::from_utf8_lossy(bytes.get(header_start..nul).unwrap_or(&[]));
+    let mut fields: Vec<(String, String)> = Vec::new();
+    for line in header_text.split('\n') {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let (name, value) = line.split_once('=').ok_or_else(|| {
+            ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "header line \"{}\" is not of the form name = value",
+                    shorten(line)
+                ),
+            )
+        })?;
+        fields.push((name.trim().to_string(), value.trim().to_string()));
+    }
+    let get = |name: &str| {
+        fields
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    };
+
+    let resolution = |name: &str| -> Result<u64, ReadError> {
+        let text = get(name).ok_or_else(|| {
+            ReadError::corrupt(FORMAT, format!("header lacks the mandatory field {name}"))
+        })?;
+        match text.parse::<u64>() {
+            Ok(n) if n > 0 => Ok(n),
+            _ => Err(ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "{name} must be a positive integer, got \"{}\"",
+                    shorten(text)
+                ),
+            )),
+        }
+    };
+    let (x_res, y_res) = (resolution("XRes")?, resolution("YRes")?);
+    let data_len = checked_data_len(FORMAT, y_res, x_res, 4)?;
+    let data = bytes
+        .get(data_start..)
+        .and_then(|rest| rest.get(..usize::try_from(data_len).ok()?))
+        .ok_or_else(|| ReadError::Truncated {
+            format: FORMAT,
+            what: format!("{x_res} x {y_res} float32 values"),
+            offset: data_start as u64,
+            needed: data_len,
+            len: bytes.len() as u64,
+        })?;
+    // Both fit: their product times 4 was just sliced out of the file.
+    let (columns, rows) = match (usize::try_from(x_res), usize::try_from(y_res)) {
+        (Ok(c), Ok(r)) => (c, r),
+        _ => {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                "image too large for this machine",
+            ));
+        }
+    };
+
+    let (z_unit, z_factor) = parse_unit(get("ZUnits").unwrap_or(""));
+    let values: Vec<f64> = data
+        .chunks_exact(4)
+        .map(|c| {
+            let mut raw = [0u8; 4];
+            for (dst, src) in raw.iter_mut().zip(c) {
+                *dst = *src;
+            }
+            f64::from(f32::from_le_bytes(raw)) * z_factor
+        })
+        .collect();
+    let name = get("Title")
+        .filter(|t| !t.is_empty())
+        .unwrap_or(DEFAULT_TITLE);
+    let channel = ImageChannel::from_row_major(name, z_unit, rows, columns, values)
+        .map_err(|source| ReadError::geometry(FORMAT, source))?;
+
+    let geometry = build_geometry(&get, columns, rows)?;
+    let pass = match get("DHCT_Pass") {
+        None => ScanPass::Trace,
+        Some(p) if p.eq_ignore_ascii_case("trace") => ScanPass::Trace,
+        Some(p) if p.eq_ignore_ascii_case("retrace") => ScanPass::Retrace,
+        Some(p) => {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                format!("DHCT_Pass must be trace or retrace, got \"{}\"", shorten(p)),
+            ));
+        }
+    };
+    let pair = match pass {
+        ScanPass::Trace => ScanPair::new(geometry, channel, None),
+        ScanPass::Retrace => ScanPair::retrace_only(geometry, channel),
+    }
+    .map_err(|source| ReadError::geometry(FORMAT, source))?;
+
+    let mut metadata = BTreeMap::new();
+    for (name, value) in &fields {
+        let known = matches!(
+            name.as_str(),
+            "XRes" | "YRes" | "XReal" | "YReal" | "XYUnits" | "ZUnits" | "Title"
+        ) || name.starts_with("DHCT_");
+        if !known {
+            metadata.insert(name.clone(), value.clone());
+        }
+    }
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs: vec![pair],
+        metadata,
+    })
+}
+
+fn build_geometry<'a>(
+    get: &impl Fn(&str) -> Option<&'a str>,
+    columns: usize,
+    rows: usize,
+) -> Result<ScanGeometry, ReadError> {
+    let geometry_error = |source| ReadError::geometry(FORMAT, source);
+    let (xy_unit, xy_factor) = parse_unit(get("XYUnits").unwrap_or("m"));
+    let real = |name: &str| {
+        get(name)
+            .and_then(parse_number)
+            .map(|v| v.abs() * xy_factor)
+            .filter(|v| v.is_finite() && *v > 0.0)
+    };
+    let (pitch_x, pitch_y, mut scale_source) = match (real("XReal"), real("YReal")) {
+        (Some(w), Some(h)) if xy_unit == "m" => {
+            let (px, py) = (w / columns as f64, h / rows as f64);
+            if px > 0.0 && py > 0.0 && px.is_finite() && py.is_finite() {
+                (px, py, ValueSource::Stated)
+            } else {
+                (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed)
+            }
+        }
+        _ => (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed),
+    };
+    let dhct_number = |name: &str| -> Result<Option<f64>, ReadError> {
+        match get(name) {
+            None => Ok(None),
+            Some(text) => parse_number(text)
+                .filter(|v| v.is_finite())
+                .map(Some)
+                .ok_or_else(|| {
+                    ReadError::corrupt(
+                        FORMAT,
+                        format!("{name} must be a number, got \"{}\"", shorten(text)),
+                    )
+                }),
+        }
+    };
+    let dhct_direction = |name: &str, default: ScanDirection| match get(name) {
+        None => Ok(default),
+        Some(text) => ScanDirection::parse(text).ok_or_else(|| {
+            ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "{name} must be right, left, down or up, got \"{}\"",
+                    shorten(text)
+                ),
+            )
+        }),
+    };
+    let dhct_source = |name: &str, default: ValueSource| match get(name) {
+        None => Ok(default),
+        Some(text) if text.eq_ignore_ascii_case("stated") => Ok(ValueSource::Stated),
+        Some(text) if text.eq_ignore_ascii_case("assumed") => Ok(ValueSource::Assumed),
+        Some(text) => Err(ReadError::corrupt(
+            FORMAT,
+            format!(
+                "{name} must be stated or assumed, got \"{}\"",
+                shorten(text)
+            ),
+        )),
+    };
+
+    let pixel_period = dhct_number("DHCT_PixelPeriod")?;
+    let (pixel_period, mut timing_source) = match pixel_period {
+        Some(p) => (p, ValueSource::Stated),
+        None => (ASSUMED_PIXEL_PERIOD, ValueSource::Assumed),
+    };
+    timing_source = dhct_source("DHCT_TimingSource", timing_source)?;
+    if scale_source == ValueSource::Stated {
+        scale_source = dhct_source("DHCT_ScaleSource", scale_source)?;
+    }
+    let trace_fast = dhct_direction("DHCT_TraceFast", ScanDirection::Right)?;
+    let slow = dhct_direction("DHCT_SlowDirection", ScanDirection::Down)?;
+    let mut geometry = ScanGeometry::new(
+        columns,
+        rows,
+        pitch_x,
+        pitch_y,
+        pixel_period,
+        trace_fast,
+        slow,
+    )
+    .map_err(geometry_error)?;
+    if let Some(turnaround) = dhct_number("DHCT_TurnaroundTime")? {
+        geometry = geometry
+            .with_turnaround(turnaround)
+            .map_err(geometry_error)?;
+    }
+    if let Some(angle) = dhct_number("DHCT_ScanAngle")? {
+        geometry = geometry.with_scan_angle(angle).map_err(geometry_error)?;
+    }
+    let offset_x = dhct_number("DHCT_OffsetX")?;
+    let offset_y = dhct_number("DHCT_OffsetY")?;
+    if offset_x.is_some() || offset_y.is_some() {
+        geometry = geometry
+            .with_offset(offset_x.unwrap_or(0.0), offset_y.unwrap_or(0.0))
+            .map_err(geometry_error)?;
+    }
+    Ok(geometry
+        .with_scale_source(scale_source)
+        .with_timing_source(timing_source))
+}
+
+/// Writes `channel` as the trace image of `geometry` (see [`write_pass`]).
+pub fn write<W: Write>(
+    channel: &ImageChannel,
+    geometry: &ScanGeometry,
+    w: &mut W,
+) -> Result<(), WriteError> {
+    write_pass(channel, geometry, ScanPass::Trace, w)
+}
+
+/// Writes `channel` (an image of `pass`) as a GSF file: `XReal`/`YReal` in metres,
+/// `ZUnits` = the channel unit, `Title` = the channel name (control characters replaced by
+/// spaces), the data as 32-bit floats (NaN kept), plus the `DHCT_*` keys that preserve the
+/// rest of `geometry`. Fails if the channel's size differs from the geometry's.
+pub fn write_pass<W: Write>(
+    channel: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    w: &mut W,
+) -> Result<(), WriteError> {
+    if channel.rows() != geometry.rows() || channel.columns() != geometry.columns() {
+        return Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: format!(
+                "image is {} x {} px but the geometry says {} x {} px",
+                channel.columns(),
+                channel.rows(),
+                geometry.columns(),
+                geometry.rows()
+            ),
+        });
+    }
+    let clean = |text: &str| -> String {
+        text.chars()
+            .map(|c| if c.is_control() { ' ' } else { c })
+            .collect::<String>()
+            .trim()
+            .to_string()
+    };
+    let direction = |d: ScanDirection| match d {
+        ScanDirection::Right => "right",
+        ScanDirection::Left => "left",
+        ScanDirection::Down => "down",
+        ScanDirection::Up => "up",
+    };
+    let source = |s: ValueSource| match s {
+        ValueSource::Stated => "stated",
+        ValueSource::Assumed => "assumed",
+    };
+    let (offset_x, offset_y) = geometry.offset();
+    let mut header = String::from_utf8_lossy(MAGIC).into_owned();
+    let mut line = |name: &str, value: String| {
+        header.push_str(name);
+        header.push_str(" = ");
+        header.push_str(&value);
+        header.push('\n');
+    };
+    line("XRes", channel.columns().to_string());
+    line("YRes", channel.rows().to_string());
+    line("XReal", format!("{:e}", geometry.width()));
+    line("YReal", format!("{:e}", geometry.height()));
+    line("XYUnits", "m".to_string());
+    let unit = clean(&channel.unit);
+    if !unit.is_empty() {
+        line("ZUnits", unit);
+    }
+    let title = clean(&channel.name);
+    if !title.is_empty() {
+        line("Title", title);
+    }
+    line(
+        "DHCT_Pass",
+        match pass {
+            ScanPass::Trace => "trace",
+            ScanPass::Retrace => "retrace",
+        }
+        .to_string(),
+    );
+    line("DHCT_PixelPeriod", format!("{:e}", geometry.pixel_period()));
+    line(
+        "DHCT_TurnaroundTime",
+        format!("{:e}", geometry.turnaround_time()),
+    );
+    line(
+        "DHCT_TraceFast",
+        direction(geometry.trace_fast()).to_string(),
+    );
+    line(
+        "DHCT_SlowDirection",
+        direction(geometry.slow_direction()).to_string(),
+    );
+    line("DHCT_ScanAngle", format!("{:e}", geometry.scan_angle()));
+    line("DHCT_OffsetX", format!("{:e}", offset_x));
+    line("DHCT_OffsetY", format!("{:e}", offset_y));
+    line(
+        "DHCT_ScaleSource",
+        source(geometry.scale_source()).to_string(),
+    );
+    line(
+        "DHCT_TimingSource",
+        source(geometry.timing_source()).to_string(),
+    );
+
+    let mut out = header.into_bytes();
+    let padding = 4 - out.len() % 4;
+    out.extend(std::iter::repeat_n(0u8, padding));
+    out.reserve(channel.rows() * channel.columns() * 4);
+    for value in channel.z.iter() {
+        out.extend_from_slice(&(*value as f32).to_le_bytes());
+    }
+    w.write_all(&out)?;
+    Ok(())
+}
+
+fn shorten(text: &str) -> String {
+    const MAX: usize = 60;
+    if text.chars().count() > MAX {
+        format!("{}…", text.chars().take(MAX).collect::<String>())
+    } else {
+        text.to_string()
+    }
 }

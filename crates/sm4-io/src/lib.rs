@@ -3,6 +3,7 @@
 //! | format | read | write | module |
 //! |---|---|---|---|
 //! | RHK SM4 | yes | yes | [`sm4`] |
+//! | RHK SM3 (not validated on a real file) | yes | — | [`sm4::sm3`] |
 //! | Nanonis SXM | yes | — | [`sxm`] |
 //! | ISO 28600 SPM transfer format | yes | — | [`iso28600`] |
 //! | Gwyddion Simple Field (.gsf) | yes | yes | [`gsf`] |
@@ -39,8 +40,8 @@ pub mod tiff_file;
 use std::path::Path;
 
 pub use atomic::write_atomically;
-pub use dhct_scan::{FileFormat, ScanFile};
 pub use detect::detect_format;
+pub use dhct_scan::{FileFormat, ScanFile};
 pub use error::{ReadError, WriteError};
 pub use overrides::GeometryOverrides;
 
@@ -69,6 +70,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<ScanFile, ReadError> {
 pub fn read_as(format: FileFormat, bytes: &[u8]) -> Result<ScanFile, ReadError> {
     match format {
         FileFormat::RhkSm4 => sm4::read(bytes),
+        FileFormat::RhkSm3 => sm4::sm3::read(bytes),
         FileFormat::NanonisSxm => sxm::read(bytes),
         FileFormat::Iso28600 => iso28600::read(bytes),
         FileFormat::Gsf => gsf::read(bytes),

@@ -1,1 +1,216 @@
-//! (being written)
+//! PNG export: 16-bit grey and 8-bit colour-mapped pictures of one image.
+//!
+//! PNG is a picture format: it holds no physical scale, so dhct writes it for viewing and
+//! reports the z range it mapped, but does not read it back (see [`crate::read_as`]).
+//! Row 0 of the image is the top row of the picture.
+
+use std::io::Write;
+
+use dhct_scan::{FileFormat, ImageChannel};
+use serde::{Deserialize, Serialize};
+
+use crate::WriteError;
+use crate::tiff_file::U16Scale;
+
+const FORMAT: FileFormat = FileFormat::Png;
+
+/// Colour of NaN and infinite pixels in colour-mapped pictures (magenta, absent from every
+/// colour map offered).
+pub const NAN_COLOUR: [u8; 3] = [255, 0, 255];
+
+/// Colour maps for [`write_colormap`]. All run from low values (dark) to high values (bright).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Colormap {
+    /// matplotlib's perceptually uniform viridis (blue–green–yellow).
+    #[default]
+    Viridis,
+    /// matplotlib's inferno (black–purple–orange–yellow).
+    Inferno,
+    /// matplotlib's magma (black–purple–pink–cream).
+    Magma,
+    /// matplotlib's plasma (blue–purple–orange–yellow).
+    Plasma,
+    /// cividis, designed for colour-vision deficiency (blue–grey–yellow).
+    Cividis,
+    /// Linear grey, black to white.
+    Greys,
+    /// The "afmhot"/gold map common for STM topography: black–brown–orange–yellow–white
+    /// (red = 2t, green = 2t − ½, blue = 2t − 1, each clipped to 0..1).
+    Gold,
+}
+
+impl Colormap {
+    /// Every colour map, in the order listed above.
+    pub const ALL: [Colormap; 7] = [
+        Colormap::Viridis,
+        Colormap::Inferno,
+        Colormap::Magma,
+        Colormap::Plasma,
+        Colormap::Cividis,
+        Colormap::Greys,
+        Colormap::Gold,
+    ];
+
+    /// Lower-case name, as accepted by [`Colormap::parse`].
+    pub fn name(self) -> &'static str {
+        match self {
+            Colormap::Viridis => "viridis",
+            Colormap::Inferno => "inferno",
+            Colormap::Magma => "magma",
+            Colormap::Plasma => "plasma",
+            Colormap::Cividis => "cividis",
+            Colormap::Greys => "greys",
+            Colormap::Gold => "gold",
+        }
+    }
+
+    /// Parses a colour-map name, case-insensitively; `gray`/`grey` and `afmhot` are accepted
+    /// as aliases of `greys` and `gold`.
+    pub fn parse(name: &str) -> Option<Colormap> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "gray" | "grey" | "grays" => Some(Colormap::Greys),
+            "afmhot" => Some(Colormap::Gold),
+            other => Colormap::ALL.into_iter().find(|c| c.name() == other),
+        }
+    }
+
+    /// The colour at position `t` (0 = lowest value, 1 = highest; clamped), as RGB.
+    pub fn rgb(self, t: f64) -> [u8; 3] {
+        let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+        let byte = |x: f64| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let gradient = match self {
+            Colormap::Viridis => colorous::VIRIDIS,
+            Colormap::Inferno => colorous::INFERNO,
+            Colormap::Magma => colorous::MAGMA,
+            Colormap::Plasma => colorous::PLASMA,
+            Colormap::Cividis => colorous::CIVIDIS,
+            Colormap::Greys => {
+                let g = byte(t);
+                return [g, g, g];
+            }
+            Colormap::Gold => {
+                return [byte(2.0 * t), byte(2.0 * t - 0.5), byte(2.0 * t - 1.0)];
+            }
+        };
+        let c = gradient.eval_continuous(t);
+        [c.r, c.g, c.b]
+    }
+}
+
+/// The z range a colour-mapped picture shows: `low` (first colour) to `high` (last colour),
+/// in the channel's unit. `None` when the image has no finite value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ZRange {
+    /// Value drawn with the first colour of the map.
+    pub low: f64,
+    /// Value drawn with the last colour of the map.
+    pub high: f64,
+}
+
+impl ZRange {
+    /// Position of `value` in the range, 0..1 (0 for a flat range).
+    pub fn position(&self, value: f64) -> f64 {
+        let span = self.high - self.low;
+        if span > 0.0 && span.is_finite() {
+            ((value - self.low) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Writes `channel` as a 16-bit grey PNG: the smallest finite value is black (0), the largest
+/// white (65535), linearly; NaN and infinities are black. Returns the map from counts back to
+/// values.
+pub fn write_gray16<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<U16Scale, WriteError> {
+    let (width, height) = dimensions(channel)?;
+    let scale = U16Scale::for_channel(channel);
+    let mut data = Vec::with_capacity(channel.rows() * channel.columns() * 2);
+    for &value in channel.z.iter() {
+        data.extend_from_slice(&scale.count(value).to_be_bytes());
+    }
+    encode(
+        w,
+        width,
+        height,
+        png::ColorType::Grayscale,
+        png::BitDepth::Sixteen,
+        &data,
+    )?;
+    Ok(scale)
+}
+
+/// Writes `channel` as an 8-bit RGB PNG through `colormap`: the finite range maps linearly
+/// onto the colour map ([`Colormap::rgb`] of [`ZRange::position`]), NaN and infinities are
+/// drawn in [`NAN_COLOUR`]. Returns the range mapped (`None` if no value is finite).
+pub fn write_colormap<W: Write>(
+    channel: &ImageChannel,
+    colormap: Colormap,
+    w: &mut W,
+) -> Result<Option<ZRange>, WriteError> {
+    let (width, height) = dimensions(channel)?;
+    let range = channel
+        .finite_range()
+        .map(|(low, high)| ZRange { low, high });
+    let mut data = Vec::with_capacity(channel.rows() * channel.columns() * 3);
+    for &value in channel.z.iter() {
+        let rgb = match range {
+            Some(range) if value.is_finite() => colormap.rgb(range.position(value)),
+            _ => NAN_COLOUR,
+        };
+        data.extend_from_slice(&rgb);
+    }
+    encode(
+        w,
+        width,
+        height,
+        png::ColorType::Rgb,
+        png::BitDepth::Eight,
+        &data,
+    )?;
+    Ok(range)
+}
+
+fn encode<W: Write>(
+    w: &mut W,
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    depth: png::BitDepth,
+    data: &[u8],
+) -> Result<(), WriteError> {
+    let mut encoder = png::Encoder::new(w, width, height);
+    encoder.set_color(color);
+    encoder.set_depth(depth);
+    let mut writer = encoder.write_header().map_err(encoder_error)?;
+    writer.write_image_data(data).map_err(encoder_error)?;
+    writer.finish().map_err(encoder_error)
+}
+
+fn dimensions(channel: &ImageChannel) -> Result<(u32, u32), WriteError> {
+    match (
+        u32::try_from(channel.columns()),
+        u32::try_from(channel.rows()),
+    ) {
+        (Ok(w), Ok(h)) if w > 0 && h > 0 && w < (1 << 31) && h < (1 << 31) => Ok((w, h)),
+        _ => Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: format!(
+                "a PNG image must be 1 to 2^31-1 px along each side, not {} x {}",
+                channel.columns(),
+                channel.rows()
+            ),
+        }),
+    }
+}
+
+fn encoder_error(error: png::EncodingError) -> WriteError {
+    match error {
+        png::EncodingError::IoError(e) => WriteError::Stream(e),
+        other => WriteError::Encoder {
+            format: FORMAT,
+            reason: other.to_string(),
+        },
+    }
+}

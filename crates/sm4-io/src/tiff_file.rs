@@ -1,6 +1,396 @@
-//! (being written by a helper; placeholder so the crate compiles)
-use crate::{ReadError, ScanFile};
-use dhct_scan::FileFormat;
-pub fn read(_bytes: &[u8]) -> Result<ScanFile, ReadError> {
-    Err(ReadError::unsupported(FileFormat::Gsf, "reader not written yet"))
+//! Grey-scale TIFF: float32 and scaled 16-bit writers, and a reader for single-channel
+//! 8/16/32/64-bit integer and 32/64-bit float images (via the `tiff` crate).
+//!
+//! Both writers put a small text block in the `ImageDescription` tag (tag 270):
+//!
+//! ```text
+//! dhct image
+//! name=Topography
+//! unit=m
+//! z_offset=-1.2e-10      (16-bit files only)
+//! z_step=3.4e-15         (16-bit files only)
+//! ```
+//!
+//! so that dhct's reader restores the channel name, unit and, for 16-bit files, the physical
+//! values `z = z_offset + z_step · count`. Other programs show the image and ignore the text.
+//!
+//! A TIFF carries no scan geometry dhct trusts, so the reader returns the placeholder
+//! geometry of [`crate::npy`]: pitch [`ASSUMED_PITCH`], pixel period [`ASSUMED_PIXEL_PERIOD`],
+//! fast right, slow down, scale and timing [`ValueSource::Assumed`](dhct_scan::ValueSource).
+//! Only the first image of a multi-page file is read. Row 0 is the top row (TIFF's default
+//! orientation; the `Orientation` tag is not interpreted).
+//!
+//! Decoder limits are set from the file length (a hostile header cannot make the decoder
+//! allocate more than [`DECODE_BUDGET_PER_BYTE`] bytes per file byte, at least 1 MiB and at
+//! most 1 GiB).
+
+use std::collections::BTreeMap;
+use std::io::{Cursor, Write};
+
+use ::tiff::ColorType;
+use ::tiff::TiffError;
+use ::tiff::decoder::{Decoder, DecodingResult, Limits};
+use ::tiff::encoder::{TiffEncoder, colortype};
+use ::tiff::tags::Tag;
+use dhct_scan::{FileFormat, ImageChannel, ScanPair};
+
+use crate::{ReadError, ScanFile, WriteError};
+
+pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+
+const FORMAT: FileFormat = FileFormat::Tiff;
+const DESCRIPTION_MAGIC: &str = "dhct image";
+
+/// Decoded bytes allowed per byte of file (deflate/LZW can expand data a lot, but not this
+/// much for real images).
+pub const DECODE_BUDGET_PER_BYTE: usize = 64;
+
+/// Name given to the channel of a TIFF file that was not written by dhct.
+pub const DEFAULT_NAME: &str = "TIFF image";
+
+/// The linear map between 16-bit counts and physical values: `z = offset + step · count`.
+///
+/// [`write_u16`] (and [`crate::png_file::write_gray16`]) map the smallest finite value to
+/// count 0 and the largest to 65535; NaN and infinities become count 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct U16Scale {
+    /// Value of count 0 (the smallest finite value), in the channel's unit.
+    pub offset: f64,
+    /// Value step per count, in the channel's unit; positive.
+    pub step: f64,
+}
+
+impl U16Scale {
+    /// The scale that maps `low..=high` onto `0..=65535`. A flat or empty range gets step 1
+    /// (every count is `low`).
+    pub fn for_range(low: f64, high: f64) -> U16Scale {
+        let step = (high - low) / f64::from(u16::MAX);
+        if low.is_finite() && step.is_finite() && step > 0.0 {
+            U16Scale { offset: low, step }
+        } else {
+            U16Scale {
+                offset: if low.is_finite() { low } else { 0.0 },
+                step: 1.0,
+            }
+        }
+    }
+
+    /// The scale for the finite values of `channel` (offset 0, step 1 if there are none).
+    pub fn for_channel(channel: &ImageChannel) -> U16Scale {
+        match channel.finite_range() {
+            Some((low, high)) => U16Scale::for_range(low, high),
+            None => U16Scale::for_range(0.0, 0.0),
+        }
+    }
+
+    /// The count of `value`, rounded to nearest and clamped to `0..=65535`; NaN and
+    /// infinities give 0.
+    pub fn count(&self, value: f64) -> u16 {
+        if !value.is_finite() {
+            return 0;
+        }
+        let count = ((value - self.offset) / self.step).round();
+        if count.is_nan() {
+            0
+        } else {
+            count.clamp(0.0, f64::from(u16::MAX)) as u16
+        }
+    }
+
+    /// The physical value of `count`.
+    pub fn value(&self, count: u16) -> f64 {
+        self.offset + self.step * f64::from(count)
+    }
+}
+
+/// Writes `channel` as a single-page, uncompressed 32-bit float grey TIFF (values rounded to
+/// `f32`, NaN kept), with the name and unit in `ImageDescription`.
+pub fn write_f32<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteError> {
+    let (width, height) = dimensions(channel)?;
+    let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
+    let description = description(channel, None);
+    let mut cursor = Cursor::new(Vec::new());
+    {
+        let mut encoder = TiffEncoder::new(&mut cursor).map_err(encoder_error)?;
+        let mut image = encoder
+            .new_image::<colortype::Gray32Float>(width, height)
+            .map_err(encoder_error)?;
+        image
+            .encoder()
+            .write_tag(Tag::ImageDescription, description.as_str())
+            .map_err(encoder_error)?;
+        image.write_data(&data).map_err(encoder_error)?;
+    }
+    w.write_all(cursor.get_ref())?;
+    Ok(())
+}
+
+/// Writes `channel` as a single-page, uncompressed 16-bit grey TIFF: the finite range maps
+/// linearly onto 0..65535 and NaN onto 0 (see [`U16Scale`]). Returns the scale, which is
+/// also stored in `ImageDescription`.
+pub fn write_u16<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<U16Scale, WriteError> {
+    let (width, height) = dimensions(channel)?;
+    let scale = U16Scale::for_channel(channel);
+    let data: Vec<u16> = channel.z.iter().map(|&v| scale.count(v)).collect();
+    let description = description(channel, Some(scale));
+    let mut cursor = Cursor::new(Vec::new());
+    {
+        let mut encoder = TiffEncoder::new(&mut cursor).map_err(encoder_error)?;
+        let mut image = encoder
+            .new_image::<colortype::Gray16>(width, height)
+            .map_err(encoder_error)?;
+        image
+            .encoder()
+            .write_tag(Tag::ImageDescription, description.as_str())
+            .map_err(encoder_error)?;
+        image.write_data(&data).map_err(encoder_error)?;
+    }
+    w.write_all(cursor.get_ref())?;
+    Ok(scale)
+}
+
+/// Reads the first image of a grey-scale TIFF (see the module docs).
+pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    if !(bytes.starts_with(b"II*\0")
+        || bytes.starts_with(b"MM\0*")
+        || bytes.starts_with(b"II+\0")
+        || bytes.starts_with(b"MM\0+"))
+    {
+        return Err(ReadError::wrong_format(FORMAT, "no TIFF byte-order mark"));
+    }
+    let budget = bytes
+        .len()
+        .saturating_mul(DECODE_BUDGET_PER_BYTE)
+        .clamp(1 << 20, 1 << 30);
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = budget;
+    limits.intermediate_buffer_size = budget;
+    limits.ifd_value_size = bytes.len().clamp(1 << 10, 1 << 20);
+    let mut decoder = Decoder::new(Cursor::new(bytes))
+        .map_err(|e| read_error(e, bytes))?
+        .with_limits(limits);
+    let (width, height) = decoder.dimensions().map_err(|e| read_error(e, bytes))?;
+    if width == 0 || height == 0 {
+        return Err(ReadError::NoImage {
+            format: FORMAT,
+            reason: format!("the image is {width} x {height} px"),
+        });
+    }
+    let bits = match decoder.colortype().map_err(|e| read_error(e, bytes))? {
+        ColorType::Gray(bits @ (8 | 16 | 32 | 64)) => bits,
+        other => {
+            return Err(ReadError::unsupported(
+                FORMAT,
+                format!(
+                    "colour type {other:?}; dhct reads single-channel grey images of 8, 16, 32 or 64 bits"
+                ),
+            ));
+        }
+    };
+    let needed = crate::bytes::checked_data_len(
+        FORMAT,
+        u64::from(height),
+        u64::from(width),
+        u64::from(bits / 8),
+    )?;
+    if needed > budget as u64 {
+        return Err(ReadError::corrupt(
+            FORMAT,
+            format!(
+                "a {width} x {height} px image of {bits}-bit samples needs {needed} bytes, \
+                 more than a {}-byte file can plausibly hold",
+                bytes.len()
+            ),
+        ));
+    }
+    let description = decoder
+        .get_tag_ascii_string(Tag::ImageDescription)
+        .ok()
+        .unwrap_or_default();
+    let more_pages = decoder.more_images();
+    let image = decoder.read_image().map_err(|e| read_error(e, bytes))?;
+    let values: Vec<f64> = match image {
+        DecodingResult::U8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U64(v) => v.into_iter().map(|x| x as f64).collect(),
+        DecodingResult::I8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I64(v) => v.into_iter().map(|x| x as f64).collect(),
+        DecodingResult::F32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::F64(v) => v,
+        DecodingResult::F16(_) => {
+            return Err(ReadError::unsupported(FORMAT, "16-bit float samples"));
+        }
+    };
+
+    let info = parse_description(&description);
+    let scale = match (info.z_offset, info.z_step) {
+        (Some(offset), Some(step)) if bits == 16 => Some(U16Scale { offset, step }),
+        _ => None,
+    };
+    let values = match scale {
+        Some(scale) => values
+            .into_iter()
+            .map(|v| scale.offset + scale.step * v)
+            .collect(),
+        None => values,
+    };
+    let (columns, rows) = match (usize::try_from(width), usize::try_from(height)) {
+        (Ok(c), Ok(r)) => (c, r),
+        _ => {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                "image too large for this machine",
+            ));
+        }
+    };
+    let name = info.name.unwrap_or_else(|| DEFAULT_NAME.to_string());
+    let channel =
+        ImageChannel::from_row_major(name, info.unit.unwrap_or_default(), rows, columns, values)
+            .map_err(|source| ReadError::geometry(FORMAT, source))?;
+    let geometry = crate::npy::assumed_geometry(columns, rows)
+        .map_err(|source| ReadError::geometry(FORMAT, source))?;
+    let pair = ScanPair::new(geometry, channel, None)
+        .map_err(|source| ReadError::geometry(FORMAT, source))?;
+
+    let mut metadata = BTreeMap::new();
+    metadata.insert("tiff sample bits".to_string(), bits.to_string());
+    if more_pages {
+        metadata.insert(
+            "tiff pages".to_string(),
+            "several; only the first was read".to_string(),
+        );
+    }
+    if !description.is_empty() && !description.starts_with(DESCRIPTION_MAGIC) {
+        metadata.insert(
+            "tiff description".to_string(),
+            description.chars().take(500).collect(),
+        );
+    }
+    if let Some(scale) = scale {
+        metadata.insert(
+            "tiff z scale".to_string(),
+            format!("z = {:e} + {:e} · count", scale.offset, scale.step),
+        );
+    }
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs: vec![pair],
+        metadata,
+    })
+}
+
+/// What dhct stored in `ImageDescription`.
+#[derive(Default)]
+struct DescriptionInfo {
+    name: Option<String>,
+    unit: Option<String>,
+    z_offset: Option<f64>,
+    z_step: Option<f64>,
+}
+
+fn parse_description(text: &str) -> DescriptionInfo {
+    let mut info = DescriptionInfo::default();
+    let mut lines = text.lines();
+    if lines.next().map(str::trim) != Some(DESCRIPTION_MAGIC) {
+        return info;
+    }
+    for line in lines {
+        let Some((key, value)) = line.split_once('=') else {
+            continue;
+        };
+        let value = value.trim();
+        match key.trim() {
+            "name" => info.name = Some(value.to_string()),
+            "unit" => info.unit = Some(value.to_string()),
+            "z_offset" => info.z_offset = value.parse().ok().filter(|v: &f64| v.is_finite()),
+            "z_step" => {
+                info.z_step = value
+                    .parse()
+                    .ok()
+                    .filter(|v: &f64| v.is_finite() && *v > 0.0)
+            }
+            _ => {}
+        }
+    }
+    info
+}
+
+fn description(channel: &ImageChannel, scale: Option<U16Scale>) -> String {
+    // ASCII only: TIFF ASCII tags are 7-bit; other characters become '?'.
+    let ascii = |text: &str| -> String {
+        text.chars()
+            .map(|c| {
+                if c.is_ascii() && !c.is_ascii_control() {
+                    c
+                } else {
+                    '?'
+                }
+            })
+            .collect()
+    };
+    let mut text = format!(
+        "{DESCRIPTION_MAGIC}\nname={}\nunit={}\n",
+        ascii(&channel.name),
+        ascii(&channel.unit)
+    );
+    if let Some(scale) = scale {
+        text.push_str(&format!(
+            "z_offset={:e}\nz_step={:e}\n",
+            scale.offset, scale.step
+        ));
+    }
+    text
+}
+
+fn dimensions(channel: &ImageChannel) -> Result<(u32, u32), WriteError> {
+    match (
+        u32::try_from(channel.columns()),
+        u32::try_from(channel.rows()),
+    ) {
+        (Ok(w), Ok(h)) if w > 0 && h > 0 => Ok((w, h)),
+        _ => Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: format!(
+                "a TIFF image must be 1 to 2^32-1 px along each side, not {} x {}",
+                channel.columns(),
+                channel.rows()
+            ),
+        }),
+    }
+}
+
+fn encoder_error(error: TiffError) -> WriteError {
+    match error {
+        TiffError::IoError(e) => WriteError::Stream(e),
+        other => WriteError::Encoder {
+            format: FORMAT,
+            reason: other.to_string(),
+        },
+    }
+}
+
+fn read_error(error: TiffError, bytes: &[u8]) -> ReadError {
+    match error {
+        TiffError::IoError(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            ReadError::Truncated {
+                format: FORMAT,
+                what: "TIFF directory or image data".to_string(),
+                offset: bytes.len() as u64,
+                needed: 1,
+                len: bytes.len() as u64,
+            }
+        }
+        TiffError::UnsupportedError(e) => ReadError::unsupported(FORMAT, e.to_string()),
+        TiffError::LimitsExceeded => ReadError::corrupt(
+            FORMAT,
+            format!(
+                "the image needs more memory than a {}-byte file can plausibly hold",
+                bytes.len()
+            ),
+        ),
+        other => ReadError::corrupt(FORMAT, other.to_string()),
+    }
 }
