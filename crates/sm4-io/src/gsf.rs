@@ -42,7 +42,7 @@ use crate::bytes::checked_data_len;
 use crate::iso28600::{parse_number, parse_unit};
 use crate::{ReadError, ScanFile, WriteError};
 
-pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 const FORMAT: FileFormat = FileFormat::Gsf;
 const MAGIC: &[u8] = b"Gwyddion Simple Field 1.0\n";

@@ -64,7 +64,7 @@ use dhct_scan::{
 
 use crate::{ReadError, ScanFile};
 
-pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 const FORMAT: FileFormat = FileFormat::Iso28600;
 

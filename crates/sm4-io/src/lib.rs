@@ -32,6 +32,7 @@ pub mod gsf;
 pub mod iso28600;
 pub mod npy;
 mod overrides;
+mod placeholders;
 pub mod png_file;
 pub mod sm4;
 pub mod sxm;
@@ -44,6 +45,7 @@ pub use detect::detect_format;
 pub use dhct_scan::{FileFormat, ScanFile};
 pub use error::{ReadError, WriteError};
 pub use overrides::GeometryOverrides;
+pub use placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 /// Reads a file of any supported format, detected from its content.
 /// Errors do not repeat the path; callers add it as context.

@@ -42,14 +42,7 @@ use crate::{ReadError, ScanFile, WriteError};
 const FORMAT: FileFormat = FileFormat::Npy;
 const MAGIC: &[u8] = b"\x93NUMPY";
 
-/// Placeholder pixel pitch (metres, along x and y) used by readers of formats that carry no
-/// physical scale (NPY, TIFF): 1 Å per pixel. Marked [`ValueSource::Assumed`].
-pub const ASSUMED_PITCH: f64 = 1e-10;
-
-/// Placeholder pixel period (seconds per pixel along the fast axis) used by readers of
-/// formats that carry no timing (ISO 28600, NPY, TIFF, plain GSF): 1 ms per pixel.
-/// Marked [`ValueSource::Assumed`].
-pub const ASSUMED_PIXEL_PERIOD: f64 = 1e-3;
+use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 /// Name given to the single channel of an `.npy` file.
 pub const CHANNEL_NAME: &str = "array";

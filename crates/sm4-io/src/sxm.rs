@@ -50,7 +50,7 @@ use crate::bytes::checked_data_len;
 use crate::iso28600::parse_number;
 use crate::{ReadError, ScanFile};
 
-pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 const FORMAT: FileFormat = FileFormat::NanonisSxm;
 const MAGIC: &[u8] = b":NANONIS_VERSION:";

@@ -15,7 +15,7 @@
 //! values `z = z_offset + z_step · count`. Other programs show the image and ignore the text.
 //!
 //! A TIFF carries no scan geometry dhct trusts, so the reader returns the placeholder
-//! geometry of [`crate::npy`]: pitch [`ASSUMED_PITCH`], pixel period [`ASSUMED_PIXEL_PERIOD`],
+//! geometry of [`crate::npy`]: pitch [`crate::ASSUMED_PITCH`], pixel period [`crate::ASSUMED_PIXEL_PERIOD`],
 //! fast right, slow down, scale and timing [`ValueSource::Assumed`](dhct_scan::ValueSource).
 //! Only the first image of a multi-page file is read. Row 0 is the top row (TIFF's default
 //! orientation; the `Orientation` tag is not interpreted).
@@ -35,8 +35,6 @@ use ::tiff::tags::Tag;
 use dhct_scan::{FileFormat, ImageChannel, ScanPair};
 
 use crate::{ReadError, ScanFile, WriteError};
-
-pub use crate::npy::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 const FORMAT: FileFormat = FileFormat::Tiff;
 const DESCRIPTION_MAGIC: &str = "dhct image";

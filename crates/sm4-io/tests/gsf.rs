@@ -136,7 +136,7 @@ fn gwyddion_file_without_dhct_keys_gets_assumed_timing() {
     assert!(close(g.pitch_x(), 0.5e-9) && close(g.pitch_y(), 0.5e-9));
     assert_eq!(g.scale_source(), ValueSource::Stated);
     assert_eq!(g.timing_source(), ValueSource::Assumed);
-    assert_eq!(g.pixel_period(), gsf::ASSUMED_PIXEL_PERIOD);
+    assert_eq!(g.pixel_period(), dhct_sm4_io::ASSUMED_PIXEL_PERIOD);
     assert_eq!(g.trace_fast(), ScanDirection::Right);
     assert_eq!(g.slow_direction(), ScanDirection::Down);
     assert_eq!(pair.name(), "Height");
@@ -167,7 +167,10 @@ fn unit_prefixes_fold_into_values_and_missing_scale_is_assumed() {
         scan.pairs[0].geometry().scale_source(),
         ValueSource::Assumed
     );
-    assert_eq!(scan.pairs[0].geometry().pitch_x(), gsf::ASSUMED_PITCH);
+    assert_eq!(
+        scan.pairs[0].geometry().pitch_x(),
+        dhct_sm4_io::ASSUMED_PITCH
+    );
 
     let volts = gwyddion_file(
         "XRes = 2\nYRes = 1\nXReal = 1\nYReal = 1\nXYUnits = V\n",

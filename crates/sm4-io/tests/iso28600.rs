@@ -38,7 +38,7 @@ fn real_hopg_file_reads_with_stated_scale_and_assumed_timing() {
     );
     assert_eq!(g.scale_source(), ValueSource::Stated);
     assert_eq!(g.timing_source(), ValueSource::Assumed);
-    assert_eq!(g.pixel_period(), iso28600::ASSUMED_PIXEL_PERIOD);
+    assert_eq!(g.pixel_period(), dhct_sm4_io::ASSUMED_PIXEL_PERIOD);
     assert_eq!(g.trace_fast(), ScanDirection::Right, "\"left to right\"");
     assert_eq!(g.slow_direction(), ScanDirection::Down, "\"top to bottom\"");
     // First values of the file fill the top row from the left; the last is bottom-right.

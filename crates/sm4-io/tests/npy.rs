@@ -97,8 +97,8 @@ fn reads_every_dtype_in_both_orders_and_all_versions() {
                 assert_eq!((g.columns(), g.rows()), (3, 2));
                 assert_eq!(g.scale_source(), ValueSource::Assumed);
                 assert_eq!(g.timing_source(), ValueSource::Assumed);
-                assert_eq!(g.pitch_x(), npy::ASSUMED_PITCH);
-                assert_eq!(g.pixel_period(), npy::ASSUMED_PIXEL_PERIOD);
+                assert_eq!(g.pitch_x(), dhct_sm4_io::ASSUMED_PITCH);
+                assert_eq!(g.pixel_period(), dhct_sm4_io::ASSUMED_PIXEL_PERIOD);
                 assert_eq!(g.trace_fast(), ScanDirection::Right);
                 assert_eq!(g.slow_direction(), ScanDirection::Down);
             }

@@ -211,8 +211,8 @@ fn missing_scan_time_and_range_are_assumed() {
     let g = sxm::read(&file).unwrap().pairs[0].geometry().clone();
     assert_eq!(g.timing_source(), ValueSource::Assumed);
     assert_eq!(g.scale_source(), ValueSource::Assumed);
-    assert_eq!(g.pixel_period(), sxm::ASSUMED_PIXEL_PERIOD);
-    assert_eq!(g.pitch_x(), sxm::ASSUMED_PITCH);
+    assert_eq!(g.pixel_period(), dhct_sm4_io::ASSUMED_PIXEL_PERIOD);
+    assert_eq!(g.pitch_x(), dhct_sm4_io::ASSUMED_PITCH);
 }
 
 #[test]

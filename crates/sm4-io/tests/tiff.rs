@@ -37,7 +37,7 @@ fn float32_round_trip_is_exact() {
     assert_eq!((g.columns(), g.rows()), (7, 5));
     assert_eq!(g.scale_source(), ValueSource::Assumed);
     assert_eq!(g.timing_source(), ValueSource::Assumed);
-    assert_eq!(g.pitch_x(), tiff_file::ASSUMED_PITCH);
+    assert_eq!(g.pitch_x(), dhct_sm4_io::ASSUMED_PITCH);
     assert_eq!(
         scan.metadata.get("tiff sample bits").map(String::as_str),
         Some("32")

@@ -62,7 +62,7 @@
 //! * Pixel pitch `|x scale|`, `|y scale|` (x/y units, normally "m"); pixel period = period;
 //!   scan angle = angle converted to radians (sign passed through as stored); offset = x/y
 //!   offset. Turnaround time is not in the file: 0. A zero or non-finite scale or period, or
-//!   non-length x/y units, give [`ASSUMED_PITCH`] / [`ASSUMED_PIXEL_PERIOD`] marked
+//!   non-length x/y units, give [`crate::ASSUMED_PITCH`] / [`crate::ASSUMED_PIXEL_PERIOD`] marked
 //!   [`dhct_scan::ValueSource::Assumed`]; an unknown scan direction code gives `Right` with
 //!   the timing marked assumed.
 //! * Metadata (from the first image page): `signature`, `date` (ISO), `time`, `bias` (V),
@@ -91,8 +91,6 @@ mod write;
 use std::io::Write;
 
 use crate::{ReadError, ScanFile, WriteError};
-
-pub use read::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 /// Reads an SM4 file from memory: one [`dhct_scan::ScanPair`] per image channel.
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {

@@ -19,12 +19,7 @@ use crate::bytes::{ByteReader, checked_data_len};
 
 const FORMAT: FileFormat = FileFormat::RhkSm4;
 
-/// Pixel pitch (metres) used, and marked [`ValueSource::Assumed`], when a page's x or y
-/// scale is zero or not finite.
-pub const ASSUMED_PITCH: f64 = 1e-10;
-/// Pixel period (seconds) used, and marked [`ValueSource::Assumed`], when a page's period
-/// is zero or not finite.
-pub const ASSUMED_PIXEL_PERIOD: f64 = 1e-3;
+use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
 fn corrupt(reason: impl Into<String>) -> ReadError {
     ReadError::corrupt(FORMAT, reason)
