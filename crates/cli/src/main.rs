@@ -4,6 +4,7 @@
 //! what to try); 2 the command line itself was malformed.
 
 mod info;
+mod simulate;
 mod units;
 
 use std::path::PathBuf;
@@ -36,6 +37,29 @@ enum Command {
         json: bool,
         #[command(flatten)]
         geometry: GeometryArgs,
+    },
+    /// Simulate an STM acquisition (trace and retrace) of a lattice surface with drift,
+    /// creep, hysteresis and other distortions; write the images (SM4, ...) and the ground
+    /// truth (ground_truth.json, displacement fields as NPY) into a directory.
+    Simulate {
+        /// Simulation config, TOML or JSON (see docs/simulator.md).
+        #[arg(required_unless_present_any = ["preset", "list_presets"], conflicts_with = "preset")]
+        config: Option<PathBuf>,
+        /// Use a built-in preset instead of a config file (see --list-presets).
+        #[arg(long)]
+        preset: Option<String>,
+        /// List the built-in presets and exit.
+        #[arg(long)]
+        list_presets: bool,
+        /// Output directory (created if missing).
+        #[arg(short, long, required_unless_present_any = ["list_presets", "print_config"])]
+        output: Option<PathBuf>,
+        /// Replace the config's random seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Print the config as TOML (e.g. a preset to edit) instead of simulating.
+        #[arg(long)]
+        print_config: bool,
     },
 }
 
@@ -89,6 +113,36 @@ fn main() -> ExitCode {
             json,
             geometry,
         } => info::run(file, &geometry.overrides(), *json),
+        Command::Simulate {
+            config,
+            preset,
+            list_presets,
+            output,
+            seed,
+            print_config,
+        } => {
+            let source = match (config, preset) {
+                (Some(path), _) => Some(simulate::ConfigSource::File(path)),
+                (None, Some(name)) => Some(simulate::ConfigSource::Preset(name)),
+                (None, None) => None,
+            };
+            match source {
+                _ if *list_presets => {
+                    print!("{}", simulate::list_presets());
+                    Ok(())
+                }
+                Some(source) => simulate::run(&simulate::SimulateRequest {
+                    source,
+                    output: output.as_deref(),
+                    seed: *seed,
+                    print_config: *print_config,
+                })
+                .map(|text| print!("{text}")),
+                None => Err(anyhow::anyhow!(
+                    "give a simulation config file or --preset NAME (see --list-presets)"
+                )),
+            }
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
