@@ -1,4 +1,56 @@
-//! Feature indexing: find and sub-pixel fit every atom or molecule in an STM image (DHCT step 1-2).
+//! Feature indexing: find every atom or molecule in an STM image and fit it to sub-pixel
+//! precision (DHCT steps 1–2).
 //!
-//! This crate is part of the dhct workspace; its pipeline stage is being built (see the
-//! project's issues). It has no public API yet.
+//! Pipeline ([`find_features`]): optional background and scan-line corrections →
+//! normalised cross-correlation with a Gaussian kernel sized from the nearest-neighbour
+//! distance (FFT) → threshold and rain-falling watershed → DHCT area filter → bounded
+//! Levenberg–Marquardt fit of an elliptical 2-D Gaussian per region (analytic Jacobian,
+//! fixed-size normal equations) → edge and duplicate checks → acquisition time of each
+//! sub-pixel centre from the scan geometry. Every rejected candidate is kept with its reason.
+//!
+//! ```
+//! use dhct_features::{find_features, Background, FeatureOptions};
+//! use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPass};
+//! use ndarray::Array2;
+//!
+//! // A 64 x 64 px square lattice of Gaussian bumps, 9 px apart, 0.1 nm pixels.
+//! let z = Array2::from_shape_fn((64, 64), |(r, c)| {
+//!     let (dx, dy) = ((c % 9) as f64 - 4.0, (r % 9) as f64 - 4.0);
+//!     1e-11 * (-(dx * dx + dy * dy) / 4.0).exp()
+//! });
+//! let image = ImageChannel::new("Topography", "m", z);
+//! let geometry = ScanGeometry::new(64, 64, 1e-10, 1e-10, 1e-3,
+//!                                  ScanDirection::Right, ScanDirection::Down).unwrap();
+//! let options = FeatureOptions {
+//!     background: Background::None, // the image has no tilt to remove
+//!     ..FeatureOptions::for_neighbour_distance(9e-10)
+//! };
+//! let set = find_features(&image, &geometry, ScanPass::Trace, &options, None).unwrap();
+//! // 7 x 7 bumps; those at x = 4 or y = 4 are closer to the border than the kernel radius.
+//! assert_eq!(set.features.len(), 36);
+//! for f in &set.features {
+//!     assert!(((f.x_px - 4.0) / 9.0 - ((f.x_px - 4.0) / 9.0).round()).abs() < 1e-6);
+//! }
+//! ```
+
+mod correlate;
+mod error;
+mod feature;
+mod find;
+mod gaussian_fit;
+mod kernel;
+mod ncc;
+mod options;
+mod preprocess;
+mod watershed;
+
+pub use correlate::correlate_same;
+pub use error::FeatureError;
+pub use feature::{CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts};
+pub use find::{find_features, find_features_and_correlation, find_features_in_pair};
+pub use gaussian_fit::{FitLimits, FitStatus, GaussianFit, fit_gaussian};
+pub use kernel::Kernel;
+pub use ncc::normalised_cross_correlation;
+pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
+pub use preprocess::{correct_lines, remove_background, subtract_polynomial};
+pub use watershed::{Region, watershed_regions};

@@ -1,0 +1,30 @@
+use thiserror::Error;
+
+/// Why features could not be found.
+#[derive(Debug, Error)]
+pub enum FeatureError {
+    #[error("invalid parameter: {0}")]
+    BadParameter(String),
+    #[error(
+        "the image is {columns} x {rows} px, smaller than the {kernel} px kernel: check --nn and the pixel pitch"
+    )]
+    ImageTooSmall {
+        columns: usize,
+        rows: usize,
+        kernel: usize,
+    },
+    #[error("the image has {finite} finite pixels out of {total}: too few to find features")]
+    MissingData { finite: usize, total: usize },
+    #[error("the image is flat (all values equal): there is nothing to find")]
+    FlatImage,
+    #[error(
+        "no features found in the {pass} image ({candidates} candidate regions above NCC {threshold}; \
+         rejected: {rejected}). Check the nearest-neighbour distance, the polarity (bright/dark) and the threshold"
+    )]
+    NoFeatures {
+        pass: &'static str,
+        candidates: usize,
+        threshold: f64,
+        rejected: String,
+    },
+}

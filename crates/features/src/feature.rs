@@ -1,0 +1,199 @@
+//! The feature table: every fitted feature with position, shape, uncertainty and time.
+
+use std::io::Write;
+
+use dhct_scan::ScanPass;
+use serde::{Deserialize, Serialize};
+
+use crate::FitStatus;
+
+/// One fitted feature. Positions are in the controller frame of its image (display
+/// orientation; x = column, y = row; metres = px · pitch).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Feature {
+    /// Index within its feature set.
+    pub id: usize,
+    /// Image the feature was found in.
+    pub pass: ScanPass,
+    /// Fitted centre, pixels (sub-pixel).
+    pub x_px: f64,
+    pub y_px: f64,
+    /// Fitted centre, metres.
+    pub x_m: f64,
+    pub y_m: f64,
+    /// 1σ uncertainty of the centre from the fit covariance, pixels.
+    pub x_sigma_px: f64,
+    pub y_sigma_px: f64,
+    /// Gaussian widths along the major and minor axes, pixels (major ≥ minor).
+    pub sigma_major_px: f64,
+    pub sigma_minor_px: f64,
+    /// Angle of the major axis from +x towards +y (display frame), radians.
+    pub theta_rad: f64,
+    /// Fitted Gaussian amplitude, z units, positive for the chosen polarity.
+    pub amplitude: f64,
+    /// Signed apparent height (z units): +amplitude for bright, −amplitude for dark features.
+    pub height: f64,
+    /// Fitted background level z0, z units.
+    pub z0: f64,
+    /// RMS residual of the fit, z units.
+    pub residual_rms: f64,
+    /// Pixels in the fitted region.
+    pub pixel_count: usize,
+    /// Peak normalised cross-correlation of the region.
+    pub ncc_peak: f64,
+    pub status: FitStatus,
+    /// Acquisition time since frame start, seconds (from the sub-pixel centre).
+    pub time_s: f64,
+    /// Time since the start of the feature's scan line, seconds.
+    pub line_time_s: f64,
+}
+
+/// Why a candidate region did not become a feature.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rejection {
+    /// Region area below median/√10.
+    AreaTooSmall,
+    /// Region area above median·√10.
+    AreaTooLarge,
+    /// The fit failed (too few pixels, singular, non-finite).
+    FitFailed,
+    /// The centre ran onto the bound of its region: not a feature here.
+    CentreOnBound,
+    /// Width or amplitude at its bound: not feature-shaped.
+    BadShape,
+    /// Centre closer to the image border than the kernel radius.
+    EdgeCut,
+    /// Another fit of the same feature was kept.
+    Duplicate,
+}
+
+/// A candidate region that was not accepted, with where it was and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RejectedCandidate {
+    pub x_px: f64,
+    pub y_px: f64,
+    pub reason: Rejection,
+}
+
+/// Counts of rejected candidates by reason.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct RejectionCounts {
+    pub area_too_small: usize,
+    pub area_too_large: usize,
+    pub fit_failed: usize,
+    pub centre_on_bound: usize,
+    pub bad_shape: usize,
+    pub edge_cut: usize,
+    pub duplicate: usize,
+}
+
+impl RejectionCounts {
+    /// Counts the reasons in `rejected`.
+    pub fn of(rejected: &[RejectedCandidate]) -> RejectionCounts {
+        let mut counts = RejectionCounts::default();
+        for r in rejected {
+            *match r.reason {
+                Rejection::AreaTooSmall => &mut counts.area_too_small,
+                Rejection::AreaTooLarge => &mut counts.area_too_large,
+                Rejection::FitFailed => &mut counts.fit_failed,
+                Rejection::CentreOnBound => &mut counts.centre_on_bound,
+                Rejection::BadShape => &mut counts.bad_shape,
+                Rejection::EdgeCut => &mut counts.edge_cut,
+                Rejection::Duplicate => &mut counts.duplicate,
+            } += 1;
+        }
+        counts
+    }
+
+    /// Total number rejected.
+    pub fn total(&self) -> usize {
+        self.area_too_small
+            + self.area_too_large
+            + self.fit_failed
+            + self.centre_on_bound
+            + self.bad_shape
+            + self.edge_cut
+            + self.duplicate
+    }
+}
+
+impl std::fmt::Display for RejectionCounts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} area too small, {} area too large, {} fit failed, {} centre on bound, \
+             {} bad shape, {} edge-cut, {} duplicate",
+            self.area_too_small,
+            self.area_too_large,
+            self.fit_failed,
+            self.centre_on_bound,
+            self.bad_shape,
+            self.edge_cut,
+            self.duplicate
+        )
+    }
+}
+
+/// All features of one image, with what was rejected and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeatureSet {
+    pub pass: ScanPass,
+    /// Accepted features, ordered by acquisition time.
+    pub features: Vec<Feature>,
+    /// Candidate regions that were not accepted.
+    pub rejected: Vec<RejectedCandidate>,
+    /// Number of watershed regions above the threshold.
+    pub candidates: usize,
+    /// σ of the correlation kernel used, pixels (NaN for a custom kernel).
+    pub kernel_sigma_px: f64,
+}
+
+/// Column names of [`FeatureSet::write_csv`].
+pub const CSV_HEADER: &str = "id,pass,x_px,y_px,x_m,y_m,x_sigma_px,y_sigma_px,sigma_major_px,\
+sigma_minor_px,theta_rad,amplitude,height,z0,residual_rms,pixel_count,ncc_peak,status,time_s,line_time_s";
+
+impl FeatureSet {
+    /// Counts of rejected candidates by reason.
+    pub fn rejection_counts(&self) -> RejectionCounts {
+        RejectionCounts::of(&self.rejected)
+    }
+
+    /// Writes the features as CSV with a header line ([`CSV_HEADER`]).
+    pub fn write_csv<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
+        writeln!(w, "{CSV_HEADER}")?;
+        for f in &self.features {
+            let pass = match f.pass {
+                ScanPass::Trace => "trace",
+                ScanPass::Retrace => "retrace",
+            };
+            let status = serde_json::to_value(f.status)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default();
+            writeln!(
+                w,
+                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{},{},{status},{},{}",
+                f.id,
+                f.x_px,
+                f.y_px,
+                f.x_m,
+                f.y_m,
+                f.x_sigma_px,
+                f.y_sigma_px,
+                f.sigma_major_px,
+                f.sigma_minor_px,
+                f.theta_rad,
+                f.amplitude,
+                f.height,
+                f.z0,
+                f.residual_rms,
+                f.pixel_count,
+                f.ncc_peak,
+                f.time_s,
+                f.line_time_s
+            )?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,358 @@
+//! The feature-finding pipeline: preprocess → NCC → watershed → area filter → Gaussian fits
+//! → edge and duplicate checks → acquisition times.
+
+use dhct_scan::{ImageChannel, ScanGeometry, ScanPair, ScanPass};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use ndarray::Array2;
+use rayon::prelude::*;
+
+use crate::gaussian_fit::{FitLimits, fit_gaussian};
+use crate::ncc::normalised_cross_correlation;
+use crate::preprocess::{correct_lines, remove_background};
+use crate::watershed::{Region, watershed_regions};
+use crate::{
+    Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice, Polarity,
+    RejectedCandidate, Rejection, RejectionCounts,
+};
+
+/// Minimum region area (px) counted when taking the median area (DHCT's 10 px).
+const MIN_AREA_FOR_MEDIAN: usize = 10;
+
+/// Finds and fits every feature of one image. `mask` (true = use), if given, restricts the
+/// background fit only; features are found everywhere.
+pub fn find_features(
+    image: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> Result<FeatureSet, FeatureError> {
+    find_features_and_correlation(image, geometry, pass, options, mask).map(|(set, _)| set)
+}
+
+/// Finds features in every image of a pair, trace and retrace in parallel.
+pub fn find_features_in_pair(
+    pair: &ScanPair,
+    options: &FeatureOptions,
+) -> Result<Vec<FeatureSet>, FeatureError> {
+    let geometry = pair.geometry();
+    let run = |pass| {
+        pair.image(pass)
+            .map(|image| find_features(image, geometry, pass, options, None))
+    };
+    let (trace, retrace) = rayon::join(|| run(ScanPass::Trace), || run(ScanPass::Retrace));
+    trace.into_iter().chain(retrace).collect()
+}
+
+/// Like [`find_features`], also returning the normalised cross-correlation map.
+pub fn find_features_and_correlation(
+    image: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> Result<(FeatureSet, Array2<f64>), FeatureError> {
+    let (rows, columns) = image.z.dim();
+    if rows != geometry.rows() || columns != geometry.columns() {
+        return Err(FeatureError::BadParameter(format!(
+            "image is {columns} x {rows} px but its geometry says {} x {} px",
+            geometry.columns(),
+            geometry.rows()
+        )));
+    }
+    if mask.is_some_and(|m| m.dim() != image.z.dim()) {
+        return Err(FeatureError::BadParameter(
+            "mask size differs from the image size".into(),
+        ));
+    }
+    if !(options.threshold.is_finite() && (-1.0..1.0).contains(&options.threshold)) {
+        return Err(FeatureError::BadParameter(format!(
+            "NCC threshold must lie in [-1, 1), got {}",
+            options.threshold
+        )));
+    }
+    if !(options.duplicate_fraction.is_finite() && options.duplicate_fraction >= 0.0) {
+        return Err(FeatureError::BadParameter(
+            "duplicate fraction must be ≥ 0".into(),
+        ));
+    }
+    let d = options.neighbour_distance;
+    if !(d.is_finite() && d > 0.0) {
+        return Err(FeatureError::BadParameter(format!(
+            "nearest-neighbour distance must be a positive length in metres, got {d}"
+        )));
+    }
+    let pitch = (geometry.pitch_x() * geometry.pitch_y()).sqrt();
+    let nn_px = d / pitch;
+    let (kernel, kernel_sigma_px) = match &options.kernel {
+        KernelChoice::FromNeighbourDistance => {
+            let k = Kernel::for_neighbour_distance(nn_px)?;
+            let s = (nn_px / 2.0).round().max(1.0) / 2.0;
+            (k, s)
+        }
+        KernelChoice::GaussianSigma { sigma_px } => {
+            (Kernel::gaussian(*sigma_px)?, (2.0 * sigma_px).round() / 2.0)
+        }
+        KernelChoice::Custom { kernel } => (kernel.clone(), f64::NAN),
+    };
+    let (kh, kw) = kernel.values().dim();
+    if rows < kh || columns < kw {
+        return Err(FeatureError::ImageTooSmall {
+            columns,
+            rows,
+            kernel: kh.max(kw),
+        });
+    }
+
+    // Missing data: NaN pixels are excluded from fits and filled for the correlation.
+    let finite: Vec<f64> = image.z.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.len() < (rows * columns) / 2 || finite.len() < 4 * kh * kw {
+        return Err(FeatureError::MissingData {
+            finite: finite.len(),
+            total: rows * columns,
+        });
+    }
+    if finite.iter().all(|v| *v == finite[0]) {
+        return Err(FeatureError::FlatImage);
+    }
+    let lined = correct_lines(&image.z, geometry.fast_axis(), options.line_correction);
+    let flattened = remove_background(&lined, options.background, mask)?;
+    let sign = match options.polarity {
+        Polarity::Bright => 1.0,
+        Polarity::Dark => -1.0,
+    };
+    let signed = flattened.mapv(|v| sign * v);
+    let fill = {
+        let mut values: Vec<f64> = signed.iter().copied().filter(|v| v.is_finite()).collect();
+        let middle = values.len() / 2;
+        *values.select_nth_unstable_by(middle, f64::total_cmp).1
+    };
+    let filled = signed.mapv(|v| if v.is_finite() { v } else { fill });
+    let ncc = normalised_cross_correlation(filled.view(), &kernel);
+
+    let regions = watershed_regions(&ncc, options.threshold);
+    let candidates = regions.len();
+    let mut rejected = Vec::new();
+    let kept = area_filter(regions, options.area_filter, columns, &mut rejected);
+
+    let edge_margin = (kh.max(kw) / 2) as f64;
+    let sigma_start = if kernel_sigma_px.is_finite() {
+        kernel_sigma_px
+    } else {
+        nn_px / 4.0
+    };
+    // Each region identifies one feature; the fit uses a disc of radius ½·NN around the
+    // region's peak, so the pixel set is symmetric about the feature (a watershed basin's
+    // shape depends on tie-breaking at saddles and would bias the centre).
+    let window_radius = (0.5 * nn_px).max(2.0);
+    let window_offsets: Vec<(i64, i64)> = {
+        let reach = window_radius.ceil() as i64;
+        (-reach..=reach)
+            .flat_map(|dr| (-reach..=reach).map(move |dc| (dr, dc)))
+            .filter(|&(dr, dc)| ((dr * dr + dc * dc) as f64) <= window_radius * window_radius)
+            .collect()
+    };
+    let z_values = signed.as_standard_layout();
+    let fits: Vec<_> = kept
+        .par_iter()
+        .map(|region| {
+            let (peak_row, peak_col) = (
+                (region.peak / columns) as i64,
+                (region.peak % columns) as i64,
+            );
+            let capacity = window_offsets.len();
+            let (mut xs, mut ys, mut zs) = (
+                Vec::with_capacity(capacity),
+                Vec::with_capacity(capacity),
+                Vec::with_capacity(capacity),
+            );
+            for &(dr, dc) in &window_offsets {
+                let (r, c) = (peak_row + dr, peak_col + dc);
+                if r < 0 || c < 0 || r >= rows as i64 || c >= columns as i64 {
+                    continue;
+                }
+                let z = z_values[[r as usize, c as usize]];
+                if z.is_finite() {
+                    xs.push(c as f64);
+                    ys.push(r as f64);
+                    zs.push(z);
+                }
+            }
+            let (x, y) = (peak_col as f64, peak_row as f64);
+            let limits = FitLimits {
+                x_range: (x - window_radius, x + window_radius),
+                y_range: (y - window_radius, y + window_radius),
+                sigma_range: (0.25, nn_px.max(1.0)),
+                max_iterations: 100,
+            };
+            let fit = fit_gaussian(&xs, &ys, &zs, (x, y), sigma_start, &limits);
+            (fit, xs.len())
+        })
+        .collect();
+
+    struct Candidate {
+        fit: crate::gaussian_fit::GaussianFit,
+        pixel_count: usize,
+        ncc_peak: f64,
+    }
+    let mut accepted = Vec::new();
+    for (region, (fit, pixel_count)) in kept.iter().zip(fits) {
+        let reason = match fit.status {
+            FitStatus::Failed => Some(Rejection::FitFailed),
+            FitStatus::CentreOnBound => Some(Rejection::CentreOnBound),
+            FitStatus::BadShape => Some(Rejection::BadShape),
+            FitStatus::Converged | FitStatus::IterationLimit => {
+                let inside = fit.x0 >= edge_margin
+                    && fit.y0 >= edge_margin
+                    && fit.x0 <= (columns - 1) as f64 - edge_margin
+                    && fit.y0 <= (rows - 1) as f64 - edge_margin;
+                (!inside).then_some(Rejection::EdgeCut)
+            }
+        };
+        match reason {
+            Some(reason) => rejected.push(RejectedCandidate {
+                x_px: fit.x0,
+                y_px: fit.y0,
+                reason,
+            }),
+            None => accepted.push(Candidate {
+                fit,
+                pixel_count,
+                ncc_peak: ncc.as_slice().map_or(f64::NAN, |s| s[region.peak]),
+            }),
+        }
+    }
+
+    // Duplicates: of fits closer than the duplicate distance, keep the best-correlated.
+    let duplicate_px = options.duplicate_fraction * nn_px;
+    let mut is_duplicate = vec![false; accepted.len()];
+    if duplicate_px > 0.0 && accepted.len() > 1 {
+        let points: Vec<[f64; 2]> = accepted.iter().map(|c| [c.fit.x0, c.fit.y0]).collect();
+        let tree: ImmutableKdTree<f64, 2> =
+            ImmutableKdTree::new_from_slice(&points).map_err(|e| {
+                FeatureError::BadParameter(format!("cannot index feature positions: {e:?}"))
+            })?;
+        for (i, point) in points.iter().enumerate() {
+            let close = tree
+                .query(point)
+                .within::<SquaredEuclidean<f64>>(duplicate_px * duplicate_px)
+                .unsorted()
+                .execute();
+            for neighbour in close {
+                let j = neighbour.item as usize;
+                if j == i {
+                    continue;
+                }
+                let better = accepted[j].ncc_peak > accepted[i].ncc_peak
+                    || (accepted[j].ncc_peak == accepted[i].ncc_peak && j < i);
+                if better {
+                    is_duplicate[i] = true;
+                    break;
+                }
+            }
+        }
+    }
+
+    let mut features = Vec::with_capacity(accepted.len());
+    for (candidate, duplicate) in accepted.into_iter().zip(is_duplicate) {
+        let fit = candidate.fit;
+        if duplicate {
+            rejected.push(RejectedCandidate {
+                x_px: fit.x0,
+                y_px: fit.y0,
+                reason: Rejection::Duplicate,
+            });
+            continue;
+        }
+        let time = geometry.acquisition_time(pass, fit.x0, fit.y0);
+        features.push(Feature {
+            id: 0,
+            pass,
+            x_px: fit.x0,
+            y_px: fit.y0,
+            x_m: fit.x0 * geometry.pitch_x(),
+            y_m: fit.y0 * geometry.pitch_y(),
+            x_sigma_px: fit.x0_sigma,
+            y_sigma_px: fit.y0_sigma,
+            sigma_major_px: fit.sigma_major,
+            sigma_minor_px: fit.sigma_minor,
+            theta_rad: fit.theta,
+            amplitude: fit.amplitude,
+            height: sign * fit.amplitude,
+            z0: sign * fit.offset,
+            residual_rms: fit.residual_rms,
+            pixel_count: candidate.pixel_count,
+            ncc_peak: candidate.ncc_peak,
+            status: fit.status,
+            time_s: time.since_frame_start,
+            line_time_s: time.since_line_start,
+        });
+    }
+    features.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    for (id, f) in features.iter_mut().enumerate() {
+        f.id = id;
+    }
+    if features.is_empty() {
+        return Err(FeatureError::NoFeatures {
+            pass: match pass {
+                ScanPass::Trace => "trace",
+                ScanPass::Retrace => "retrace",
+            },
+            candidates,
+            threshold: options.threshold,
+            rejected: RejectionCounts::of(&rejected).to_string(),
+        });
+    }
+    Ok((
+        FeatureSet {
+            pass,
+            features,
+            rejected,
+            candidates,
+            kernel_sigma_px,
+        },
+        ncc,
+    ))
+}
+
+/// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
+/// over regions larger than 10 px.
+fn area_filter(
+    regions: Vec<Region>,
+    enabled: bool,
+    columns: usize,
+    rejected: &mut Vec<RejectedCandidate>,
+) -> Vec<Region> {
+    let mut areas: Vec<usize> = regions
+        .iter()
+        .map(|r| r.pixels.len())
+        .filter(|&a| a > MIN_AREA_FOR_MEDIAN)
+        .collect();
+    if !enabled || areas.is_empty() {
+        return regions;
+    }
+    areas.sort_unstable();
+    let median = areas[areas.len() / 2] as f64;
+    let factor = 10f64.sqrt();
+    let (low, high) = (median / factor, median * factor);
+    let mut kept = Vec::with_capacity(regions.len());
+    for region in regions {
+        let area = region.pixels.len() as f64;
+        let reason = if area <= low {
+            Some(Rejection::AreaTooSmall)
+        } else if area >= high {
+            Some(Rejection::AreaTooLarge)
+        } else {
+            None
+        };
+        match reason {
+            Some(reason) => rejected.push(RejectedCandidate {
+                x_px: (region.peak % columns) as f64,
+                y_px: (region.peak / columns) as f64,
+                reason,
+            }),
+            None => kept.push(region),
+        }
+    }
+    kept
+}

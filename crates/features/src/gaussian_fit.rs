@@ -1,0 +1,334 @@
+//! Sub-pixel least-squares fit of an elliptical 2-D Gaussian to one feature's pixels.
+//!
+//! Model (pixel coordinates, x = column, y = row):
+//! `z = A·exp(−q/2) + z0`, `q = a·dx² + 2b·dx·dy + c·dy²`, `dx = x − x0`, `dy = y − y0`.
+//! The quadratic form `[[a, b], [b, c]]` is the inverse covariance of the Gaussian; it is
+//! equivalent to the rotated form `A·exp(−u²/2σ1² − v²/2σ2²) + z0` but stays well
+//! conditioned when σ1 ≈ σ2 (where θ is undetermined). σ1, σ2, θ are derived from it.
+//!
+//! Solver: Levenberg–Marquardt with Marquardt's diagonal scaling, analytic Jacobian,
+//! fixed-size 7×7 normal equations solved by Cholesky, bounds enforced by projection.
+
+use nalgebra::{SMatrix, SVector};
+use serde::{Deserialize, Serialize};
+
+type Matrix7 = SMatrix<f64, 7, 7>;
+type Vector7 = SVector<f64, 7>;
+
+/// Parameter indices.
+const AMPLITUDE: usize = 0;
+const X0: usize = 1;
+const Y0: usize = 2;
+const QA: usize = 3;
+const QB: usize = 4;
+const QC: usize = 5;
+const OFFSET: usize = 6;
+
+/// How a fit ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitStatus {
+    /// Converged inside the bounds.
+    Converged,
+    /// Stopped at the iteration limit; the result may still be usable.
+    IterationLimit,
+    /// The centre ended on its bound: the feature is not where its region is.
+    CentreOnBound,
+    /// The width ended on its bound or the shape became degenerate.
+    BadShape,
+    /// Too few pixels or a singular problem.
+    Failed,
+}
+
+/// Bounds and limits of a fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FitLimits {
+    /// Centre bounds (pixels), inclusive: x in `[x_min, x_max]`, y in `[y_min, y_max]`.
+    pub x_range: (f64, f64),
+    pub y_range: (f64, f64),
+    /// Allowed Gaussian σ along either principal axis, pixels.
+    pub sigma_range: (f64, f64),
+    /// Iteration limit.
+    pub max_iterations: usize,
+}
+
+/// Result of one fit, in the caller's z units and pixel coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GaussianFit {
+    pub amplitude: f64,
+    pub x0: f64,
+    pub y0: f64,
+    /// Width along the major axis, px (σ1 ≥ σ2).
+    pub sigma_major: f64,
+    /// Width along the minor axis, px.
+    pub sigma_minor: f64,
+    /// Angle of the major axis from +x towards +y, radians in (−π/2, π/2].
+    pub theta: f64,
+    pub offset: f64,
+    /// Root-mean-square residual, z units.
+    pub residual_rms: f64,
+    /// 1σ uncertainty of x0 and y0 from the fit covariance, px.
+    pub x0_sigma: f64,
+    pub y0_sigma: f64,
+    pub iterations: usize,
+    pub status: FitStatus,
+}
+
+/// Model value and its gradient with respect to the 7 parameters at one pixel.
+#[inline(always)]
+fn model_and_gradient(p: &Vector7, x: f64, y: f64) -> (f64, Vector7) {
+    let (dx, dy) = (x - p[X0], y - p[Y0]);
+    let q = p[QA] * dx * dx + 2.0 * p[QB] * dx * dy + p[QC] * dy * dy;
+    let e = (-0.5 * q).exp();
+    let ae = p[AMPLITUDE] * e;
+    let gradient = Vector7::from([
+        e,
+        ae * (p[QA] * dx + p[QB] * dy),
+        ae * (p[QB] * dx + p[QC] * dy),
+        -0.5 * ae * dx * dx,
+        -ae * dx * dy,
+        -0.5 * ae * dy * dy,
+        1.0,
+    ]);
+    (ae + p[OFFSET], gradient)
+}
+
+/// Normal equations `JᵀJ`, `Jᵀr` and the cost at `p`.
+fn normal_equations(p: &Vector7, xs: &[f64], ys: &[f64], zs: &[f64]) -> (Matrix7, Vector7, f64) {
+    let mut jtj = Matrix7::zeros();
+    let mut jtr = Vector7::zeros();
+    let mut total = 0.0;
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
+        let (f, g) = model_and_gradient(p, x, y);
+        let r = z - f;
+        total += r * r;
+        jtr += g * r;
+        // Symmetric rank-one update, upper triangle only.
+        for i in 0..7 {
+            for j in i..7 {
+                jtj[(i, j)] += g[i] * g[j];
+            }
+        }
+    }
+    for i in 0..7 {
+        for j in 0..i {
+            jtj[(i, j)] = jtj[(j, i)];
+        }
+    }
+    (jtj, jtr, total)
+}
+
+/// Projects `p` into the bounds; returns false if the shape is not a valid ellipse.
+fn project(p: &mut Vector7, limits: &FitLimits, amplitude_max: f64) -> bool {
+    p[AMPLITUDE] = p[AMPLITUDE].clamp(0.0, amplitude_max);
+    p[X0] = p[X0].clamp(limits.x_range.0, limits.x_range.1);
+    p[Y0] = p[Y0].clamp(limits.y_range.0, limits.y_range.1);
+    p[OFFSET] = p[OFFSET].clamp(-amplitude_max, amplitude_max);
+    let (s_min, s_max) = limits.sigma_range;
+    let (q_min, q_max) = (1.0 / (s_max * s_max), 1.0 / (s_min * s_min));
+    p[QA] = p[QA].clamp(q_min, q_max);
+    p[QC] = p[QC].clamp(q_min, q_max);
+    p.iter().all(|v| v.is_finite()) && p[QA] * p[QC] - p[QB] * p[QB] > 0.0
+}
+
+/// Principal widths (major, minor, px) and major-axis angle of the quadratic form.
+fn principal_axes(a: f64, b: f64, c: f64) -> (f64, f64, f64) {
+    let mean = 0.5 * (a + c);
+    let radius = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (small, large) = (mean - radius, mean + radius);
+    // The major axis of the Gaussian is the eigenvector of the smaller eigenvalue.
+    let mut theta = 0.5 * (2.0 * b).atan2(a - c) + std::f64::consts::FRAC_PI_2;
+    if theta > std::f64::consts::FRAC_PI_2 {
+        theta -= std::f64::consts::PI;
+    }
+    (
+        1.0 / small.max(f64::MIN_POSITIVE).sqrt(),
+        1.0 / large.sqrt(),
+        theta,
+    )
+}
+
+/// Fits the model to pixels at `(xs[i], ys[i])` with values `zs[i]`, starting from the centre
+/// `(x0, y0)` and isotropic width `sigma0` (px). Bright features are assumed: flip z for
+/// dark ones before calling.
+pub fn fit_gaussian(
+    xs: &[f64],
+    ys: &[f64],
+    zs: &[f64],
+    (x0, y0): (f64, f64),
+    sigma0: f64,
+    limits: &FitLimits,
+) -> GaussianFit {
+    let n = zs.len();
+    let failed = |status| GaussianFit {
+        amplitude: f64::NAN,
+        x0,
+        y0,
+        sigma_major: f64::NAN,
+        sigma_minor: f64::NAN,
+        theta: f64::NAN,
+        offset: f64::NAN,
+        residual_rms: f64::NAN,
+        x0_sigma: f64::NAN,
+        y0_sigma: f64::NAN,
+        iterations: 0,
+        status,
+    };
+    if n <= 7 || xs.len() != n || ys.len() != n {
+        return failed(FitStatus::Failed);
+    }
+    // Normalise z to [0, 1] so all parameters are of order one.
+    let (z_min, z_max) = zs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &z| {
+            (lo.min(z), hi.max(z))
+        });
+    let span = z_max - z_min;
+    if !(span.is_finite() && span > 0.0) {
+        return failed(FitStatus::Failed);
+    }
+    let scaled: Vec<f64> = zs.iter().map(|z| (z - z_min) / span).collect();
+    let amplitude_max = 3.0;
+    let q0 = 1.0 / (sigma0 * sigma0);
+    let mut p = Vector7::from([1.0, x0, y0, q0, 0.0, q0, 0.0]);
+    if !project(&mut p, limits, amplitude_max) {
+        return failed(FitStatus::Failed);
+    }
+
+    let mut lambda = 1e-3;
+    let (mut jtj, mut jtr, mut current) = normal_equations(&p, xs, ys, &scaled);
+    let mut iterations = 0;
+    let mut converged = false;
+    while iterations < limits.max_iterations && !converged {
+        iterations += 1;
+        let mut accepted = false;
+        while lambda < 1e12 {
+            let mut damped = jtj;
+            for i in 0..7 {
+                damped[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
+            }
+            let Some(cholesky) = damped.cholesky() else {
+                lambda *= 10.0;
+                continue;
+            };
+            let step = cholesky.solve(&jtr);
+            let mut trial = p + step;
+            if !project(&mut trial, limits, amplitude_max) {
+                lambda *= 10.0;
+                continue;
+            }
+            // One pass gives the trial's cost and, if it is accepted, its normal equations.
+            let (trial_jtj, trial_jtr, trial_cost) = normal_equations(&trial, xs, ys, &scaled);
+            if trial_cost <= current {
+                let decrease = current - trial_cost;
+                let moved = (trial - p).abs();
+                p = trial;
+                (jtj, jtr, current) = (trial_jtj, trial_jtr, trial_cost);
+                lambda = (lambda * 0.1).max(1e-12);
+                accepted = true;
+                // Converged when the cost no longer falls measurably or the centre and
+                // every other parameter have stopped moving.
+                converged = decrease <= 1e-12 * current.max(1e-300)
+                    || (moved[X0] < 1e-6 && moved[Y0] < 1e-6 && moved.max() < 1e-7);
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !accepted {
+            // No downhill step exists at any damping: a minimum within the bounds.
+            converged = true;
+        }
+    }
+
+    let dof = (n - 7) as f64;
+    let variance = current / dof;
+    let covariance = jtj.try_inverse().map(|inverse| inverse * variance);
+    let (x0_sigma, y0_sigma) = covariance
+        .map(|c| (c[(X0, X0)].max(0.0).sqrt(), c[(Y0, Y0)].max(0.0).sqrt()))
+        .unwrap_or((f64::NAN, f64::NAN));
+    let (sigma_major, sigma_minor, theta) = principal_axes(p[QA], p[QB], p[QC]);
+    let on_bound = |v: f64, (lo, hi): (f64, f64)| v <= lo + 1e-9 || v >= hi - 1e-9;
+    let status = if on_bound(p[X0], limits.x_range) || on_bound(p[Y0], limits.y_range) {
+        FitStatus::CentreOnBound
+    } else if !(sigma_minor > limits.sigma_range.0 * (1.0 + 1e-6)
+        && sigma_major < limits.sigma_range.1 * (1.0 - 1e-6))
+        || p[AMPLITUDE] <= 0.0
+        || p[AMPLITUDE] >= amplitude_max
+    {
+        FitStatus::BadShape
+    } else if converged {
+        FitStatus::Converged
+    } else {
+        FitStatus::IterationLimit
+    };
+    GaussianFit {
+        amplitude: p[AMPLITUDE] * span,
+        x0: p[X0],
+        y0: p[Y0],
+        sigma_major,
+        sigma_minor,
+        theta,
+        offset: p[OFFSET] * span + z_min,
+        residual_rms: (current / n as f64).sqrt() * span,
+        x0_sigma,
+        y0_sigma,
+        iterations,
+        status,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(cx: f64, cy: f64) -> FitLimits {
+        FitLimits {
+            x_range: (cx - 6.0, cx + 6.0),
+            y_range: (cy - 6.0, cy + 6.0),
+            sigma_range: (0.3, 20.0),
+            max_iterations: 100,
+        }
+    }
+
+    #[test]
+    fn recovers_an_exact_rotated_gaussian() {
+        let (x0, y0, s1, s2, theta, a, z0) = (10.3, 9.6, 3.0, 1.8, 0.6f64, 2.5e-11, 1e-9);
+        let (mut xs, mut ys, mut zs) = (vec![], vec![], vec![]);
+        for r in 0..20 {
+            for c in 0..21 {
+                let (dx, dy) = (c as f64 - x0, r as f64 - y0);
+                let u = dx * theta.cos() + dy * theta.sin();
+                let v = -dx * theta.sin() + dy * theta.cos();
+                xs.push(c as f64);
+                ys.push(r as f64);
+                zs.push(a * (-u * u / (2.0 * s1 * s1) - v * v / (2.0 * s2 * s2)).exp() + z0);
+            }
+        }
+        let fit = fit_gaussian(&xs, &ys, &zs, (10.0, 10.0), 2.0, &limits(10.0, 10.0));
+        assert_eq!(fit.status, FitStatus::Converged);
+        assert!(
+            (fit.x0 - x0).abs() < 1e-7 && (fit.y0 - y0).abs() < 1e-7,
+            "{fit:?}"
+        );
+        assert!((fit.sigma_major - s1).abs() < 1e-6 && (fit.sigma_minor - s2).abs() < 1e-6);
+        assert!((fit.theta - theta).abs() < 1e-6, "{}", fit.theta);
+        assert!((fit.amplitude - a).abs() < 1e-16 && (fit.offset - z0).abs() < 1e-16);
+    }
+
+    #[test]
+    fn reports_failure_instead_of_panicking_on_degenerate_input() {
+        let xs = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0];
+        let flat = [1.0; 9];
+        let fit = fit_gaussian(&xs, &xs, &flat, (4.0, 4.0), 2.0, &limits(4.0, 4.0));
+        assert_eq!(fit.status, FitStatus::Failed);
+        let fit = fit_gaussian(
+            &xs[..5],
+            &xs[..5],
+            &flat[..5],
+            (2.0, 2.0),
+            2.0,
+            &limits(2.0, 2.0),
+        );
+        assert_eq!(fit.status, FitStatus::Failed);
+    }
+}

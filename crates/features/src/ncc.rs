@@ -1,0 +1,94 @@
+//! Normalised cross-correlation of an image with a kernel.
+
+use ndarray::{Array2, ArrayView2};
+
+use crate::Kernel;
+use crate::correlate::correlate_same;
+
+/// Normalised cross-correlation, same size as `image`, values in [−1, 1]:
+/// `Σ t′·I′ / √(Σ t′² · Σ I′²)` over the kernel-sized window centred on each pixel, with
+/// `t′`, `I′` the template and window minus their means, and a flat window gives 0.
+/// Outside the image, the image is padded with its mean (Matlab's `normxcorr2` pads with
+/// zeros, which puts false edges at the borders of images with an offset).
+///
+/// Non-finite pixels must be replaced before calling (see `prepare_for_correlation`).
+pub fn normalised_cross_correlation(image: ArrayView2<f64>, kernel: &Kernel) -> Array2<f64> {
+    let template = kernel.values();
+    let n = template.len() as f64;
+    let mean_t = template.sum() / n;
+    let centred = template.mapv(|v| v - mean_t);
+    let template_energy: f64 = centred.iter().map(|v| v * v).sum();
+
+    // Standardise the image so window sums of squares do not cancel catastrophically
+    // (z in metres can carry a large offset); NCC is invariant to this affine change.
+    let count = image.len() as f64;
+    let mean = image.sum() / count;
+    let spread = (image.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / count).sqrt();
+    let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
+    let standard = image.mapv(|v| (v - mean) * scale);
+
+    let numerator = correlate_same(standard.view(), centred.view());
+    let (sum, sum_squares) = window_sums(&standard, kernel.radius());
+    let floor = 1e-12 * n;
+    Array2::from_shape_fn(image.dim(), |(r, c)| {
+        let variance_sum = sum_squares[[r, c]] - sum[[r, c]] * sum[[r, c]] / n;
+        if variance_sum > floor {
+            (numerator[[r, c]] / (template_energy * variance_sum).sqrt()).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// Sums of values and of squares over the window `[r−kr, r+kr] x [c−kc, c+kc]` clipped to
+/// the image (zero padding), via integral images.
+fn window_sums(image: &Array2<f64>, (kr, kc): (usize, usize)) -> (Array2<f64>, Array2<f64>) {
+    let (h, w) = image.dim();
+    let mut integral = Array2::<f64>::zeros((h + 1, w + 1));
+    let mut integral_sq = Array2::<f64>::zeros((h + 1, w + 1));
+    for r in 0..h {
+        let (mut row, mut row_sq) = (0.0, 0.0);
+        for c in 0..w {
+            let v = image[[r, c]];
+            row += v;
+            row_sq += v * v;
+            integral[[r + 1, c + 1]] = integral[[r, c + 1]] + row;
+            integral_sq[[r + 1, c + 1]] = integral_sq[[r, c + 1]] + row_sq;
+        }
+    }
+    let boxed = |table: &Array2<f64>| {
+        Array2::from_shape_fn((h, w), |(r, c)| {
+            let (r0, r1) = (r.saturating_sub(kr), (r + kr + 1).min(h));
+            let (c0, c1) = (c.saturating_sub(kc), (c + kc + 1).min(w));
+            table[[r1, c1]] - table[[r0, c1]] - table[[r1, c0]] + table[[r0, c0]]
+        })
+    };
+    (boxed(&integral), boxed(&integral_sq))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_copy_of_the_kernel_correlates_to_one_and_its_negative_to_minus_one() {
+        let kernel = Kernel::gaussian(2.0).unwrap();
+        let (kh, kw) = kernel.values().dim();
+        let mut image = Array2::from_elem((40, 40), 3.0e-9);
+        let mut dark = image.clone();
+        for i in 0..kh {
+            for j in 0..kw {
+                image[[10 + i, 12 + j]] += 5e-11 * kernel.values()[[i, j]];
+                dark[[10 + i, 12 + j]] -= 5e-11 * kernel.values()[[i, j]];
+            }
+        }
+        let centre = (10 + kh / 2, 12 + kw / 2);
+        let ncc = normalised_cross_correlation(image.view(), &kernel);
+        assert!((ncc[[centre.0, centre.1]] - 1.0).abs() < 1e-9);
+        assert!(ncc.iter().all(|v| (-1.0..=1.0).contains(v)));
+        let ncc = normalised_cross_correlation(dark.view(), &kernel);
+        assert!((ncc[[centre.0, centre.1]] + 1.0).abs() < 1e-9);
+        // Flat windows inside the image give exactly 0.
+        assert_eq!(ncc[[34, 30]], 0.0);
+    }
+}

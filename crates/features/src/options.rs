@@ -1,0 +1,95 @@
+use serde::{Deserialize, Serialize};
+
+use crate::Kernel;
+
+/// Whether features are protrusions (atoms, molecules) or depressions (holes, e.g. the
+/// Si(111)-7×7 corner holes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Polarity {
+    #[default]
+    Bright,
+    Dark,
+}
+
+/// Background removed before feature finding (the image handed to the correction is never
+/// altered; this only changes what the correlation and the Gaussian fits see).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind", content = "order")]
+pub enum Background {
+    /// Leave z as it is.
+    None,
+    /// Least-squares plane (over the mask, if given).
+    #[default]
+    Plane,
+    /// Least-squares polynomial of the given total order (1 = plane, at most 6).
+    Polynomial(u8),
+}
+
+/// Per-line offset removal along the fast axis (scan-line noise).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LineCorrection {
+    #[default]
+    None,
+    /// Subtract each line's median.
+    Median,
+    /// Subtract each line's least-squares straight line.
+    Linear,
+}
+
+/// Which correlation template to use.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum KernelChoice {
+    /// The DHCT kernel sized from the nearest-neighbour distance.
+    #[default]
+    FromNeighbourDistance,
+    /// An isotropic Gaussian of this σ, pixels.
+    GaussianSigma { sigma_px: f64 },
+    /// A user template.
+    Custom { kernel: Kernel },
+}
+
+/// Parameters of feature finding. Only `neighbour_distance` has no default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct FeatureOptions {
+    /// Expected nearest-neighbour distance, metres (e.g. 2.46e-10 for graphite).
+    pub neighbour_distance: f64,
+    pub polarity: Polarity,
+    /// NCC threshold in [−1, 1]; pixels at or below it belong to no feature.
+    pub threshold: f64,
+    pub kernel: KernelChoice,
+    pub background: Background,
+    pub line_correction: LineCorrection,
+    /// Drop regions whose area is outside `median/√10 .. median·√10` (the DHCT area filter).
+    pub area_filter: bool,
+    /// Two fits closer than this fraction of the NN distance are one feature fitted twice.
+    pub duplicate_fraction: f64,
+}
+
+impl Default for FeatureOptions {
+    fn default() -> Self {
+        FeatureOptions {
+            neighbour_distance: f64::NAN,
+            polarity: Polarity::Bright,
+            threshold: 0.1,
+            kernel: KernelChoice::FromNeighbourDistance,
+            background: Background::Plane,
+            line_correction: LineCorrection::None,
+            area_filter: true,
+            duplicate_fraction: 0.5,
+        }
+    }
+}
+
+impl FeatureOptions {
+    /// Defaults for a lattice whose nearest-neighbour distance is `neighbour_distance` metres.
+    pub fn for_neighbour_distance(neighbour_distance: f64) -> FeatureOptions {
+        FeatureOptions {
+            neighbour_distance,
+            ..FeatureOptions::default()
+        }
+    }
+}

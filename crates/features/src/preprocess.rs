@@ -1,0 +1,180 @@
+//! Background and scan-line corrections applied before feature finding.
+//!
+//! These change only the copy of z that the correlation and the Gaussian fits see; the
+//! image handed to the distortion correction is never altered.
+
+use dhct_scan::Axis;
+use nalgebra::{DMatrix, DVector};
+use ndarray::Array2;
+
+use crate::{Background, FeatureError, LineCorrection};
+
+/// Subtracts a least-squares polynomial surface of total order `order` (1 = plane), fitted
+/// to the finite pixels where `mask` is true (all finite pixels without a mask).
+pub fn subtract_polynomial(
+    z: &Array2<f64>,
+    order: u8,
+    mask: Option<&Array2<bool>>,
+) -> Result<Array2<f64>, FeatureError> {
+    if order > 6 {
+        return Err(FeatureError::BadParameter(format!(
+            "background polynomial order must be at most 6, got {order}"
+        )));
+    }
+    let (h, w) = z.dim();
+    // Coordinates scaled to [−1, 1] keep the normal equations well conditioned.
+    let scale = |i: usize, n: usize| {
+        if n > 1 {
+            2.0 * i as f64 / (n - 1) as f64 - 1.0
+        } else {
+            0.0
+        }
+    };
+    let exponents: Vec<(i32, i32)> = (0..=order as i32)
+        .flat_map(|total| (0..=total).map(move |j| (total - j, j)))
+        .collect();
+    let terms = exponents.len();
+    let mut normal = DMatrix::<f64>::zeros(terms, terms);
+    let mut rhs = DVector::<f64>::zeros(terms);
+    let mut basis = vec![0.0; terms];
+    let mut used = 0usize;
+    for ((r, c), &value) in z.indexed_iter() {
+        if !value.is_finite() || mask.is_some_and(|m| !m[[r, c]]) {
+            continue;
+        }
+        let (x, y) = (scale(c, w), scale(r, h));
+        for (b, &(i, j)) in basis.iter_mut().zip(&exponents) {
+            *b = x.powi(i) * y.powi(j);
+        }
+        for a in 0..terms {
+            rhs[a] += basis[a] * value;
+            for b in 0..terms {
+                normal[(a, b)] += basis[a] * basis[b];
+            }
+        }
+        used += 1;
+    }
+    if used < 2 * terms {
+        return Err(FeatureError::MissingData {
+            finite: used,
+            total: h * w,
+        });
+    }
+    let coefficients = normal.cholesky().map(|c| c.solve(&rhs)).ok_or_else(|| {
+        FeatureError::BadParameter("background fit is singular (mask too small?)".into())
+    })?;
+    Ok(Array2::from_shape_fn((h, w), |(r, c)| {
+        let (x, y) = (scale(c, w), scale(r, h));
+        let surface: f64 = exponents
+            .iter()
+            .enumerate()
+            .map(|(k, &(i, j))| coefficients[k] * x.powi(i) * y.powi(j))
+            .sum();
+        z[[r, c]] - surface
+    }))
+}
+
+/// Removes per-line offsets along the fast axis (each line's median, or its straight-line
+/// fit), then restores the overall median level.
+pub fn correct_lines(z: &Array2<f64>, fast_axis: Axis, method: LineCorrection) -> Array2<f64> {
+    if method == LineCorrection::None {
+        return z.clone();
+    }
+    let mut out = z.clone();
+    let lines = match fast_axis {
+        Axis::Horizontal => out.rows_mut().into_iter().collect::<Vec<_>>(),
+        Axis::Vertical => out.columns_mut().into_iter().collect::<Vec<_>>(),
+    };
+    let mut levels = Vec::new();
+    for mut line in lines {
+        let finite: Vec<(f64, f64)> = line
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.is_finite())
+            .map(|(i, v)| (i as f64, *v))
+            .collect();
+        if finite.len() < 2 {
+            continue;
+        }
+        match method {
+            LineCorrection::Median => {
+                let mut values: Vec<f64> = finite.iter().map(|p| p.1).collect();
+                let m = median(&mut values);
+                line.mapv_inplace(|v| v - m);
+                levels.push(m);
+            }
+            LineCorrection::Linear => {
+                let n = finite.len() as f64;
+                let (sx, sy) = finite
+                    .iter()
+                    .fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
+                let (mx, my) = (sx / n, sy / n);
+                let (sxx, sxy) = finite.iter().fold((0.0, 0.0), |(a, b), p| {
+                    (a + (p.0 - mx).powi(2), b + (p.0 - mx) * (p.1 - my))
+                });
+                let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+                for (i, v) in line.iter_mut().enumerate() {
+                    *v -= my + slope * (i as f64 - mx);
+                }
+                levels.push(my);
+            }
+            LineCorrection::None => {}
+        }
+    }
+    let level = median(&mut levels);
+    out.mapv_inplace(|v| v + level);
+    out
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let n = values.len();
+    let (below, upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let upper = *upper;
+    if n % 2 == 1 {
+        upper
+    } else {
+        // The lower middle value is the largest of the lower half.
+        0.5 * (below.iter().copied().fold(f64::NEG_INFINITY, f64::max) + upper)
+    }
+}
+
+/// Applies the chosen background removal.
+pub fn remove_background(
+    z: &Array2<f64>,
+    background: Background,
+    mask: Option<&Array2<bool>>,
+) -> Result<Array2<f64>, FeatureError> {
+    match background {
+        Background::None => Ok(z.clone()),
+        Background::Plane => subtract_polynomial(z, 1, mask),
+        Background::Polynomial(order) => subtract_polynomial(z, order, mask),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tilted_plane_is_removed_exactly_and_line_offsets_vanish() {
+        let z = Array2::from_shape_fn((30, 40), |(r, c)| {
+            1e-9 + 2e-11 * c as f64 - 3e-11 * r as f64
+        });
+        let flat = subtract_polynomial(&z, 1, None).unwrap();
+        assert!(flat.iter().all(|v| v.abs() < 1e-20));
+        let quadratic =
+            z.mapv(|v| v * 1.0) + Array2::from_shape_fn((30, 40), |(r, _)| 1e-12 * (r * r) as f64);
+        let flat = subtract_polynomial(&quadratic, 2, None).unwrap();
+        assert!(flat.iter().all(|v| v.abs() < 1e-19));
+
+        let striped = Array2::from_shape_fn((10, 8), |(r, c)| (r as f64) * 5.0 + (c % 2) as f64);
+        let fixed = correct_lines(&striped, Axis::Horizontal, LineCorrection::Median);
+        for row in fixed.rows() {
+            assert!((row[0] - fixed[[0, 0]]).abs() < 1e-12);
+        }
+        assert!(subtract_polynomial(&z, 9, None).is_err());
+    }
+}
