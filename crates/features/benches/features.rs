@@ -48,6 +48,24 @@ fn main() {
         best = best.min(start.elapsed().as_secs_f64());
     }
     let count = sets.iter().map(|s| s.features.len()).sum::<usize>();
+    let iterations: usize = sets
+        .iter()
+        .flat_map(|s| &s.features)
+        .map(|f| f.fit_iterations)
+        .sum();
+    let pixels: usize = sets
+        .iter()
+        .flat_map(|s| &s.features)
+        .map(|f| f.pixel_count)
+        .sum();
+    println!(
+        "fits: {:.1} iterations and {:.0} pixels on average",
+        iterations as f64 / count as f64,
+        pixels as f64 / count as f64
+    );
+    for set in &sets {
+        println!("{:?} stage times: {:?}", set.pass, set.timings);
+    }
     println!(
         "features: {count} in trace + retrace, best of 3: {best:.3} s on {threads} threads → {:.0} features/s",
         count as f64 / best
@@ -65,15 +83,18 @@ fn main() {
         .map(|f| f.trace.controller_position_px)
         .collect();
     let trace = &sets[0];
+    let tree: kiddo::ImmutableKdTree<f64, 2> =
+        kiddo::ImmutableKdTree::new_from_slice(&truth).expect("index truth");
     let offsets: Vec<[f64; 2]> = trace
         .features
         .iter()
         .filter_map(|f| {
-            truth
-                .iter()
-                .map(|t| [f.x_px - t[0], f.y_px - t[1]])
-                .min_by(|a, b| a[0].hypot(a[1]).total_cmp(&b[0].hypot(b[1])))
-                .filter(|d| d[0].hypot(d[1]) < 5.0)
+            let nearest = tree
+                .query(&[f.x_px, f.y_px])
+                .nearest_one::<kiddo::SquaredEuclidean<f64>>()
+                .execute();
+            let t = truth[nearest.item as usize];
+            (nearest.distance < 25.0).then(|| [f.x_px - t[0], f.y_px - t[1]])
         })
         .collect();
     let n = offsets.len() as f64;

@@ -42,6 +42,8 @@ pub struct Feature {
     /// Peak normalised cross-correlation of the region.
     pub ncc_peak: f64,
     pub status: FitStatus,
+    /// Levenberg–Marquardt iterations the fit took.
+    pub fit_iterations: usize,
     /// Acquisition time since frame start, seconds (from the sub-pixel centre).
     pub time_s: f64,
     /// Time since the start of the feature's scan line, seconds.
@@ -135,6 +137,21 @@ impl std::fmt::Display for RejectionCounts {
     }
 }
 
+/// Wall-clock time spent in each stage of [`crate::find_features`], seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Line correction and background removal.
+    pub preprocess_s: f64,
+    /// Normalised cross-correlation.
+    pub correlation_s: f64,
+    /// Watershed and area filter.
+    pub segmentation_s: f64,
+    /// Gaussian fits.
+    pub fitting_s: f64,
+    /// Edge and duplicate checks, times, table.
+    pub bookkeeping_s: f64,
+}
+
 /// All features of one image, with what was rejected and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeatureSet {
@@ -147,11 +164,13 @@ pub struct FeatureSet {
     pub candidates: usize,
     /// σ of the correlation kernel used, pixels (NaN for a custom kernel).
     pub kernel_sigma_px: f64,
+    /// Time spent per stage (for benchmarks and reports; not deterministic).
+    pub timings: StageTimings,
 }
 
 /// Column names of [`FeatureSet::write_csv`].
 pub const CSV_HEADER: &str = "id,pass,x_px,y_px,x_m,y_m,x_sigma_px,y_sigma_px,sigma_major_px,\
-sigma_minor_px,theta_rad,amplitude,height,z0,residual_rms,pixel_count,ncc_peak,status,time_s,line_time_s";
+sigma_minor_px,theta_rad,amplitude,height,z0,residual_rms,pixel_count,ncc_peak,status,fit_iterations,time_s,line_time_s";
 
 impl FeatureSet {
     /// Counts of rejected candidates by reason.
@@ -173,7 +192,7 @@ impl FeatureSet {
                 .unwrap_or_default();
             writeln!(
                 w,
-                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{},{},{status},{},{}",
+                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{},{},{status},{},{},{}",
                 f.id,
                 f.x_px,
                 f.y_px,
@@ -190,6 +209,7 @@ impl FeatureSet {
                 f.residual_rms,
                 f.pixel_count,
                 f.ncc_peak,
+                f.fit_iterations,
                 f.time_s,
                 f.line_time_s
             )?;

@@ -1,6 +1,8 @@
 //! The feature-finding pipeline: preprocess → NCC → watershed → area filter → Gaussian fits
 //! → edge and duplicate checks → acquisition times.
 
+use std::time::Instant;
+
 use dhct_scan::{ImageChannel, ScanGeometry, ScanPair, ScanPass};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use ndarray::Array2;
@@ -12,7 +14,7 @@ use crate::preprocess::{correct_lines, remove_background};
 use crate::watershed::{Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice, Polarity,
-    RejectedCandidate, Rejection, RejectionCounts,
+    RejectedCandidate, Rejection, RejectionCounts, StageTimings,
 };
 
 /// Minimum region area (px) counted when taking the median area (DHCT's 10 px).
@@ -115,6 +117,13 @@ pub fn find_features_and_correlation(
     if finite.iter().all(|v| *v == finite[0]) {
         return Err(FeatureError::FlatImage);
     }
+    let mut timings = StageTimings::default();
+    let mut clock = Instant::now();
+    let mut lap = |slot: &mut f64| {
+        let now = Instant::now();
+        *slot = (now - clock).as_secs_f64();
+        clock = now;
+    };
     let lined = correct_lines(&image.z, geometry.fast_axis(), options.line_correction);
     let flattened = remove_background(&lined, options.background, mask)?;
     let sign = match options.polarity {
@@ -128,13 +137,16 @@ pub fn find_features_and_correlation(
         *values.select_nth_unstable_by(middle, f64::total_cmp).1
     };
     let filled = signed.mapv(|v| if v.is_finite() { v } else { fill });
+    lap(&mut timings.preprocess_s);
     let ncc = normalised_cross_correlation(filled.view(), &kernel);
+    lap(&mut timings.correlation_s);
 
     let regions = watershed_regions(&ncc, options.threshold);
     let candidates = regions.len();
     let mut rejected = Vec::new();
     let kept = area_filter(regions, options.area_filter, columns, &mut rejected);
 
+    lap(&mut timings.segmentation_s);
     let edge_margin = (kh.max(kw) / 2) as f64;
     let sigma_start = if kernel_sigma_px.is_finite() {
         kernel_sigma_px
@@ -179,17 +191,19 @@ pub fn find_features_and_correlation(
                 }
             }
             let (x, y) = (peak_col as f64, peak_row as f64);
+            let start = subpixel_peak(&ncc, peak_row as usize, peak_col as usize);
             let limits = FitLimits {
                 x_range: (x - window_radius, x + window_radius),
                 y_range: (y - window_radius, y + window_radius),
                 sigma_range: (0.25, nn_px.max(1.0)),
                 max_iterations: 100,
             };
-            let fit = fit_gaussian(&xs, &ys, &zs, (x, y), sigma_start, &limits);
+            let fit = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &limits);
             (fit, xs.len())
         })
         .collect();
 
+    lap(&mut timings.fitting_s);
     struct Candidate {
         fit: crate::gaussian_fit::GaussianFit,
         pixel_count: usize,
@@ -284,6 +298,7 @@ pub fn find_features_and_correlation(
             pixel_count: candidate.pixel_count,
             ncc_peak: candidate.ncc_peak,
             status: fit.status,
+            fit_iterations: fit.iterations,
             time_s: time.since_frame_start,
             line_time_s: time.since_line_start,
         });
@@ -303,6 +318,7 @@ pub fn find_features_and_correlation(
             rejected: RejectionCounts::of(&rejected).to_string(),
         });
     }
+    lap(&mut timings.bookkeeping_s);
     Ok((
         FeatureSet {
             pass,
@@ -310,9 +326,35 @@ pub fn find_features_and_correlation(
             rejected,
             candidates,
             kernel_sigma_px,
+            timings,
         },
         ncc,
     ))
+}
+
+/// Sub-pixel position `(x, y)` of the correlation peak at `(row, col)` from a parabola
+/// through it and its two neighbours along each axis (the peak itself at the border).
+fn subpixel_peak(map: &Array2<f64>, row: usize, col: usize) -> (f64, f64) {
+    let (rows, cols) = map.dim();
+    let vertex = |before: f64, centre: f64, after: f64| {
+        let curvature = before - 2.0 * centre + after;
+        if curvature < 0.0 {
+            (0.5 * (before - after) / curvature).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        }
+    };
+    let dx = if col > 0 && col + 1 < cols {
+        vertex(map[[row, col - 1]], map[[row, col]], map[[row, col + 1]])
+    } else {
+        0.0
+    };
+    let dy = if row > 0 && row + 1 < rows {
+        vertex(map[[row - 1, col]], map[[row, col]], map[[row + 1, col]])
+    } else {
+        0.0
+    };
+    (col as f64 + dx, row as f64 + dy)
 }
 
 /// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken

@@ -74,37 +74,51 @@ pub struct GaussianFit {
     pub status: FitStatus,
 }
 
-/// Model value and its gradient with respect to the 7 parameters at one pixel.
-#[inline(always)]
-fn model_and_gradient(p: &Vector7, x: f64, y: f64) -> (f64, Vector7) {
-    let (dx, dy) = (x - p[X0], y - p[Y0]);
-    let q = p[QA] * dx * dx + 2.0 * p[QB] * dx * dy + p[QC] * dy * dy;
-    let e = (-0.5 * q).exp();
-    let ae = p[AMPLITUDE] * e;
-    let gradient = Vector7::from([
-        e,
-        ae * (p[QA] * dx + p[QB] * dy),
-        ae * (p[QB] * dx + p[QC] * dy),
-        -0.5 * ae * dx * dx,
-        -ae * dx * dy,
-        -0.5 * ae * dy * dy,
-        1.0,
-    ]);
-    (ae + p[OFFSET], gradient)
-}
-
 /// Normal equations `JᵀJ`, `Jᵀr` and the cost at `p`.
+///
+/// This is the hot loop of feature finding. Along a run of pixels in one row with unit steps
+/// in x, the Gaussian factor obeys an exact recurrence: with `dx → dx + 1`,
+/// `e(dx+1) = e(dx) · K · L(dx)`, where `K = exp(−(a/2 + b·dy))` is constant along the row
+/// and `L(dx) = exp(−a·dx)` is itself geometric (`L(dx+1) = L(dx) · exp(−a)`). So `exp` is
+/// called about twice per row instead of once per pixel; any other pixel order falls back to
+/// a direct evaluation.
 fn normal_equations(p: &Vector7, xs: &[f64], ys: &[f64], zs: &[f64]) -> (Matrix7, Vector7, f64) {
+    let (amplitude, x0, y0) = (p[AMPLITUDE], p[X0], p[Y0]);
+    let (qa, qb, qc, offset) = (p[QA], p[QB], p[QC], p[OFFSET]);
+    let step_factor = (-qa).exp();
     let mut jtj = Matrix7::zeros();
     let mut jtr = Vector7::zeros();
     let mut total = 0.0;
+    // State of the recurrence: previous pixel, its Gaussian factor, K and L.
+    let (mut last_x, mut last_y) = (f64::NAN, f64::NAN);
+    let (mut e, mut row_factor, mut step) = (0.0, 0.0, 0.0);
     for ((&x, &y), &z) in xs.iter().zip(ys).zip(zs) {
-        let (f, g) = model_and_gradient(p, x, y);
-        let r = z - f;
+        let (dx, dy) = (x - x0, y - y0);
+        if y == last_y && x == last_x + 1.0 {
+            e *= row_factor * step;
+            step *= step_factor;
+        } else {
+            e = (-0.5 * (qa * dx * dx + 2.0 * qb * dx * dy + qc * dy * dy)).exp();
+            row_factor = (-(0.5 * qa + qb * dy)).exp();
+            step = (-qa * dx).exp();
+        }
+        last_x = x;
+        last_y = y;
+        let ae = amplitude * e;
+        let g = [
+            e,
+            ae * (qa * dx + qb * dy),
+            ae * (qb * dx + qc * dy),
+            -0.5 * ae * dx * dx,
+            -ae * dx * dy,
+            -0.5 * ae * dy * dy,
+            1.0,
+        ];
+        let r = z - (ae + offset);
         total += r * r;
-        jtr += g * r;
         // Symmetric rank-one update, upper triangle only.
         for i in 0..7 {
+            jtr[i] += g[i] * r;
             for j in i..7 {
                 jtj[(i, j)] += g[i] * g[j];
             }
@@ -190,7 +204,24 @@ pub fn fit_gaussian(
     let scaled: Vec<f64> = zs.iter().map(|z| (z - z_min) / span).collect();
     let amplitude_max = 3.0;
     let q0 = 1.0 / (sigma0 * sigma0);
-    let mut p = Vector7::from([1.0, x0, y0, q0, 0.0, q0, 0.0]);
+    // With the shape fixed at the start, amplitude and offset are linear parameters: solve
+    // them exactly (2 × 2 least squares) so LM starts close to the minimum.
+    let (mut sg, mut sgg, mut sz, mut sgz) = (0.0, 0.0, 0.0, 0.0);
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(&scaled) {
+        let g = (-0.5 * q0 * ((x - x0).powi(2) + (y - y0).powi(2))).exp();
+        sg += g;
+        sgg += g * g;
+        sz += z;
+        sgz += g * z;
+    }
+    let determinant = n as f64 * sgg - sg * sg;
+    let (amplitude0, offset0) = if determinant > 1e-12 * n as f64 * sgg {
+        let a = (n as f64 * sgz - sg * sz) / determinant;
+        (a, (sz - a * sg) / n as f64)
+    } else {
+        (1.0, 0.0)
+    };
+    let mut p = Vector7::from([amplitude0.max(1e-3), x0, y0, q0, 0.0, q0, offset0]);
     if !project(&mut p, limits, amplitude_max) {
         return failed(FitStatus::Failed);
     }
@@ -226,10 +257,14 @@ pub fn fit_gaussian(
                 (jtj, jtr, current) = (trial_jtj, trial_jtr, trial_cost);
                 lambda = (lambda * 0.1).max(1e-12);
                 accepted = true;
-                // Converged when the cost no longer falls measurably or the centre and
-                // every other parameter have stopped moving.
-                converged = decrease <= 1e-12 * current.max(1e-300)
-                    || (moved[X0] < 1e-6 && moved[Y0] < 1e-6 && moved.max() < 1e-7);
+                // Converged when the cost no longer falls measurably, or when a step moved
+                // the centre (what the fit is for) by less than 1e-3 px. Near the optimum of
+                // a noisy fit, Gauss–Newton converges linearly (each step about half the
+                // last), so the remaining centre error is of that order: an order of
+                // magnitude below the best achievable precision (Cramér–Rao ≈ 0.016 px at
+                // SNR 50).
+                let relative = decrease / current.max(1e-300);
+                converged = relative <= 1e-10 || (moved[X0] < 1e-3 && moved[Y0] < 1e-3);
                 break;
             }
             lambda *= 10.0;
@@ -306,13 +341,46 @@ mod tests {
         }
         let fit = fit_gaussian(&xs, &ys, &zs, (10.0, 10.0), 2.0, &limits(10.0, 10.0));
         assert_eq!(fit.status, FitStatus::Converged);
+        // The fit stops once a step moves the centre by < 1e-3 px; on noise-free data the
+        // centre is then far closer than that, the shape to a few 1e-4.
         assert!(
-            (fit.x0 - x0).abs() < 1e-7 && (fit.y0 - y0).abs() < 1e-7,
+            (fit.x0 - x0).abs() < 1e-5 && (fit.y0 - y0).abs() < 1e-5,
             "{fit:?}"
         );
-        assert!((fit.sigma_major - s1).abs() < 1e-6 && (fit.sigma_minor - s2).abs() < 1e-6);
-        assert!((fit.theta - theta).abs() < 1e-6, "{}", fit.theta);
-        assert!((fit.amplitude - a).abs() < 1e-16 && (fit.offset - z0).abs() < 1e-16);
+        assert!((fit.sigma_major - s1).abs() < 1e-3 && (fit.sigma_minor - s2).abs() < 1e-3);
+        assert!((fit.theta - theta).abs() < 1e-4, "{}", fit.theta);
+        assert!((fit.amplitude / a - 1.0).abs() < 1e-4 && (fit.offset - z0).abs() < 1e-4 * a);
+    }
+
+    #[test]
+    fn row_recurrence_and_direct_evaluation_agree() {
+        // Raster order uses the recurrence; a scrambled order evaluates every pixel directly.
+        let (mut xs, mut ys, mut zs) = (vec![], vec![], vec![]);
+        for r in 0..15 {
+            for c in 0..17 {
+                let (dx, dy) = (c as f64 - 8.2, r as f64 - 6.9);
+                xs.push(c as f64);
+                ys.push(r as f64);
+                zs.push(
+                    (-(0.3 * dx * dx + 0.2 * dx * dy + 0.5 * dy * dy) / 2.0).exp()
+                        + 0.01 * ((c * 7 + r * 3) % 5) as f64,
+                );
+            }
+        }
+        let order: Vec<usize> = (0..xs.len()).map(|i| (i * 37) % xs.len()).collect();
+        let pick = |v: &[f64]| order.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let raster = fit_gaussian(&xs, &ys, &zs, (8.0, 7.0), 2.0, &limits(8.0, 7.0));
+        let scrambled = fit_gaussian(
+            &pick(&xs),
+            &pick(&ys),
+            &pick(&zs),
+            (8.0, 7.0),
+            2.0,
+            &limits(8.0, 7.0),
+        );
+        assert!((raster.x0 - scrambled.x0).abs() < 1e-9 && (raster.y0 - scrambled.y0).abs() < 1e-9);
+        assert!((raster.sigma_major - scrambled.sigma_major).abs() < 1e-9);
+        assert!((raster.residual_rms - scrambled.residual_rms).abs() < 1e-12);
     }
 
     #[test]

@@ -30,29 +30,47 @@ pub fn subtract_polynomial(
             0.0
         }
     };
-    let exponents: Vec<(i32, i32)> = (0..=order as i32)
+    let exponents: Vec<(usize, usize)> = (0..=order as usize)
         .flat_map(|total| (0..=total).map(move |j| (total - j, j)))
         .collect();
     let terms = exponents.len();
+    // Powers x^i per column and y^j per row, so the per-pixel work is products only.
+    let powers = |n: usize| -> Vec<Vec<f64>> {
+        (0..n)
+            .map(|k| {
+                let v = scale(k, n);
+                std::iter::successors(Some(1.0), |p| Some(p * v))
+                    .take(order as usize + 1)
+                    .collect()
+            })
+            .collect()
+    };
+    let (x_powers, y_powers) = (powers(w), powers(h));
     let mut normal = DMatrix::<f64>::zeros(terms, terms);
     let mut rhs = DVector::<f64>::zeros(terms);
     let mut basis = vec![0.0; terms];
+    let mut sums = vec![0.0; terms * terms];
     let mut used = 0usize;
     for ((r, c), &value) in z.indexed_iter() {
         if !value.is_finite() || mask.is_some_and(|m| !m[[r, c]]) {
             continue;
         }
-        let (x, y) = (scale(c, w), scale(r, h));
         for (b, &(i, j)) in basis.iter_mut().zip(&exponents) {
-            *b = x.powi(i) * y.powi(j);
+            *b = x_powers[c][i] * y_powers[r][j];
         }
         for a in 0..terms {
             rhs[a] += basis[a] * value;
-            for b in 0..terms {
-                normal[(a, b)] += basis[a] * basis[b];
+            for b in a..terms {
+                sums[a * terms + b] += basis[a] * basis[b];
             }
         }
         used += 1;
+    }
+    for a in 0..terms {
+        for b in a..terms {
+            normal[(a, b)] = sums[a * terms + b];
+            normal[(b, a)] = sums[a * terms + b];
+        }
     }
     if used < 2 * terms {
         return Err(FeatureError::MissingData {
@@ -64,11 +82,10 @@ pub fn subtract_polynomial(
         FeatureError::BadParameter("background fit is singular (mask too small?)".into())
     })?;
     Ok(Array2::from_shape_fn((h, w), |(r, c)| {
-        let (x, y) = (scale(c, w), scale(r, h));
         let surface: f64 = exponents
             .iter()
             .enumerate()
-            .map(|(k, &(i, j))| coefficients[k] * x.powi(i) * y.powi(j))
+            .map(|(k, &(i, j))| coefficients[k] * x_powers[c][i] * y_powers[r][j])
             .sum();
         z[[r, c]] - surface
     }))
