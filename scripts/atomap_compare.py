@@ -2,8 +2,10 @@
 """Atomap's 2-D Gaussian refinement vs dhct feature finding on the same simulated image.
 
 Usage:
-    cargo bench -p dhct-features --bench features -- --write-dir target/atomap
-    python3 scripts/atomap_compare.py target/atomap
+    cargo bench -p dhct-features --bench features -- --write-dir "$PWD/target/atomap"
+    python3 scripts/atomap_compare.py "$PWD/target/atomap"
+
+(cargo bench runs in the crate's directory, hence the absolute path.)
 
 Atomap is installed into a cached virtual environment (target/tmp/atomap-venv) with pip.
 Prints features/s and rms position error vs the simulator's truth for both, and the ratios.

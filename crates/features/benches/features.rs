@@ -2,7 +2,7 @@
 //! retrace over 25 nm (simulated with drift, creep, hysteresis and noise), the full pipeline
 //! (background, line correction, NCC, watershed, fits, duplicates, times) on both images.
 //!
-//! `cargo bench -p dhct-features --bench features [-- --write-dir DIR]`
+//! `cargo bench -p dhct-features --bench features [-- --write-dir ABSOLUTE_DIR]`
 //! With `--write-dir DIR`, the trace image (`trace.npy`), its true feature positions
 //! (`truth_trace.csv`), our features (`dhct_trace.csv`) and our timing (`dhct_timing.json`)
 //! are written there for `scripts/atomap_compare.py`.

@@ -4,7 +4,7 @@ use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPass};
 use ndarray::Array2;
 
 fn main() {
-    let z = Array2::from_shape_fn((64, 64), |(r, c)| {
+    let z = Array2::from_shape_fn((66, 66), |(r, c)| {
         let (dx, dy) = ((c % 9) as f64 - 4.0, (r % 9) as f64 - 4.0);
         1e-11 * (-(dx * dx + dy * dy) / 4.0).exp()
     });

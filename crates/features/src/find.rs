@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, fit_gaussian};
 use crate::ncc::normalised_cross_correlation;
-use crate::preprocess::{correct_lines, remove_background};
+use crate::preprocess::{correct_lines_in_place, remove_background};
 use crate::watershed::{Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice, Polarity,
@@ -73,6 +73,14 @@ pub fn find_features_and_correlation(
             options.threshold
         )));
     }
+    if !(options.fit_radius_fraction.is_finite()
+        && (0.1..=1.0).contains(&options.fit_radius_fraction))
+    {
+        return Err(FeatureError::BadParameter(format!(
+            "fit radius fraction must lie in [0.1, 1] of the NN distance, got {}",
+            options.fit_radius_fraction
+        )));
+    }
     if !(options.duplicate_fraction.is_finite() && options.duplicate_fraction >= 0.0) {
         return Err(FeatureError::BadParameter(
             "duplicate fraction must be ≥ 0".into(),
@@ -107,14 +115,17 @@ pub fn find_features_and_correlation(
     }
 
     // Missing data: NaN pixels are excluded from fits and filled for the correlation.
-    let finite: Vec<f64> = image.z.iter().copied().filter(|v| v.is_finite()).collect();
-    if finite.len() < (rows * columns) / 2 || finite.len() < 4 * kh * kw {
+    let (finite, low, high) = image.z.iter().filter(|v| v.is_finite()).fold(
+        (0usize, f64::INFINITY, f64::NEG_INFINITY),
+        |(n, lo, hi), &v| (n + 1, lo.min(v), hi.max(v)),
+    );
+    if finite < (rows * columns) / 2 || finite < 4 * kh * kw {
         return Err(FeatureError::MissingData {
-            finite: finite.len(),
+            finite,
             total: rows * columns,
         });
     }
-    if finite.iter().all(|v| *v == finite[0]) {
+    if low == high {
         return Err(FeatureError::FlatImage);
     }
     let mut timings = StageTimings::default();
@@ -124,21 +135,28 @@ pub fn find_features_and_correlation(
         *slot = (now - clock).as_secs_f64();
         clock = now;
     };
-    let lined = correct_lines(&image.z, geometry.fast_axis(), options.line_correction);
+    let mut lined = image.z.clone();
+    correct_lines_in_place(&mut lined, geometry.fast_axis(), options.line_correction);
     let flattened = remove_background(&lined, options.background, mask)?;
     let sign = match options.polarity {
         Polarity::Bright => 1.0,
         Polarity::Dark => -1.0,
     };
-    let signed = flattened.mapv(|v| sign * v);
-    let fill = {
+    let mut signed = flattened;
+    if sign < 0.0 {
+        signed.mapv_inplace(|v| -v);
+    }
+    // The correlation needs every pixel: fill missing ones with the median (only if any).
+    let filled = if finite == rows * columns {
+        None
+    } else {
         let mut values: Vec<f64> = signed.iter().copied().filter(|v| v.is_finite()).collect();
         let middle = values.len() / 2;
-        *values.select_nth_unstable_by(middle, f64::total_cmp).1
+        let fill = *values.select_nth_unstable_by(middle, f64::total_cmp).1;
+        Some(signed.mapv(|v| if v.is_finite() { v } else { fill }))
     };
-    let filled = signed.mapv(|v| if v.is_finite() { v } else { fill });
     lap(&mut timings.preprocess_s);
-    let ncc = normalised_cross_correlation(filled.view(), &kernel);
+    let ncc = normalised_cross_correlation(filled.as_ref().unwrap_or(&signed).view(), &kernel);
     lap(&mut timings.correlation_s);
 
     let regions = watershed_regions(&ncc, options.threshold);
@@ -153,10 +171,10 @@ pub fn find_features_and_correlation(
     } else {
         nn_px / 4.0
     };
-    // Each region identifies one feature; the fit uses a disc of radius ½·NN around the
+    // Each region identifies one feature; the fit uses a disc of radius 0.4·NN (by default) around the
     // region's peak, so the pixel set is symmetric about the feature (a watershed basin's
     // shape depends on tie-breaking at saddles and would bias the centre).
-    let window_radius = (0.5 * nn_px).max(2.0);
+    let window_radius = (options.fit_radius_fraction * nn_px).max(2.0);
     let window_offsets: Vec<(i64, i64)> = {
         let reach = window_radius.ceil() as i64;
         (-reach..=reach)

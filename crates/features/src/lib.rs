@@ -13,13 +13,13 @@
 //! use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPass};
 //! use ndarray::Array2;
 //!
-//! // A 64 x 64 px square lattice of Gaussian bumps, 9 px apart, 0.1 nm pixels.
-//! let z = Array2::from_shape_fn((64, 64), |(r, c)| {
+//! // A 66 x 66 px square lattice of Gaussian bumps, 9 px apart, 0.1 nm pixels.
+//! let z = Array2::from_shape_fn((66, 66), |(r, c)| {
 //!     let (dx, dy) = ((c % 9) as f64 - 4.0, (r % 9) as f64 - 4.0);
 //!     1e-11 * (-(dx * dx + dy * dy) / 4.0).exp()
 //! });
 //! let image = ImageChannel::new("Topography", "m", z);
-//! let geometry = ScanGeometry::new(64, 64, 1e-10, 1e-10, 1e-3,
+//! let geometry = ScanGeometry::new(66, 66, 1e-10, 1e-10, 1e-3,
 //!                                  ScanDirection::Right, ScanDirection::Down).unwrap();
 //! let options = FeatureOptions {
 //!     background: Background::None, // the image has no tilt to remove
@@ -56,5 +56,7 @@ pub use gaussian_fit::{FitLimits, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
 pub use ncc::normalised_cross_correlation;
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
-pub use preprocess::{correct_lines, remove_background, subtract_polynomial};
+pub use preprocess::{
+    correct_lines, correct_lines_in_place, remove_background, subtract_polynomial,
+};
 pub use watershed::{Region, watershed_regions};

@@ -28,10 +28,17 @@ pub fn normalised_cross_correlation(image: ArrayView2<f64>, kernel: &Kernel) -> 
     let standard = image.mapv(|v| (v - mean) * scale);
 
     let numerator = correlate_same(standard.view(), centred.view());
-    let (sum, sum_squares) = window_sums(&standard, kernel.radius());
+    let (integral, integral_sq) = integral_images(&standard);
+    let (h, w) = image.dim();
+    let (kr, kc) = kernel.radius();
     let floor = 1e-12 * n;
-    Array2::from_shape_fn(image.dim(), |(r, c)| {
-        let variance_sum = sum_squares[[r, c]] - sum[[r, c]] * sum[[r, c]] / n;
+    Array2::from_shape_fn((h, w), |(r, c)| {
+        // Window [r−kr, r+kr] x [c−kc, c+kc] clipped to the image (mean padding outside).
+        let (r0, r1) = (r.saturating_sub(kr), (r + kr + 1).min(h));
+        let (c0, c1) = (c.saturating_sub(kc), (c + kc + 1).min(w));
+        let boxed = |t: &Array2<f64>| t[[r1, c1]] - t[[r0, c1]] - t[[r1, c0]] + t[[r0, c0]];
+        let sum = boxed(&integral);
+        let variance_sum = boxed(&integral_sq) - sum * sum / n;
         if variance_sum > floor {
             (numerator[[r, c]] / (template_energy * variance_sum).sqrt()).clamp(-1.0, 1.0)
         } else {
@@ -40,9 +47,8 @@ pub fn normalised_cross_correlation(image: ArrayView2<f64>, kernel: &Kernel) -> 
     })
 }
 
-/// Sums of values and of squares over the window `[r−kr, r+kr] x [c−kc, c+kc]` clipped to
-/// the image (zero padding), via integral images.
-fn window_sums(image: &Array2<f64>, (kr, kc): (usize, usize)) -> (Array2<f64>, Array2<f64>) {
+/// Summed-area tables of the values and of their squares, `(h+1) x (w+1)`.
+fn integral_images(image: &Array2<f64>) -> (Array2<f64>, Array2<f64>) {
     let (h, w) = image.dim();
     let mut integral = Array2::<f64>::zeros((h + 1, w + 1));
     let mut integral_sq = Array2::<f64>::zeros((h + 1, w + 1));
@@ -56,14 +62,7 @@ fn window_sums(image: &Array2<f64>, (kr, kc): (usize, usize)) -> (Array2<f64>, A
             integral_sq[[r + 1, c + 1]] = integral_sq[[r, c + 1]] + row_sq;
         }
     }
-    let boxed = |table: &Array2<f64>| {
-        Array2::from_shape_fn((h, w), |(r, c)| {
-            let (r0, r1) = (r.saturating_sub(kr), (r + kr + 1).min(h));
-            let (c0, c1) = (c.saturating_sub(kc), (c + kc + 1).min(w));
-            table[[r1, c1]] - table[[r0, c1]] - table[[r1, c0]] + table[[r0, c0]]
-        })
-    };
-    (boxed(&integral), boxed(&integral_sq))
+    (integral, integral_sq)
 }
 
 #[cfg(test)]

@@ -94,10 +94,16 @@ pub fn subtract_polynomial(
 /// Removes per-line offsets along the fast axis (each line's median, or its straight-line
 /// fit), then restores the overall median level.
 pub fn correct_lines(z: &Array2<f64>, fast_axis: Axis, method: LineCorrection) -> Array2<f64> {
-    if method == LineCorrection::None {
-        return z.clone();
-    }
     let mut out = z.clone();
+    correct_lines_in_place(&mut out, fast_axis, method);
+    out
+}
+
+/// [`correct_lines`] without a copy.
+pub fn correct_lines_in_place(out: &mut Array2<f64>, fast_axis: Axis, method: LineCorrection) {
+    if method == LineCorrection::None {
+        return;
+    }
     let lines = match fast_axis {
         Axis::Horizontal => out.rows_mut().into_iter().collect::<Vec<_>>(),
         Axis::Vertical => out.columns_mut().into_iter().collect::<Vec<_>>(),
@@ -140,7 +146,6 @@ pub fn correct_lines(z: &Array2<f64>, fast_axis: Axis, method: LineCorrection) -
     }
     let level = median(&mut levels);
     out.mapv_inplace(|v| v + level);
-    out
 }
 
 fn median(values: &mut [f64]) -> f64 {

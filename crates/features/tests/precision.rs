@@ -3,7 +3,7 @@
 //! Images are lattices of isolated 2-D Gaussians at known random sub-pixel positions plus
 //! white noise, so the truth and the bound are exact: the CRLB of x0 is the (x0, x0) element
 //! of the inverse Fisher matrix `(1/σ_n²) Σ ∇f ∇fᵀ` of the 7-parameter model, summed over
-//! the pixels the fit uses (the disc of radius ½·NN around the feature).
+//! the pixels the fit uses (the disc of radius 0.4·NN around the feature).
 
 use dhct_features::{Background, FeatureOptions, find_features};
 use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPass};
@@ -60,9 +60,10 @@ fn image_with_noise(seed: u64, noise: f64, size: usize) -> (ImageChannel, Vec<Tr
     (ImageChannel::new("Topography", "m", z), truths)
 }
 
-/// CRLB of x0 (px²) for the Gaussian at `truth` observed on the disc of radius ½·NN.
+/// CRLB of x0 (px²) for the Gaussian at `truth` observed on the disc the fit uses
+/// (radius 0.4·NN, the default `fit_radius_fraction`).
 fn crlb_x(truth: &Truth, noise: f64) -> f64 {
-    let radius = 0.5 * SPACING_PX;
+    let radius = 0.4 * SPACING_PX;
     let (cx, cy) = (truth.x.round(), truth.y.round());
     let q = 1.0 / (SIGMA_PX * SIGMA_PX);
     let mut fisher = SMatrix::<f64, 7, 7>::zeros();
