@@ -78,7 +78,7 @@ def main():
     except Exception as error:  # noqa: BLE001 - any failure to build the venv is a skip reason
         print(f"skipped: cannot set up atomap ({error})")
         return 0
-    env = dict(os.environ, DHCT_ATOMAP_STAGE="--inside", MPLBACKEND="Agg")
+    env = dict(os.environ, DHCT_ATOMAP_STAGE="--inside", MPLBACKEND="Agg", TQDM_DISABLE="1")
     return subprocess.run([python, __file__, sys.argv[1]], env=env).returncode
 
 

@@ -19,11 +19,8 @@ pub struct Region {
 /// Splits the pixels of `map` with value `> threshold` into basins of its local maxima.
 pub fn watershed_regions(map: &Array2<f64>, threshold: f64) -> Vec<Region> {
     let (h, w) = map.dim();
-    let values = map
-        .as_slice()
-        .map(|s| s.to_vec())
-        .unwrap_or_else(|| map.iter().copied().collect());
-    let above = |i: usize| values[i] > threshold;
+    let standard = map.as_standard_layout();
+    let values = standard.as_slice().unwrap_or_default();
     let higher = |a: usize, b: usize| {
         // Strict total order: value first, then index.
         values[a] > values[b] || (values[a] == values[b] && a > b)
@@ -31,23 +28,48 @@ pub fn watershed_regions(map: &Array2<f64>, threshold: f64) -> Vec<Region> {
     const NONE: usize = usize::MAX;
     // Each above-threshold pixel's steepest higher neighbour, or itself if it is a maximum.
     let mut parent = vec![NONE; h * w];
+    let offsets: [isize; 8] = [
+        -(w as isize) - 1,
+        -(w as isize),
+        -(w as isize) + 1,
+        -1,
+        1,
+        w as isize - 1,
+        w as isize,
+        w as isize + 1,
+    ];
     for r in 0..h {
+        let interior_row = r > 0 && r + 1 < h;
         for c in 0..w {
             let i = r * w + c;
-            if !above(i) {
+            if values[i] <= threshold {
                 continue;
             }
             let mut best = i;
-            for dr in -1i64..=1 {
-                for dc in -1i64..=1 {
-                    let (rr, cc) = (r as i64 + dr, c as i64 + dc);
-                    if (dr == 0 && dc == 0) || rr < 0 || cc < 0 || rr >= h as i64 || cc >= w as i64
-                    {
-                        continue;
-                    }
-                    let j = rr as usize * w + cc as usize;
+            if interior_row && c > 0 && c + 1 < w {
+                // No bounds checks needed away from the border.
+                for offset in offsets {
+                    let j = (i as isize + offset) as usize;
                     if higher(j, best) {
                         best = j;
+                    }
+                }
+            } else {
+                for dr in -1i64..=1 {
+                    for dc in -1i64..=1 {
+                        let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                        if (dr == 0 && dc == 0)
+                            || rr < 0
+                            || cc < 0
+                            || rr >= h as i64
+                            || cc >= w as i64
+                        {
+                            continue;
+                        }
+                        let j = rr as usize * w + cc as usize;
+                        if higher(j, best) {
+                            best = j;
+                        }
                     }
                 }
             }
@@ -72,21 +94,32 @@ pub fn watershed_regions(map: &Array2<f64>, threshold: f64) -> Vec<Region> {
             root[p] = top;
         }
     }
-    // Group pixels by maximum, in order of the maxima's first appearance.
-    let mut region_of_peak = std::collections::HashMap::new();
-    let mut regions: Vec<Region> = Vec::new();
-    for (i, &top) in root.iter().enumerate() {
-        if top == NONE {
-            continue;
+    // Group pixels by maximum (regions in order of their maxima's first appearance): a
+    // dense region index per maximum, then one pass to count and one to fill.
+    let mut region_index = vec![u32::MAX; h * w];
+    let mut peaks = Vec::new();
+    for &top in &root {
+        if top != NONE && region_index[top] == u32::MAX {
+            region_index[top] = peaks.len() as u32;
+            peaks.push(top);
         }
-        let index = *region_of_peak.entry(top).or_insert_with(|| {
-            regions.push(Region {
-                peak: top,
-                pixels: Vec::new(),
-            });
-            regions.len() - 1
-        });
-        regions[index].pixels.push(i);
+    }
+    let mut sizes = vec![0usize; peaks.len()];
+    for &top in root.iter().filter(|&&t| t != NONE) {
+        sizes[region_index[top] as usize] += 1;
+    }
+    let mut regions: Vec<Region> = peaks
+        .iter()
+        .zip(&sizes)
+        .map(|(&peak, &size)| Region {
+            peak,
+            pixels: Vec::with_capacity(size),
+        })
+        .collect();
+    for (i, &top) in root.iter().enumerate() {
+        if top != NONE {
+            regions[region_index[top] as usize].pixels.push(i);
+        }
     }
     regions
 }
