@@ -8,7 +8,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use crate::gaussian_fit::{FitLimits, fit_gaussian};
+use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
 use crate::ncc::normalised_cross_correlation;
 use crate::preprocess::{correct_lines_in_place, remove_background};
 use crate::watershed::{Region, watershed_regions};
@@ -215,8 +215,27 @@ pub fn find_features_and_correlation(
                 y_range: (y - window_radius, y + window_radius),
                 sigma_range: (0.25, nn_px.max(1.0)),
                 max_iterations: 100,
+                shape: FitShape::Elliptical,
             };
-            let fit = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &limits);
+            let mut fit = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &limits);
+            if fit.status == FitStatus::BadShape {
+                // Noise (e.g. scan-line streaks) can pull a free ellipse out of shape; a
+                // round atom is still well described by a circular Gaussian.
+                let circular = FitLimits {
+                    shape: FitShape::Circular,
+                    ..limits
+                };
+                let retry = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &circular);
+                if matches!(
+                    retry.status,
+                    FitStatus::Converged | FitStatus::IterationLimit
+                ) {
+                    fit = GaussianFit {
+                        status: FitStatus::ConvergedCircular,
+                        ..retry
+                    };
+                }
+            }
             (fit, xs.len())
         })
         .collect();
@@ -233,7 +252,7 @@ pub fn find_features_and_correlation(
             FitStatus::Failed => Some(Rejection::FitFailed),
             FitStatus::CentreOnBound => Some(Rejection::CentreOnBound),
             FitStatus::BadShape => Some(Rejection::BadShape),
-            FitStatus::Converged | FitStatus::IterationLimit => {
+            FitStatus::Converged | FitStatus::IterationLimit | FitStatus::ConvergedCircular => {
                 let inside = fit.x0 >= edge_margin
                     && fit.y0 >= edge_margin
                     && fit.x0 <= (columns - 1) as f64 - edge_margin

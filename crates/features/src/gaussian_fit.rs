@@ -38,6 +38,9 @@ pub enum FitStatus {
     BadShape,
     /// Too few pixels or a singular problem.
     Failed,
+    /// The elliptical fit failed on shape; a circular fit converged (see
+    /// `FitShape::Circular`).
+    ConvergedCircular,
 }
 
 /// Bounds and limits of a fit.
@@ -50,6 +53,39 @@ pub struct FitLimits {
     pub sigma_range: (f64, f64),
     /// Iteration limit.
     pub max_iterations: usize,
+    /// Elliptical (7 parameters) or circular (σ1 = σ2, 5 parameters).
+    pub shape: FitShape,
+}
+
+/// The Gaussian's shape freedom.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitShape {
+    /// Independent widths and orientation.
+    #[default]
+    Elliptical,
+    /// One width (a = c, b = 0): more robust for small or noisy features.
+    Circular,
+}
+
+/// Ties the circular model's parameters: the width's gradient is the sum of the a and c
+/// gradients, and b and c get unit rows so their steps are zero (c then follows a).
+fn restrict_to_circle(jtj: &mut Matrix7, jtr: &mut Vector7) {
+    for k in 0..7 {
+        jtj[(QA, k)] += jtj[(QC, k)];
+    }
+    for k in 0..7 {
+        jtj[(k, QA)] += jtj[(k, QC)];
+    }
+    jtr[QA] += jtr[QC];
+    for frozen in [QB, QC] {
+        for k in 0..7 {
+            jtj[(frozen, k)] = 0.0;
+            jtj[(k, frozen)] = 0.0;
+        }
+        jtj[(frozen, frozen)] = 1.0;
+        jtr[frozen] = 0.0;
+    }
 }
 
 /// Result of one fit, in the caller's z units and pixel coordinates.
@@ -227,7 +263,14 @@ pub fn fit_gaussian(
     }
 
     let mut lambda = 1e-3;
-    let (mut jtj, mut jtr, mut current) = normal_equations(&p, xs, ys, &scaled);
+    let circular = limits.shape == FitShape::Circular;
+    let restrict = |(mut jtj, mut jtr, cost): (Matrix7, Vector7, f64)| {
+        if circular {
+            restrict_to_circle(&mut jtj, &mut jtr);
+        }
+        (jtj, jtr, cost)
+    };
+    let (mut jtj, mut jtr, mut current) = restrict(normal_equations(&p, xs, ys, &scaled));
     let mut iterations = 0;
     let mut converged = false;
     while iterations < limits.max_iterations && !converged {
@@ -244,12 +287,17 @@ pub fn fit_gaussian(
             };
             let step = cholesky.solve(&jtr);
             let mut trial = p + step;
+            if circular {
+                trial[QC] = trial[QA];
+                trial[QB] = 0.0;
+            }
             if !project(&mut trial, limits, amplitude_max) {
                 lambda *= 10.0;
                 continue;
             }
             // One pass gives the trial's cost and, if it is accepted, its normal equations.
-            let (trial_jtj, trial_jtr, trial_cost) = normal_equations(&trial, xs, ys, &scaled);
+            let (trial_jtj, trial_jtr, trial_cost) =
+                restrict(normal_equations(&trial, xs, ys, &scaled));
             if trial_cost <= current {
                 let decrease = current - trial_cost;
                 let moved = (trial - p).abs();
@@ -275,7 +323,7 @@ pub fn fit_gaussian(
         }
     }
 
-    let dof = (n - 7) as f64;
+    let dof = (n - if circular { 5 } else { 7 }) as f64;
     let variance = current / dof;
     let covariance = jtj.try_inverse().map(|inverse| inverse * variance);
     let (x0_sigma, y0_sigma) = covariance
@@ -322,6 +370,7 @@ mod tests {
             y_range: (cy - 6.0, cy + 6.0),
             sigma_range: (0.3, 20.0),
             max_iterations: 100,
+            shape: FitShape::Elliptical,
         }
     }
 
@@ -381,6 +430,33 @@ mod tests {
         assert!((raster.x0 - scrambled.x0).abs() < 1e-9 && (raster.y0 - scrambled.y0).abs() < 1e-9);
         assert!((raster.sigma_major - scrambled.sigma_major).abs() < 1e-9);
         assert!((raster.residual_rms - scrambled.residual_rms).abs() < 1e-12);
+    }
+
+    #[test]
+    fn circular_fits_keep_one_width_and_find_the_centre() {
+        let (x0, y0, sigma) = (7.4, 6.7, 2.2);
+        let (mut xs, mut ys, mut zs) = (vec![], vec![], vec![]);
+        for r in 0..14 {
+            for c in 0..15 {
+                let d2 = (c as f64 - x0).powi(2) + (r as f64 - y0).powi(2);
+                xs.push(c as f64);
+                ys.push(r as f64);
+                // A slightly elliptical feature: the circular model must still centre it.
+                let stretch = (c as f64 - x0).powi(2) * 0.1;
+                zs.push((-(d2 + stretch) / (2.0 * sigma * sigma)).exp());
+            }
+        }
+        let circular = FitLimits {
+            shape: FitShape::Circular,
+            ..limits(7.0, 7.0)
+        };
+        let fit = fit_gaussian(&xs, &ys, &zs, (7.0, 7.0), 2.0, &circular);
+        assert_eq!(fit.status, FitStatus::Converged);
+        assert!((fit.sigma_major - fit.sigma_minor).abs() < 1e-12, "{fit:?}");
+        assert!(
+            (fit.x0 - x0).abs() < 1e-3 && (fit.y0 - y0).abs() < 1e-3,
+            "{fit:?}"
+        );
     }
 
     #[test]

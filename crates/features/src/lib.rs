@@ -52,7 +52,7 @@ pub use feature::{
     CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
 };
 pub use find::{find_features, find_features_and_correlation, find_features_in_pair};
-pub use gaussian_fit::{FitLimits, FitStatus, GaussianFit, fit_gaussian};
+pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
 pub use ncc::normalised_cross_correlation;
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
