@@ -1,10 +1,12 @@
 //! 2-D cross-correlation by FFT (realfft along rows, rustfft along columns).
 
+use std::sync::Arc;
+
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
-use realfft::RealFftPlanner;
-use rustfft::FftPlanner;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex64;
+use rustfft::{Fft, FftPlanner};
 
 /// Smallest n ≥ `minimum` whose prime factors are all ≤ 7 (fast FFT sizes).
 fn fast_fft_size(minimum: usize) -> usize {
@@ -27,69 +29,124 @@ fn fast_fft_size(minimum: usize) -> usize {
 /// `(kr, kc) = (rows/2, cols/2)` and zero padding outside the image; same size as `image`.
 pub fn correlate_same(image: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array2<f64> {
     let (height, width) = image.dim();
-    let (kh, kw) = kernel.dim();
-    let (kr, kc) = (kh / 2, kw / 2);
-    let ph = fast_fft_size(height + kh - 1);
-    let pw = fast_fft_size(width + kw - 1);
-    let spectrum_width = pw / 2 + 1;
+    Correlator::new(height, width, kernel).correlate(image)
+}
 
-    let mut real_planner = RealFftPlanner::<f64>::new();
-    let row_forward = real_planner.plan_fft_forward(pw);
-    let row_inverse = real_planner.plan_fft_inverse(pw);
-    let mut planner = FftPlanner::<f64>::new();
-    let column_forward = planner.plan_fft_forward(ph);
-    let column_inverse = planner.plan_fft_inverse(ph);
+/// Correlation of `height x width` images with one kernel, by FFT: the FFT plans and the
+/// kernel's spectrum are computed once and reused for every image (e.g. trace and retrace).
+pub struct Correlator {
+    height: usize,
+    width: usize,
+    kernel_radius: (usize, usize),
+    /// Padded FFT size along rows (ph) and columns (pw); no wrap-around for the kernel.
+    padded: (usize, usize),
+    row_forward: Arc<dyn RealToComplex<f64>>,
+    row_inverse: Arc<dyn ComplexToReal<f64>>,
+    column_forward: Arc<dyn Fft<f64>>,
+    column_inverse: Arc<dyn Fft<f64>>,
+    /// Conjugated kernel spectrum divided by ph·pw, column-major (`pw/2+1` columns of `ph`).
+    kernel_spectrum: Vec<Complex64>,
+}
 
-    // Forward transform of a (zero-padded) real array: rows first, then columns.
-    let forward = |source: ArrayView2<f64>| -> Vec<Complex64> {
+impl Correlator {
+    /// Plans correlation of `height x width` images with `kernel`.
+    pub fn new(height: usize, width: usize, kernel: ArrayView2<f64>) -> Correlator {
+        let (kh, kw) = kernel.dim();
+        let ph = fast_fft_size(height + kh - 1);
+        let pw = fast_fft_size(width + kw - 1);
+        let mut real_planner = RealFftPlanner::<f64>::new();
+        let mut planner = FftPlanner::<f64>::new();
+        let mut correlator = Correlator {
+            height,
+            width,
+            kernel_radius: (kh / 2, kw / 2),
+            padded: (ph, pw),
+            row_forward: real_planner.plan_fft_forward(pw),
+            row_inverse: real_planner.plan_fft_inverse(pw),
+            column_forward: planner.plan_fft_forward(ph),
+            column_inverse: planner.plan_fft_inverse(ph),
+            kernel_spectrum: Vec::new(),
+        };
+        let scale = 1.0 / (ph * pw) as f64;
+        let mut spectrum = correlator.forward(kernel);
+        spectrum.par_iter_mut().for_each(|k| *k = k.conj() * scale);
+        correlator.kernel_spectrum = spectrum;
+        correlator
+    }
+
+    /// Image size this correlator was planned for, `(height, width)`.
+    pub fn image_size(&self) -> (usize, usize) {
+        (self.height, self.width)
+    }
+
+    /// 2-D spectrum of a zero-padded real array (rows first, then columns), column-major.
+    fn forward(&self, source: ArrayView2<f64>) -> Vec<Complex64> {
+        let (ph, pw) = self.padded;
+        let spectrum_width = pw / 2 + 1;
         let (rows, cols) = source.dim();
-        // Row spectra, stored column-major (spectrum_width columns of length ph) so that the
-        // column transforms work on contiguous memory.
-        let mut row_spectra = vec![Complex64::default(); ph * spectrum_width];
-        let mut computed: Vec<Vec<Complex64>> = (0..rows)
-            .into_par_iter()
-            .map_init(
-                || (row_forward.make_input_vec(), row_forward.make_output_vec()),
-                |(input, output), r| {
+        // Row spectra, row-major, then transposed so column transforms are contiguous.
+        let mut row_major = vec![Complex64::default(); rows * spectrum_width];
+        row_major
+            .par_chunks_mut(spectrum_width)
+            .enumerate()
+            .for_each_init(
+                || self.row_forward.make_input_vec(),
+                |input, (r, output)| {
                     input.iter_mut().for_each(|v| *v = 0.0);
-                    for c in 0..cols {
-                        input[c] = source[[r, c]];
+                    for (c, value) in input.iter_mut().enumerate().take(cols) {
+                        *value = source[[r, c]];
                     }
-                    row_forward
+                    self.row_forward
                         .process(input, output)
                         .expect("buffer sizes come from the plan");
-                    output.clone()
                 },
-            )
-            .collect();
-        for (r, spectrum) in computed.iter_mut().enumerate() {
-            for (k, value) in spectrum.iter().enumerate() {
-                row_spectra[k * ph + r] = *value;
-            }
-        }
-        row_spectra
+            );
+        let mut column_major = vec![Complex64::default(); ph * spectrum_width];
+        column_major
             .par_chunks_mut(ph)
-            .for_each(|column| column_forward.process(column));
-        row_spectra
-    };
+            .enumerate()
+            .for_each(|(k, column)| {
+                for r in 0..rows {
+                    column[r] = row_major[r * spectrum_width + k];
+                }
+                self.column_forward.process(column);
+            });
+        column_major
+    }
 
-    let mut product = forward(image);
-    let kernel_spectrum = forward(kernel);
-    let scale = 1.0 / (ph * pw) as f64;
-    product
-        .par_iter_mut()
-        .zip(kernel_spectrum.par_iter())
-        .for_each(|(p, k)| *p = *p * k.conj() * scale);
-    product
-        .par_chunks_mut(ph)
-        .for_each(|column| column_inverse.process(column));
-
-    // Inverse row transforms; pick the lags (r − kr, c − kc), wrapping negatives.
-    let rows: Vec<Vec<f64>> = (0..height)
-        .into_par_iter()
-        .map_init(
-            || (row_inverse.make_input_vec(), row_inverse.make_output_vec()),
-            |(input, output), r| {
+    /// Correlates an image of the planned size with the kernel.
+    ///
+    /// # Panics
+    /// If the image size differs from the planned one (a programming error).
+    pub fn correlate(&self, image: ArrayView2<f64>) -> Array2<f64> {
+        assert_eq!(
+            image.dim(),
+            (self.height, self.width),
+            "image size differs from the plan"
+        );
+        let (ph, pw) = self.padded;
+        let (kr, kc) = self.kernel_radius;
+        let spectrum_width = pw / 2 + 1;
+        let mut product = self.forward(image);
+        product
+            .par_chunks_mut(ph)
+            .zip(self.kernel_spectrum.par_chunks(ph))
+            .for_each(|(column, kernel)| {
+                for (p, k) in column.iter_mut().zip(kernel) {
+                    *p *= k;
+                }
+                self.column_inverse.process(column);
+            });
+        // Inverse row transforms; pick the lags (r − kr, c − kc), wrapping negatives.
+        let mut values = vec![0.0; self.height * self.width];
+        values.par_chunks_mut(self.width).enumerate().for_each_init(
+            || {
+                (
+                    self.row_inverse.make_input_vec(),
+                    self.row_inverse.make_output_vec(),
+                )
+            },
+            |(input, output), (r, row)| {
                 let lag_row = (r + ph - kr) % ph;
                 for (k, value) in input.iter_mut().enumerate() {
                     *value = product[k * ph + lag_row];
@@ -99,20 +156,17 @@ pub fn correlate_same(image: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array2
                 if pw.is_multiple_of(2) {
                     input[spectrum_width - 1].im = 0.0;
                 }
-                row_inverse
+                self.row_inverse
                     .process(input, output)
                     .expect("buffer sizes come from the plan");
-                (0..width).map(|c| output[(c + pw - kc) % pw]).collect()
+                for (c, value) in row.iter_mut().enumerate() {
+                    *value = output[(c + pw - kc) % pw];
+                }
             },
-        )
-        .collect();
-    let mut out = Array2::zeros((height, width));
-    for (r, row) in rows.into_iter().enumerate() {
-        for (c, value) in row.into_iter().enumerate() {
-            out[[r, c]] = value;
-        }
+        );
+        Array2::from_shape_vec((self.height, self.width), values)
+            .expect("the buffer has height x width values")
     }
-    out
 }
 
 #[cfg(test)]

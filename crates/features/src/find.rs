@@ -9,7 +9,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
-use crate::ncc::normalised_cross_correlation;
+use crate::ncc::NccPlan;
 use crate::preprocess::{correct_lines_in_place, remove_background};
 use crate::watershed::{Region, watershed_regions};
 use crate::{
@@ -32,15 +32,18 @@ pub fn find_features(
     find_features_and_correlation(image, geometry, pass, options, mask).map(|(set, _)| set)
 }
 
-/// Finds features in every image of a pair, trace and retrace in parallel.
+/// Finds features in every image of a pair, trace and retrace in parallel (sharing the
+/// kernel and the correlation plan).
 pub fn find_features_in_pair(
     pair: &ScanPair,
     options: &FeatureOptions,
 ) -> Result<Vec<FeatureSet>, FeatureError> {
     let geometry = pair.geometry();
+    let prepared = Prepared::new(geometry, options)?;
     let run = |pass| {
-        pair.image(pass)
-            .map(|image| find_features(image, geometry, pass, options, None))
+        pair.image(pass).map(|image| {
+            find_prepared(image, geometry, pass, options, None, &prepared).map(|(set, _)| set)
+        })
     };
     let (trace, retrace) = rayon::join(|| run(ScanPass::Trace), || run(ScanPass::Retrace));
     trace.into_iter().chain(retrace).collect()
@@ -53,6 +56,86 @@ pub fn find_features_and_correlation(
     pass: ScanPass,
     options: &FeatureOptions,
     mask: Option<&Array2<bool>>,
+) -> Result<(FeatureSet, Array2<f64>), FeatureError> {
+    let prepared = Prepared::new(geometry, options)?;
+    find_prepared(image, geometry, pass, options, mask, &prepared)
+}
+
+/// What is the same for every image of one geometry: the checked options, the kernel, the
+/// nearest-neighbour distance in pixels and the correlation plan.
+struct Prepared {
+    kernel: Kernel,
+    kernel_sigma_px: f64,
+    nn_px: f64,
+    plan: NccPlan,
+}
+
+impl Prepared {
+    fn new(geometry: &ScanGeometry, options: &FeatureOptions) -> Result<Prepared, FeatureError> {
+        if !(options.threshold.is_finite() && (-1.0..1.0).contains(&options.threshold)) {
+            return Err(FeatureError::BadParameter(format!(
+                "NCC threshold must lie in [-1, 1), got {}",
+                options.threshold
+            )));
+        }
+        if !(options.fit_radius_fraction.is_finite()
+            && (0.1..=1.0).contains(&options.fit_radius_fraction))
+        {
+            return Err(FeatureError::BadParameter(format!(
+                "fit radius fraction must lie in [0.1, 1] of the NN distance, got {}",
+                options.fit_radius_fraction
+            )));
+        }
+        if !(options.duplicate_fraction.is_finite() && options.duplicate_fraction >= 0.0) {
+            return Err(FeatureError::BadParameter(
+                "duplicate fraction must be ≥ 0".into(),
+            ));
+        }
+        let d = options.neighbour_distance;
+        if !(d.is_finite() && d > 0.0) {
+            return Err(FeatureError::BadParameter(format!(
+                "nearest-neighbour distance must be a positive length in metres, got {d}"
+            )));
+        }
+        let pitch = (geometry.pitch_x() * geometry.pitch_y()).sqrt();
+        let nn_px = d / pitch;
+        let (kernel, kernel_sigma_px) = match &options.kernel {
+            KernelChoice::FromNeighbourDistance => {
+                let k = Kernel::for_neighbour_distance(nn_px)?;
+                let s = (nn_px / 2.0).round().max(1.0) / 2.0;
+                (k, s)
+            }
+            KernelChoice::GaussianSigma { sigma_px } => {
+                (Kernel::gaussian(*sigma_px)?, (2.0 * sigma_px).round() / 2.0)
+            }
+            KernelChoice::Custom { kernel } => (kernel.clone(), f64::NAN),
+        };
+        let (kh, kw) = kernel.values().dim();
+        let (rows, columns) = (geometry.rows(), geometry.columns());
+        if rows < kh || columns < kw {
+            return Err(FeatureError::ImageTooSmall {
+                columns,
+                rows,
+                kernel: kh.max(kw),
+            });
+        }
+        let plan = NccPlan::new(rows, columns, &kernel);
+        Ok(Prepared {
+            kernel,
+            kernel_sigma_px,
+            nn_px,
+            plan,
+        })
+    }
+}
+
+fn find_prepared(
+    image: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+    prepared: &Prepared,
 ) -> Result<(FeatureSet, Array2<f64>), FeatureError> {
     let (rows, columns) = image.z.dim();
     if rows != geometry.rows() || columns != geometry.columns() {
@@ -67,52 +150,14 @@ pub fn find_features_and_correlation(
             "mask size differs from the image size".into(),
         ));
     }
-    if !(options.threshold.is_finite() && (-1.0..1.0).contains(&options.threshold)) {
-        return Err(FeatureError::BadParameter(format!(
-            "NCC threshold must lie in [-1, 1), got {}",
-            options.threshold
-        )));
-    }
-    if !(options.fit_radius_fraction.is_finite()
-        && (0.1..=1.0).contains(&options.fit_radius_fraction))
-    {
-        return Err(FeatureError::BadParameter(format!(
-            "fit radius fraction must lie in [0.1, 1] of the NN distance, got {}",
-            options.fit_radius_fraction
-        )));
-    }
-    if !(options.duplicate_fraction.is_finite() && options.duplicate_fraction >= 0.0) {
-        return Err(FeatureError::BadParameter(
-            "duplicate fraction must be ≥ 0".into(),
-        ));
-    }
-    let d = options.neighbour_distance;
-    if !(d.is_finite() && d > 0.0) {
-        return Err(FeatureError::BadParameter(format!(
-            "nearest-neighbour distance must be a positive length in metres, got {d}"
-        )));
-    }
-    let pitch = (geometry.pitch_x() * geometry.pitch_y()).sqrt();
-    let nn_px = d / pitch;
-    let (kernel, kernel_sigma_px) = match &options.kernel {
-        KernelChoice::FromNeighbourDistance => {
-            let k = Kernel::for_neighbour_distance(nn_px)?;
-            let s = (nn_px / 2.0).round().max(1.0) / 2.0;
-            (k, s)
-        }
-        KernelChoice::GaussianSigma { sigma_px } => {
-            (Kernel::gaussian(*sigma_px)?, (2.0 * sigma_px).round() / 2.0)
-        }
-        KernelChoice::Custom { kernel } => (kernel.clone(), f64::NAN),
-    };
+    let Prepared {
+        kernel,
+        kernel_sigma_px,
+        nn_px,
+        plan,
+    } = prepared;
+    let (kernel_sigma_px, nn_px) = (*kernel_sigma_px, *nn_px);
     let (kh, kw) = kernel.values().dim();
-    if rows < kh || columns < kw {
-        return Err(FeatureError::ImageTooSmall {
-            columns,
-            rows,
-            kernel: kh.max(kw),
-        });
-    }
 
     // Missing data: NaN pixels are excluded from fits and filled for the correlation.
     let (finite, low, high) = image.z.iter().filter(|v| v.is_finite()).fold(
@@ -156,7 +201,7 @@ pub fn find_features_and_correlation(
         Some(signed.mapv(|v| if v.is_finite() { v } else { fill }))
     };
     lap(&mut timings.preprocess_s);
-    let ncc = normalised_cross_correlation(filled.as_ref().unwrap_or(&signed).view(), &kernel);
+    let ncc = plan.apply(filled.as_ref().unwrap_or(&signed).view());
     lap(&mut timings.correlation_s);
 
     let regions = watershed_regions(&ncc, options.threshold);

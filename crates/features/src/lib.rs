@@ -46,7 +46,7 @@ mod options;
 mod preprocess;
 mod watershed;
 
-pub use correlate::correlate_same;
+pub use correlate::{Correlator, correlate_same};
 pub use error::FeatureError;
 pub use feature::{
     CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
@@ -54,7 +54,7 @@ pub use feature::{
 pub use find::{find_features, find_features_and_correlation, find_features_in_pair};
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
-pub use ncc::normalised_cross_correlation;
+pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{
     correct_lines, correct_lines_in_place, remove_background, subtract_polynomial,

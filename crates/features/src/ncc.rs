@@ -3,7 +3,7 @@
 use ndarray::{Array2, ArrayView2};
 
 use crate::Kernel;
-use crate::correlate::correlate_same;
+use crate::correlate::Correlator;
 
 /// Normalised cross-correlation, same size as `image`, values in [−1, 1]:
 /// `Σ t′·I′ / √(Σ t′² · Σ I′²)` over the kernel-sized window centred on each pixel, with
@@ -11,40 +11,72 @@ use crate::correlate::correlate_same;
 /// Outside the image, the image is padded with its mean (Matlab's `normxcorr2` pads with
 /// zeros, which puts false edges at the borders of images with an offset).
 ///
-/// Non-finite pixels must be replaced before calling (see `prepare_for_correlation`).
+/// Non-finite pixels must be replaced before calling. To correlate several images of one
+/// size with one kernel, build an [`NccPlan`] once.
 pub fn normalised_cross_correlation(image: ArrayView2<f64>, kernel: &Kernel) -> Array2<f64> {
-    let template = kernel.values();
-    let n = template.len() as f64;
-    let mean_t = template.sum() / n;
-    let centred = template.mapv(|v| v - mean_t);
-    let template_energy: f64 = centred.iter().map(|v| v * v).sum();
-
-    // Standardise the image so window sums of squares do not cancel catastrophically
-    // (z in metres can carry a large offset); NCC is invariant to this affine change.
-    let count = image.len() as f64;
-    let mean = image.sum() / count;
-    let spread = (image.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / count).sqrt();
-    let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
-    let standard = image.mapv(|v| (v - mean) * scale);
-
-    let numerator = correlate_same(standard.view(), centred.view());
-    let (integral, integral_sq) = integral_images(&standard);
     let (h, w) = image.dim();
-    let (kr, kc) = kernel.radius();
-    let floor = 1e-12 * n;
-    Array2::from_shape_fn((h, w), |(r, c)| {
-        // Window [r−kr, r+kr] x [c−kc, c+kc] clipped to the image (mean padding outside).
-        let (r0, r1) = (r.saturating_sub(kr), (r + kr + 1).min(h));
-        let (c0, c1) = (c.saturating_sub(kc), (c + kc + 1).min(w));
-        let boxed = |t: &Array2<f64>| t[[r1, c1]] - t[[r0, c1]] - t[[r1, c0]] + t[[r0, c0]];
-        let sum = boxed(&integral);
-        let variance_sum = boxed(&integral_sq) - sum * sum / n;
-        if variance_sum > floor {
-            (numerator[[r, c]] / (template_energy * variance_sum).sqrt()).clamp(-1.0, 1.0)
-        } else {
-            0.0
+    NccPlan::new(h, w, kernel).apply(image)
+}
+
+/// A planned normalised cross-correlation: FFT plans, the mean-free template and its
+/// spectrum, for images of one size.
+pub struct NccPlan {
+    correlator: Correlator,
+    template_energy: f64,
+    template_len: f64,
+    kernel_radius: (usize, usize),
+}
+
+impl NccPlan {
+    /// Plans the NCC of `height x width` images with `kernel`.
+    pub fn new(height: usize, width: usize, kernel: &Kernel) -> NccPlan {
+        let template = kernel.values();
+        let n = template.len() as f64;
+        let mean_t = template.sum() / n;
+        let centred = template.mapv(|v| v - mean_t);
+        NccPlan {
+            correlator: Correlator::new(height, width, centred.view()),
+            template_energy: centred.iter().map(|v| v * v).sum(),
+            template_len: n,
+            kernel_radius: kernel.radius(),
         }
-    })
+    }
+
+    /// Image size this plan was made for, `(height, width)`.
+    pub fn image_size(&self) -> (usize, usize) {
+        self.correlator.image_size()
+    }
+
+    /// The NCC of `image` (of the planned size); see [`normalised_cross_correlation`].
+    pub fn apply(&self, image: ArrayView2<f64>) -> Array2<f64> {
+        let (n, template_energy) = (self.template_len, self.template_energy);
+        // Standardise the image so window sums of squares do not cancel catastrophically
+        // (z in metres can carry a large offset); NCC is invariant to this affine change.
+        let count = image.len() as f64;
+        let mean = image.sum() / count;
+        let spread = (image.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / count).sqrt();
+        let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
+        let standard = image.mapv(|v| (v - mean) * scale);
+
+        let numerator = self.correlator.correlate(standard.view());
+        let (integral, integral_sq) = integral_images(&standard);
+        let (h, w) = image.dim();
+        let (kr, kc) = self.kernel_radius;
+        let floor = 1e-12 * n;
+        Array2::from_shape_fn((h, w), |(r, c)| {
+            // Window [r−kr, r+kr] x [c−kc, c+kc] clipped to the image (mean padding outside).
+            let (r0, r1) = (r.saturating_sub(kr), (r + kr + 1).min(h));
+            let (c0, c1) = (c.saturating_sub(kc), (c + kc + 1).min(w));
+            let boxed = |t: &Array2<f64>| t[[r1, c1]] - t[[r0, c1]] - t[[r1, c0]] + t[[r0, c0]];
+            let sum = boxed(&integral);
+            let variance_sum = boxed(&integral_sq) - sum * sum / n;
+            if variance_sum > floor {
+                (numerator[[r, c]] / (template_energy * variance_sum).sqrt()).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+    }
 }
 
 /// Summed-area tables of the values and of their squares, `(h+1) x (w+1)`.
