@@ -27,4 +27,15 @@ pub enum FeatureError {
         threshold: f64,
         rejected: String,
     },
+    #[error(
+        "the {count} candidate features of the {pass} image look like noise, not a lattice: their \
+         median peak correlation is {median_ncc:.2} (atoms give ≳ 0.5; the limit is {limit}). \
+         Check the nearest-neighbour distance, the polarity (bright/dark) and the image itself"
+    )]
+    NoiseLike {
+        pass: &'static str,
+        count: usize,
+        median_ncc: f64,
+        limit: f64,
+    },
 }

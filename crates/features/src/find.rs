@@ -389,15 +389,27 @@ fn find_prepared(
     for (id, f) in features.iter_mut().enumerate() {
         f.id = id;
     }
+    let pass_name = match pass {
+        ScanPass::Trace => "trace",
+        ScanPass::Retrace => "retrace",
+    };
     if features.is_empty() {
         return Err(FeatureError::NoFeatures {
-            pass: match pass {
-                ScanPass::Trace => "trace",
-                ScanPass::Retrace => "retrace",
-            },
+            pass: pass_name,
             candidates,
             threshold: options.threshold,
             rejected: RejectionCounts::of(&rejected).to_string(),
+        });
+    }
+    let mut peaks: Vec<f64> = features.iter().map(|f| f.ncc_peak).collect();
+    let middle = peaks.len() / 2;
+    let median_ncc = *peaks.select_nth_unstable_by(middle, f64::total_cmp).1;
+    if median_ncc < options.min_median_ncc {
+        return Err(FeatureError::NoiseLike {
+            pass: pass_name,
+            count: features.len(),
+            median_ncc,
+            limit: options.min_median_ncc,
         });
     }
     lap(&mut timings.bookkeeping_s);

@@ -72,6 +72,9 @@ pub struct FeatureOptions {
     /// white noise and is ~20 % faster than 0.5, which averages correlated (1/f, line) noise
     /// slightly better.
     pub fit_radius_fraction: f64,
+    /// An image whose accepted features have a median peak NCC below this is rejected as
+    /// lattice-free (noise blobs give ≈ 0.2, atoms ≳ 0.5). Set 0 to accept anything.
+    pub min_median_ncc: f64,
 }
 
 impl Default for FeatureOptions {
@@ -86,6 +89,7 @@ impl Default for FeatureOptions {
             area_filter: true,
             duplicate_fraction: 0.5,
             fit_radius_fraction: 0.4,
+            min_median_ncc: 0.3,
         }
     }
 }
