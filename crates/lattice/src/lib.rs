@@ -28,6 +28,7 @@
 //! ```
 
 mod error;
+mod fit;
 mod motif;
 mod neighbours;
 mod plane_group;
@@ -35,6 +36,10 @@ mod presets;
 mod user;
 
 pub use error::LatticeError;
+pub use fit::{
+    AngularDistribution, IndexedPoint, LatticeFit, LatticeFitError, LatticeFitOptions,
+    angular_distribution, fit_lattice,
+};
 pub use motif::MotifSite;
 pub use neighbours::{LatticeSite, lattice_sites};
 pub use plane_group::PlaneGroup;
