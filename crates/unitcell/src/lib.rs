@@ -1,4 +1,25 @@
-//! Confidence ellipses, translationally and symmetry-averaged unit cells (DHCT step 6).
+//! Unit-cell analysis on top of a whole-image lattice fit (DHCT paper §V; none of this is in
+//! the authors' Matlab).
 //!
-//! This crate is part of the dhct workspace; its pipeline stage is being built (see the
-//! project's issues). It has no public API yet.
+//! * [`ConfidenceEllipse`]: the covariance of feature deviations from their fitted sites as
+//!   1σ and 2σ in-plane ellipses (and σ_z of the heights), for the whole-image fit or for
+//!   [`LocalCell`] fits.
+//! * [`local_cells`]: every cell whose four corner features were found, fitted on its own
+//!   (origin and x/y scales; orientation fixed to the whole-image fit, paper Fig. 10b).
+//! * [`average_unit_cell`]: the translationally averaged unit-cell image: each selected cell
+//!   is resampled through its own linear map onto a fine grid in fractional coordinates and
+//!   the cells are averaged; [`tile`] repeats it to check that the boundaries are seamless.
+//!
+//! Frames and units: positions are metres in the frame of the points given to the lattice
+//! fit (normally the corrected sample frame); images are in display orientation with pixel
+//! `(column, row)` at `(column·pitch_x, row·pitch_y)`.
+
+mod average;
+mod ellipse;
+mod error;
+mod local;
+
+pub use average::{AveragedCell, average_unit_cell, tile};
+pub use ellipse::ConfidenceEllipse;
+pub use error::UnitCellError;
+pub use local::{LocalCell, local_cells};
