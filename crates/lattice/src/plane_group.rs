@@ -70,20 +70,20 @@ impl PlaneGroup {
         }
     }
 
-    /// Order of the point group (number of symmetry operations per primitive cell, counting
-    /// the centring translation of cm and c2mm).
+    /// Number of symmetry operations per conventional cell (for cm and c2mm this counts the
+    /// centring translation: twice the point-group order).
     pub fn order(self) -> usize {
         match self {
             PlaneGroup::P1 => 1,
-            PlaneGroup::P2 | PlaneGroup::Pm | PlaneGroup::Pg | PlaneGroup::Cm => 2,
+            PlaneGroup::P2 | PlaneGroup::Pm | PlaneGroup::Pg => 2,
             PlaneGroup::P3 => 3,
-            PlaneGroup::P2mm
+            PlaneGroup::Cm
+            | PlaneGroup::P2mm
             | PlaneGroup::P2mg
             | PlaneGroup::P2gg
-            | PlaneGroup::C2mm
             | PlaneGroup::P4 => 4,
             PlaneGroup::P3m1 | PlaneGroup::P31m | PlaneGroup::P6 => 6,
-            PlaneGroup::P4mm | PlaneGroup::P4gm => 8,
+            PlaneGroup::C2mm | PlaneGroup::P4mm | PlaneGroup::P4gm => 8,
             PlaneGroup::P6mm => 12,
         }
     }

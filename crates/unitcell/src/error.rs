@@ -9,6 +9,11 @@ pub enum UnitCellError {
     NoCompleteCell,
     #[error("the averaging grid must be at least 2 x 2 samples, got {0}")]
     BadResolution(usize),
+    #[error("plane group {group} is not a symmetry of the {lattice} lattice's cell")]
+    IncompatibleGroup {
+        group: dhct_lattice::PlaneGroup,
+        lattice: String,
+    },
     #[error("the pixel pitch must be positive and finite, got ({0}, {1}) m")]
     BadPitch(f64, f64),
 }

@@ -9,6 +9,9 @@
 //! * [`average_unit_cell`]: the translationally averaged unit-cell image: each selected cell
 //!   is resampled through its own linear map onto a fine grid in fractional coordinates and
 //!   the cells are averaged; [`tile`] repeats it to check that the boundaries are seamless.
+//! * [`symmetrize`]: the average over a plane group's operations ([`operations`], all 17
+//!   wallpaper groups), and [`symmetry_residuals`]: how far a cell is from each group
+//!   compatible with its lattice, so the user can choose.
 //!
 //! Frames and units: positions are metres in the frame of the points given to the lattice
 //! fit (normally the corrected sample frame); images are in display orientation with pixel
@@ -18,8 +21,12 @@ mod average;
 mod ellipse;
 mod error;
 mod local;
+mod symmetry;
 
 pub use average::{AveragedCell, average_unit_cell, tile};
 pub use ellipse::ConfidenceEllipse;
 pub use error::UnitCellError;
 pub use local::{LocalCell, local_cells};
+pub use symmetry::{
+    SymmetryOperation, SymmetryResidual, operations, symmetrize, symmetry_residuals,
+};
