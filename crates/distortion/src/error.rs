@@ -1,0 +1,44 @@
+//! Typed errors of the distortion pipeline.
+
+use thiserror::Error;
+
+/// Everything that can go wrong in neighbour analysis, the model fit or the correction.
+#[derive(Debug, Error)]
+pub enum DistortionError {
+    /// Too few features survived selection to fit the model.
+    #[error(
+        "too few features to fit the {what}: {found} usable, at least {needed} needed \
+         (check the lattice choice and its constant, the NN window, the mask, and that \
+         the feature finder found the atoms)"
+    )]
+    TooFewFeatures {
+        /// Which fit or step.
+        what: &'static str,
+        /// How many were usable.
+        found: usize,
+        /// How many are needed.
+        needed: usize,
+    },
+    /// A least-squares fit did not produce finite parameters.
+    #[error("the {0} fit failed to converge to finite parameters")]
+    FitFailed(&'static str),
+    /// A mask or image does not match the scan geometry.
+    #[error(
+        "{what} is {columns} x {rows} px but the scan geometry is {geometry_columns} x {geometry_rows} px"
+    )]
+    ShapeMismatch {
+        /// What was given.
+        what: &'static str,
+        /// Its width.
+        columns: usize,
+        /// Its height.
+        rows: usize,
+        /// The geometry's width.
+        geometry_columns: usize,
+        /// The geometry's height.
+        geometry_rows: usize,
+    },
+    /// An argument is out of range.
+    #[error("invalid parameter: {0}")]
+    BadParameter(String),
+}

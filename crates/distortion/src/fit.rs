@@ -1,0 +1,389 @@
+//! Joint robust weighted least-squares fit of the drift/creep and hysteresis models to the
+//! local distortions of trace and retrace features (pooled).
+//!
+//! * Drift + creep: `D_x(t)`, `D_y(t)` of every feature against `D(t) = v + a·t + C/(t+t0)`,
+//!   7 parameters, `t0 = exp(q)` so it stays positive. Start: a log-spaced grid over `t0`
+//!   with the (then linear) other six solved exactly; then Levenberg–Marquardt.
+//! * Hysteresis: `S` of every feature against the chosen law of `τ` (line time).
+//! * Robustness: Huber IRLS (4 rounds, scale from the MAD of the residuals), each axis
+//!   weighted by its own robust scale. Uncertainties: `σ̂²·(JᵀWJ)⁻¹`.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::lm::{huber_weights, levenberg_marquardt, mad_sigma};
+use crate::model::{DistortionModel, DriftCreep, HysteresisLaw, Parameter};
+use crate::{DistortionError, LocalDistortion};
+
+/// Which hysteresis law to fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum HysteresisChoice {
+    /// No hysteresis (`S ≡ 1`).
+    None,
+    /// The paper's quartic in `τ/τ_s`; `τ_s` defaults to the line scan time.
+    Quartic {
+        /// `τ_s`, seconds; `None` = line scan time.
+        time_scale_s: Option<f64>,
+    },
+    /// The Matlab power law `S = k·τ^n`.
+    Power,
+    /// `S = 1 + A·exp(−τ/τ_h)`.
+    Exponential,
+}
+
+/// Options of [`fit_model`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FitOptions {
+    /// Hysteresis law.
+    pub hysteresis: HysteresisChoice,
+    /// Huber IRLS rounds (0 = plain least squares).
+    pub robust_rounds: usize,
+    /// Compare each measurement with the model's secant over the feature's neighbours
+    /// (what the local fit actually measures) instead of its derivative at the feature.
+    /// Removes the curvature bias of `S` near the line start and of creep near `t = 0`.
+    pub secant: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            hysteresis: HysteresisChoice::Power,
+            robust_rounds: 4,
+            secant: true,
+        }
+    }
+}
+
+/// `Σ Δ·(g(x+Δ) − g(x)) / Σ Δ²`: the least-squares slope of `g` through the point `x` over
+/// the offsets `Δ`; the derivative (central difference) when there are no offsets.
+fn secant<G: Fn(f64) -> f64>(g: G, x: f64, offsets: &[f64]) -> f64 {
+    let denominator: f64 = offsets.iter().map(|d| d * d).sum();
+    if offsets.is_empty() || denominator <= 0.0 {
+        let h = 1e-6 * x.abs().max(1e-6);
+        return (g(x + h) - g(x - h)) / (2.0 * h);
+    }
+    let g0 = g(x);
+    offsets.iter().map(|d| d * (g(x + d) - g0)).sum::<f64>() / denominator
+}
+
+/// Minimum number of local distortions for the drift fit.
+pub const MIN_FEATURES: usize = 12;
+
+const NM: f64 = 1e9;
+
+/// Fits the model. `frame_duration_s` and `line_scan_time_s` set the search ranges of `t0`
+/// and the exponential's time constant, and the quartic's default time scale.
+pub fn fit_model(
+    local: &[LocalDistortion],
+    frame_duration_s: f64,
+    line_scan_time_s: f64,
+    options: &FitOptions,
+) -> Result<DistortionModel, DistortionError> {
+    if local.len() < MIN_FEATURES {
+        return Err(DistortionError::TooFewFeatures {
+            what: "drift/creep model",
+            found: local.len(),
+            needed: MIN_FEATURES,
+        });
+    }
+    let (drift, mut parameters) = fit_drift(
+        local,
+        frame_duration_s,
+        options.robust_rounds,
+        options.secant,
+    )?;
+    let (hysteresis, more) = fit_hysteresis(local, line_scan_time_s, options)?;
+    parameters.extend(more);
+    Ok(DistortionModel {
+        drift,
+        hysteresis,
+        parameters,
+    })
+}
+
+fn linear_ls(design: &DMatrix<f64>, y: &DVector<f64>) -> Option<DVector<f64>> {
+    let jtj = design.transpose() * design;
+    let jty = design.transpose() * y;
+    jtj.lu().solve(&jty)
+}
+
+fn parameter(name: &str, value: f64, sigma: f64, unit: &str) -> Parameter {
+    Parameter {
+        name: name.to_string(),
+        value,
+        sigma,
+        unit: unit.to_string(),
+    }
+}
+
+fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|k| {
+            inverse
+                .as_ref()
+                .map_or(f64::NAN, |c| (c[(k, k)] * scale2).max(0.0).sqrt())
+        })
+        .collect()
+}
+
+fn fit_drift(
+    local: &[LocalDistortion],
+    frame_duration_s: f64,
+    robust_rounds: usize,
+    secant_mode: bool,
+) -> Result<(DriftCreep, Vec<Parameter>), DistortionError> {
+    let t: Vec<f64> = local.iter().map(|l| l.time_s).collect();
+    let offsets: Vec<&[f64]> = local
+        .iter()
+        .map(|l| {
+            if secant_mode {
+                l.neighbour_dt_s.as_slice()
+            } else {
+                &[]
+            }
+        })
+        .collect();
+    let dx: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[0] * NM).collect();
+    let dy: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[1] * NM).collect();
+    let m = t.len();
+    // Start: grid over t0, linear in the rest.
+    let span = frame_duration_s.max(1e-9);
+    let mut best: Option<(f64, [f64; 6], f64)> = None;
+    for k in 0..=48 {
+        let t0 = span * 10f64.powf(-3.0 + 5.0 * k as f64 / 48.0);
+        let design = DMatrix::from_fn(m, 3, |i, j| match j {
+            0 => 1.0,
+            1 => secant(|x| 0.5 * x * x, t[i], offsets[i]),
+            _ => secant(|x| (x / t0).ln_1p(), t[i], offsets[i]),
+        });
+        let (Some(px), Some(py)) = (
+            linear_ls(&design, &DVector::from_column_slice(&dx)),
+            linear_ls(&design, &DVector::from_column_slice(&dy)),
+        ) else {
+            continue;
+        };
+        let fx = &design * &px;
+        let fy = &design * &py;
+        let sse: f64 = (0..m)
+            .map(|i| (fx[i] - dx[i]).powi(2) + (fy[i] - dy[i]).powi(2))
+            .sum();
+        if sse.is_finite() && best.as_ref().is_none_or(|b| sse < b.0) {
+            best = Some((sse, [px[0], px[1], px[2], py[0], py[1], py[2]], t0));
+        }
+    }
+    let Some((_, start, t0_start)) = best else {
+        return Err(DistortionError::FitFailed("drift/creep"));
+    };
+    let mut p0 = start.to_vec();
+    p0.push(t0_start.ln());
+    let residuals = |p: &[f64], r: &mut [f64]| {
+        let t0 = p[6].exp();
+        for i in 0..m {
+            let quadratic = secant(|x| 0.5 * x * x, t[i], offsets[i]);
+            let log = secant(|x| (x / t0).ln_1p(), t[i], offsets[i]);
+            r[i] = p[0] + p[1] * quadratic + p[2] * log - dx[i];
+            r[m + i] = p[3] + p[4] * quadratic + p[5] * log - dy[i];
+        }
+    };
+    let mut weights = vec![1.0; 2 * m];
+    let mut result = None;
+    for round in 0..=robust_rounds.max(1) {
+        let fit = levenberg_marquardt(residuals, 2 * m, &p0, &weights, 200)
+            .ok_or(DistortionError::FitFailed("drift/creep"))?;
+        p0.clone_from(&fit.params);
+        let (rx, ry) = fit.residuals.split_at(m);
+        let (sx, sy) = (mad_sigma(rx).max(1e-300), mad_sigma(ry).max(1e-300));
+        let (hx, hy) = if robust_rounds > 0 && round > 0 {
+            (huber_weights(rx, sx), huber_weights(ry, sy))
+        } else {
+            (vec![1.0; m], vec![1.0; m])
+        };
+        weights = hx
+            .iter()
+            .map(|h| h / (sx * sx))
+            .chain(hy.iter().map(|h| h / (sy * sy)))
+            .collect();
+        result = Some(fit);
+    }
+    let fit = result.ok_or(DistortionError::FitFailed("drift/creep"))?;
+    // One more evaluation of the normal matrix with the final weights.
+    let fit = levenberg_marquardt(residuals, 2 * m, &fit.params, &weights, 0).unwrap_or(fit);
+    let p = &fit.params;
+    let chi2: f64 = fit
+        .residuals
+        .iter()
+        .zip(&weights)
+        .map(|(r, w)| w * r * r)
+        .sum();
+    let scale2 = chi2 / (2 * m).saturating_sub(7).max(1) as f64;
+    let s = sigmas(&fit.inverse_normal, scale2, 7);
+    let t0 = p[6].exp();
+    let drift = DriftCreep {
+        velocity_m_per_s: [p[0] / NM, p[3] / NM],
+        acceleration_m_per_s2: [p[1] / NM, p[4] / NM],
+        creep_m: [p[2] / NM, p[5] / NM],
+        t0_s: t0,
+    };
+    if !(t0.is_finite() && p.iter().all(|v| v.is_finite())) {
+        return Err(DistortionError::FitFailed("drift/creep"));
+    }
+    let parameters = vec![
+        parameter("v_x", p[0] / NM, s[0] / NM, "m/s"),
+        parameter("a_x", p[1] / NM, s[1] / NM, "m/s^2"),
+        parameter("C_x", p[2] / NM, s[2] / NM, "m"),
+        parameter("v_y", p[3] / NM, s[3] / NM, "m/s"),
+        parameter("a_y", p[4] / NM, s[4] / NM, "m/s^2"),
+        parameter("C_y", p[5] / NM, s[5] / NM, "m"),
+        parameter("t0", t0, t0 * s[6], "s"),
+    ];
+    Ok((drift, parameters))
+}
+
+fn fit_hysteresis(
+    local: &[LocalDistortion],
+    line_scan_time_s: f64,
+    options: &FitOptions,
+) -> Result<(HysteresisLaw, Vec<Parameter>), DistortionError> {
+    let tau: Vec<f64> = local.iter().map(|l| l.line_time_s).collect();
+    let s: Vec<f64> = local.iter().map(|l| l.scale).collect();
+    let offsets: Vec<&[f64]> = local
+        .iter()
+        .map(|l| {
+            if options.secant {
+                l.neighbour_dtau_s.as_slice()
+            } else {
+                &[]
+            }
+        })
+        .collect();
+    let m = tau.len();
+    let law_of = |p: &[f64]| -> HysteresisLaw {
+        match options.hysteresis {
+            HysteresisChoice::None => HysteresisLaw::none(),
+            HysteresisChoice::Quartic { time_scale_s } => HysteresisLaw::Quartic {
+                coefficients: [p[0], p[1], p[2], p[3], p[4]],
+                time_scale_s: time_scale_s.unwrap_or(line_scan_time_s),
+            },
+            HysteresisChoice::Power => HysteresisLaw::Power { k: p[0], n: p[1] },
+            HysteresisChoice::Exponential => HysteresisLaw::Exponential {
+                amplitude: p[0],
+                time_constant_s: p[1].exp(),
+            },
+        }
+    };
+    let p0: Vec<f64> = match options.hysteresis {
+        HysteresisChoice::None => return Ok((HysteresisLaw::none(), Vec::new())),
+        HysteresisChoice::Quartic { time_scale_s } => {
+            let ts = time_scale_s.unwrap_or(line_scan_time_s);
+            let design = DMatrix::from_fn(m, 5, |i, j| (tau[i] / ts).powi(j as i32));
+            let y = DVector::from_iterator(m, s.iter().map(|s| s - 1.0));
+            linear_ls(&design, &y)
+                .ok_or(DistortionError::FitFailed("hysteresis"))?
+                .iter()
+                .copied()
+                .collect()
+        }
+        HysteresisChoice::Power => {
+            let pts: Vec<(f64, f64)> = tau
+                .iter()
+                .zip(&s)
+                .filter(|(t, s)| **t > 0.0 && **s > 0.0)
+                .map(|(t, s)| (t.ln(), s.ln()))
+                .collect();
+            let design = DMatrix::from_fn(pts.len(), 2, |i, j| if j == 0 { 1.0 } else { pts[i].0 });
+            let y = DVector::from_iterator(pts.len(), pts.iter().map(|p| p.1));
+            let q = linear_ls(&design, &y).ok_or(DistortionError::FitFailed("hysteresis"))?;
+            vec![q[0].exp(), q[1]]
+        }
+        HysteresisChoice::Exponential => {
+            let mut best = (f64::INFINITY, 0.0, line_scan_time_s.ln());
+            for k in 0..=40 {
+                let th = line_scan_time_s * 10f64.powf(-3.0 + 4.0 * k as f64 / 40.0);
+                let e: Vec<f64> = tau.iter().map(|t| (-t / th).exp()).collect();
+                let ee: f64 = e.iter().map(|e| e * e).sum();
+                let ey: f64 = e.iter().zip(&s).map(|(e, s)| e * (s - 1.0)).sum();
+                let a = ey / ee.max(1e-300);
+                let sse: f64 = e
+                    .iter()
+                    .zip(&s)
+                    .map(|(e, s)| (a * e - (s - 1.0)).powi(2))
+                    .sum();
+                if sse < best.0 {
+                    best = (sse, a, th.ln());
+                }
+            }
+            vec![best.1, best.2]
+        }
+    };
+    let n = p0.len();
+    if m < n + 3 {
+        return Err(DistortionError::TooFewFeatures {
+            what: "hysteresis model",
+            found: m,
+            needed: n + 3,
+        });
+    }
+    let residuals = |p: &[f64], r: &mut [f64]| {
+        let law = law_of(p);
+        for i in 0..m {
+            let predicted = if offsets[i].is_empty() {
+                law.scale(tau[i])
+            } else {
+                1.0 + secant(|x| law.excess_integral(x), tau[i], offsets[i])
+            };
+            r[i] = predicted - s[i];
+        }
+    };
+    let mut p = p0;
+    let mut weights = vec![1.0; m];
+    let mut last = None;
+    for round in 0..=options.robust_rounds.max(1) {
+        let fit = levenberg_marquardt(residuals, m, &p, &weights, 200)
+            .ok_or(DistortionError::FitFailed("hysteresis"))?;
+        p.clone_from(&fit.params);
+        let sigma = mad_sigma(&fit.residuals).max(1e-300);
+        let h = if options.robust_rounds > 0 && round > 0 {
+            huber_weights(&fit.residuals, sigma)
+        } else {
+            vec![1.0; m]
+        };
+        weights = h.iter().map(|h| h / (sigma * sigma)).collect();
+        last = Some(fit);
+    }
+    let fit = last.ok_or(DistortionError::FitFailed("hysteresis"))?;
+    let fit = levenberg_marquardt(residuals, m, &fit.params, &weights, 0).unwrap_or(fit);
+    let chi2: f64 = fit
+        .residuals
+        .iter()
+        .zip(&weights)
+        .map(|(r, w)| w * r * r)
+        .sum();
+    let scale2 = chi2 / m.saturating_sub(n).max(1) as f64;
+    let sg = sigmas(&fit.inverse_normal, scale2, n);
+    let p = &fit.params;
+    let law = law_of(p);
+    if let HysteresisLaw::Power { k, n } = law
+        && !(k > 0.0 && n > -1.0)
+    {
+        // ∫S dτ diverges at τ = 0 for n ≤ −1.
+        return Err(DistortionError::FitFailed(
+            "hysteresis (the power law left its domain k > 0, n > −1)",
+        ));
+    }
+    let parameters = match options.hysteresis {
+        HysteresisChoice::None => Vec::new(),
+        HysteresisChoice::Quartic { .. } => (0..5)
+            .map(|k| parameter(&format!("c{k}"), p[k], sg[k], "1"))
+            .collect(),
+        HysteresisChoice::Power => vec![
+            parameter("k", p[0], sg[0], "s^-n"),
+            parameter("n", p[1], sg[1], "1"),
+        ],
+        HysteresisChoice::Exponential => vec![
+            parameter("amplitude", p[0], sg[0], "1"),
+            parameter("time_constant", p[1].exp(), p[1].exp() * sg[1], "s"),
+        ],
+    };
+    Ok((law, parameters))
+}

@@ -1,0 +1,144 @@
+//! A small weighted Levenberg–Marquardt with a finite-difference Jacobian, used for the
+//! RDF, drift/creep and hysteresis fits (few parameters, up to ~10⁵ residuals).
+
+use nalgebra::{DMatrix, DVector};
+
+/// Result of [`levenberg_marquardt`].
+pub(crate) struct LmResult {
+    /// Best parameters.
+    pub params: Vec<f64>,
+    /// Residuals at the best parameters (unweighted).
+    pub residuals: Vec<f64>,
+    /// `(Jᵀ W J)⁻¹` at the best parameters (unscaled), if invertible.
+    pub inverse_normal: Option<DMatrix<f64>>,
+}
+
+fn jacobian<F: Fn(&[f64], &mut [f64])>(f: &F, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
+    let (m, n) = (r0.len(), p.len());
+    let mut jac = DMatrix::zeros(m, n);
+    let mut q = p.to_vec();
+    let mut r = vec![0.0; m];
+    for j in 0..n {
+        let h = 1e-7 * p[j].abs().max(1e-3);
+        q[j] = p[j] + h;
+        f(&q, &mut r);
+        for i in 0..m {
+            jac[(i, j)] = (r[i] - r0[i]) / h;
+        }
+        q[j] = p[j];
+    }
+    jac
+}
+
+fn cost(r: &[f64], w: &[f64]) -> f64 {
+    r.iter().zip(w).map(|(r, w)| w * r * r).sum()
+}
+
+/// Minimises `Σ w_i r_i(p)²` from `p0`. `f(p, r)` writes the `m` residuals.
+pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64])>(
+    f: F,
+    m: usize,
+    p0: &[f64],
+    weights: &[f64],
+    max_iterations: usize,
+) -> Option<LmResult> {
+    let n = p0.len();
+    let mut p = p0.to_vec();
+    let mut r = vec![0.0; m];
+    f(&p, &mut r);
+    let mut c = cost(&r, weights);
+    if !c.is_finite() {
+        return None;
+    }
+    let mut lambda = 1e-3;
+    let mut trial = vec![0.0; m];
+    for _ in 0..max_iterations {
+        let jac = jacobian(&f, &p, &r);
+        let mut jtj = DMatrix::<f64>::zeros(n, n);
+        let mut jtr = DVector::<f64>::zeros(n);
+        for i in 0..m {
+            let w = weights[i];
+            for a in 0..n {
+                let ja = jac[(i, a)] * w;
+                jtr[a] += ja * r[i];
+                for b in 0..=a {
+                    jtj[(a, b)] += ja * jac[(i, b)];
+                }
+            }
+        }
+        for a in 0..n {
+            for b in 0..a {
+                jtj[(b, a)] = jtj[(a, b)];
+            }
+        }
+        let mut improved = false;
+        for _ in 0..30 {
+            let mut damped = jtj.clone();
+            for a in 0..n {
+                damped[(a, a)] += lambda * jtj[(a, a)].max(1e-300);
+            }
+            let Some(step) = damped.lu().solve(&(-&jtr)) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let q: Vec<f64> = p.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
+            f(&q, &mut trial);
+            let ct = cost(&trial, weights);
+            if ct.is_finite() && ct <= c {
+                let small = step
+                    .iter()
+                    .zip(&p)
+                    .all(|(s, p)| s.abs() <= 1e-12 * p.abs().max(1e-9));
+                let relative = (c - ct) / c.max(1e-300);
+                p = q;
+                std::mem::swap(&mut r, &mut trial);
+                c = ct;
+                lambda = (lambda / 10.0).max(1e-12);
+                improved = !(small || relative < 1e-14);
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    let jac = jacobian(&f, &p, &r);
+    let mut jtj = DMatrix::<f64>::zeros(n, n);
+    for (i, w) in weights.iter().enumerate().take(m) {
+        let row = jac.row(i);
+        jtj += row.transpose() * row * *w;
+    }
+    let inverse_normal = jtj.try_inverse();
+    if p.iter().all(|v| v.is_finite()) {
+        Some(LmResult {
+            params: p,
+            residuals: r,
+            inverse_normal,
+        })
+    } else {
+        None
+    }
+}
+
+/// Huber weights for residuals `r` with scale `sigma` (tuning constant 1.345).
+pub(crate) fn huber_weights(r: &[f64], sigma: f64) -> Vec<f64> {
+    let k = 1.345 * sigma;
+    r.iter()
+        .map(|r| if r.abs() <= k { 1.0 } else { k / r.abs() })
+        .collect()
+}
+
+/// Robust scale: 1.4826 · median |r|.
+pub(crate) fn mad_sigma(r: &[f64]) -> f64 {
+    let mut a: Vec<f64> = r
+        .iter()
+        .map(|r| r.abs())
+        .filter(|r| r.is_finite())
+        .collect();
+    if a.is_empty() {
+        return 0.0;
+    }
+    a.sort_by(f64::total_cmp);
+    1.4826 * a[a.len() / 2]
+}

@@ -1,0 +1,313 @@
+//! The distortion model: drift + creep per axis with a shared `t0` (the paper's eq. 14) and
+//! fast-scan hysteresis `S(τ)` (the paper's quartic eq. 13, the Matlab power law, or an
+//! exponential), with the closed-form displacement they integrate to.
+//!
+//! # Signs and frames
+//!
+//! `d(t, pass)` is the displacement of the tip *relative to the sample*, metres, display
+//! frame (x right, y down): the tip commanded to controller position `p_c` at time `t` was at
+//! sample position `p_s = p_c + d`. This is the convention of `dhct-simulate`, so given the
+//! simulator's true parameters [`DistortionModel::displacement`] reproduces its
+//! `ThermalDrift + LogCreep + FastScanHysteresis` displacement exactly:
+//!
+//! * drift + creep: `d_D(t) = ∫0^t D(t') dt' = v·t + a·t²/2 + C·ln(1 + t/t0)` per axis;
+//! * hysteresis, trace: `d_H = −v_f·I(τ)·ê_trace`; retrace: `d_H = −v_f·(I(T) − I(τ))·ê_trace`,
+//!   `I(τ) = ∫0^τ (S − 1) dτ'`, `T` the scanning time of a line, `v_f` the fast speed.
+
+use dhct_scan::{ScanDirection, ScanGeometry, ScanPass};
+use serde::{Deserialize, Serialize};
+
+/// The apparent local fast-axis scale `S(τ)` (dimensionless) vs seconds since line start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum HysteresisLaw {
+    /// The paper's quartic (eq. 13) in `u = τ/τ_s`: `S = 1 + Σ_k c_k·u^k`, k = 0..4.
+    Quartic {
+        /// `[c0..c4]`, dimensionless.
+        coefficients: [f64; 5],
+        /// `τ_s`, seconds (fixed, usually the line scan time).
+        time_scale_s: f64,
+    },
+    /// The authors' Matlab power law `S = k·τ^n` (τ in seconds, `k` in s^−n, `n > −1`).
+    Power {
+        /// `k`, s^−n.
+        k: f64,
+        /// `n`, dimensionless.
+        n: f64,
+    },
+    /// `S = 1 + A·exp(−τ/τ_h)`.
+    Exponential {
+        /// `A`, dimensionless.
+        amplitude: f64,
+        /// `τ_h`, seconds.
+        time_constant_s: f64,
+    },
+}
+
+impl HysteresisLaw {
+    /// No hysteresis (`S ≡ 1`).
+    pub fn none() -> HysteresisLaw {
+        HysteresisLaw::Exponential {
+            amplitude: 0.0,
+            time_constant_s: 1.0,
+        }
+    }
+
+    /// `S(τ)`, dimensionless.
+    pub fn scale(&self, tau: f64) -> f64 {
+        match *self {
+            HysteresisLaw::Quartic {
+                coefficients,
+                time_scale_s,
+            } => {
+                let u = tau / time_scale_s;
+                1.0 + coefficients.iter().rev().fold(0.0, |acc, &c| acc * u + c)
+            }
+            HysteresisLaw::Power { k, n } => k * tau.max(0.0).powf(n),
+            HysteresisLaw::Exponential {
+                amplitude,
+                time_constant_s,
+            } => 1.0 + amplitude * (-tau / time_constant_s).exp(),
+        }
+    }
+
+    /// `I(τ) = ∫0^τ (S − 1) dτ'`, seconds; zero for `τ ≤ 0`.
+    pub fn excess_integral(&self, tau: f64) -> f64 {
+        if tau <= 0.0 {
+            return 0.0;
+        }
+        match *self {
+            HysteresisLaw::Quartic {
+                coefficients,
+                time_scale_s,
+            } => {
+                let u = tau / time_scale_s;
+                let inner = coefficients
+                    .iter()
+                    .enumerate()
+                    .rev()
+                    .fold(0.0, |acc, (k, &c)| acc * u + c / (k + 1) as f64);
+                time_scale_s * u * inner
+            }
+            HysteresisLaw::Power { k, n } => k * tau.powf(n + 1.0) / (n + 1.0) - tau,
+            HysteresisLaw::Exponential {
+                amplitude,
+                time_constant_s,
+            } => -amplitude * time_constant_s * (-tau / time_constant_s).exp_m1(),
+        }
+    }
+}
+
+/// Drift + creep velocity of the tip relative to the sample, per display axis:
+/// `D(t) = v + a·t + C/(t + t0)` (m/s), `t` seconds since frame start, `t0` shared.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DriftCreep {
+    /// `v`, m/s, `[x, y]`.
+    pub velocity_m_per_s: [f64; 2],
+    /// `a`, m/s², `[x, y]`.
+    pub acceleration_m_per_s2: [f64; 2],
+    /// `C`, metres, `[x, y]`.
+    pub creep_m: [f64; 2],
+    /// `t0`, seconds (> 0).
+    pub t0_s: f64,
+}
+
+impl DriftCreep {
+    /// No drift.
+    pub fn none() -> DriftCreep {
+        DriftCreep {
+            velocity_m_per_s: [0.0; 2],
+            acceleration_m_per_s2: [0.0; 2],
+            creep_m: [0.0; 2],
+            t0_s: 1.0,
+        }
+    }
+
+    /// `D(t)`, m/s, `[x, y]`.
+    pub fn velocity(&self, t: f64) -> [f64; 2] {
+        std::array::from_fn(|k| {
+            self.velocity_m_per_s[k]
+                + self.acceleration_m_per_s2[k] * t
+                + self.creep_m[k] / (t + self.t0_s)
+        })
+    }
+
+    /// `∫0^t D`, metres, `[x, y]`: `v·t + a·t²/2 + C·ln(1 + t/t0)`.
+    pub fn displacement(&self, t: f64) -> [f64; 2] {
+        let log = (t / self.t0_s).ln_1p();
+        std::array::from_fn(|k| {
+            self.velocity_m_per_s[k] * t
+                + 0.5 * self.acceleration_m_per_s2[k] * t * t
+                + self.creep_m[k] * log
+        })
+    }
+}
+
+/// One fitted parameter with its 1σ uncertainty and unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Parameter {
+    /// Name, e.g. `"v_x"`.
+    pub name: String,
+    /// Value in `unit`.
+    pub value: f64,
+    /// 1σ uncertainty from the fit covariance (scaled by the residual variance), `unit`.
+    pub sigma: f64,
+    /// SI unit, e.g. `"m/s"`.
+    pub unit: String,
+}
+
+/// The fitted distortion of one scan: drift + creep and fast-scan hysteresis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DistortionModel {
+    /// Drift and creep.
+    pub drift: DriftCreep,
+    /// Fast-scan hysteresis, the same law (mirrored) in trace and retrace.
+    pub hysteresis: HysteresisLaw,
+    /// Every fitted parameter with uncertainty and unit (drift first, then hysteresis).
+    pub parameters: Vec<Parameter>,
+}
+
+fn direction_vector(direction: ScanDirection) -> [f64; 2] {
+    match direction {
+        ScanDirection::Right => [1.0, 0.0],
+        ScanDirection::Left => [-1.0, 0.0],
+        ScanDirection::Down => [0.0, 1.0],
+        ScanDirection::Up => [0.0, -1.0],
+    }
+}
+
+/// Unit vectors `(ê_fast, ê_slow)` of `pass` in the display frame (x right, y down).
+pub fn scan_basis(geometry: &ScanGeometry, pass: ScanPass) -> ([f64; 2], [f64; 2]) {
+    (
+        direction_vector(geometry.fast_direction(pass)),
+        direction_vector(geometry.slow_direction()),
+    )
+}
+
+impl DistortionModel {
+    /// A model with no distortion.
+    pub fn identity() -> DistortionModel {
+        DistortionModel {
+            drift: DriftCreep::none(),
+            hysteresis: HysteresisLaw::none(),
+            parameters: Vec::new(),
+        }
+    }
+
+    /// A model from known drift and hysteresis (no uncertainties).
+    pub fn new(drift: DriftCreep, hysteresis: HysteresisLaw) -> DistortionModel {
+        DistortionModel {
+            drift,
+            hysteresis,
+            parameters: Vec::new(),
+        }
+    }
+
+    /// Displacement `d = p_sample − p_ctrl` (metres, display frame) of the tip at acquisition
+    /// time `t` (s since frame start) and line time `τ` (s since the line start of `pass`).
+    pub fn displacement_at(
+        &self,
+        geometry: &ScanGeometry,
+        pass: ScanPass,
+        t: f64,
+        tau: f64,
+    ) -> [f64; 2] {
+        let drift = self.drift.displacement(t);
+        let trace = direction_vector(geometry.trace_fast());
+        let lag = match pass {
+            ScanPass::Trace => self.hysteresis.excess_integral(tau),
+            ScanPass::Retrace => {
+                self.hysteresis.excess_integral(geometry.line_scan_time())
+                    - self.hysteresis.excess_integral(tau)
+            }
+        };
+        let h = -geometry.fast_speed() * lag;
+        [drift[0] + h * trace[0], drift[1] + h * trace[1]]
+    }
+
+    /// Displacement (metres, display frame) at controller pixel position `(x, y)` of `pass`,
+    /// with the exact acquisition time from [`ScanGeometry::acquisition_time`].
+    pub fn displacement(
+        &self,
+        geometry: &ScanGeometry,
+        pass: ScanPass,
+        x_px: f64,
+        y_px: f64,
+    ) -> [f64; 2] {
+        let time = geometry.acquisition_time(pass, x_px, y_px);
+        self.displacement_at(
+            geometry,
+            pass,
+            time.since_frame_start,
+            time.since_line_start,
+        )
+    }
+
+    /// Sample-frame position (metres) of controller pixel position `(x, y)` of `pass`:
+    /// `p_s = (x·pitch_x, y·pitch_y) + d`.
+    pub fn to_sample(
+        &self,
+        geometry: &ScanGeometry,
+        pass: ScanPass,
+        x_px: f64,
+        y_px: f64,
+    ) -> [f64; 2] {
+        let d = self.displacement(geometry, pass, x_px, y_px);
+        [
+            x_px * geometry.pitch_x() + d[0],
+            y_px * geometry.pitch_y() + d[1],
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integrals_match_numerical_quadrature() {
+        let laws = [
+            HysteresisLaw::Quartic {
+                coefficients: [0.01, 0.2, -0.3, 0.1, 0.05],
+                time_scale_s: 0.08,
+            },
+            HysteresisLaw::Power { k: 0.95, n: -0.03 },
+            HysteresisLaw::Exponential {
+                amplitude: 0.2,
+                time_constant_s: 0.01,
+            },
+        ];
+        for law in laws {
+            let tau = 0.05;
+            let steps = 200_000;
+            let h = tau / steps as f64;
+            let numeric: f64 = (0..steps)
+                .map(|k| (law.scale((k as f64 + 0.5) * h) - 1.0) * h)
+                .sum();
+            assert!((numeric - law.excess_integral(tau)).abs() < 1e-6, "{law:?}");
+        }
+        let drift = DriftCreep {
+            velocity_m_per_s: [1.0, -2.0],
+            acceleration_m_per_s2: [0.1, 0.3],
+            creep_m: [0.5, -0.7],
+            t0_s: 3.0,
+        };
+        let t = 7.0;
+        let h = 1e-5;
+        let d = |t| drift.displacement(t);
+        for k in 0..2 {
+            let numeric = (d(t + h)[k] - d(t - h)[k]) / (2.0 * h);
+            assert!((numeric - drift.velocity(t)[k]).abs() < 1e-6);
+        }
+        assert_eq!(drift.displacement(0.0), [0.0, 0.0]);
+    }
+
+    #[test]
+    fn model_serialises() {
+        let model =
+            DistortionModel::new(DriftCreep::none(), HysteresisLaw::Power { k: 1.0, n: 0.0 });
+        let json = serde_json::to_string(&model).expect("serialises");
+        let back: DistortionModel = serde_json::from_str(&json).expect("deserialises");
+        assert_eq!(model, back);
+    }
+}
