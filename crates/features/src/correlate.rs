@@ -5,8 +5,9 @@ use std::sync::Arc;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
-use rustfft::num_complex::Complex64;
-use rustfft::{Fft, FftPlanner};
+use rustfft::num_complex::Complex;
+use rustfft::num_traits::Float;
+use rustfft::{Fft, FftNum, FftPlanner};
 
 /// Smallest n ≥ `minimum` whose prime factors are all ≤ 7 (fast FFT sizes).
 fn fast_fft_size(minimum: usize) -> usize {
@@ -29,33 +30,36 @@ fn fast_fft_size(minimum: usize) -> usize {
 /// `(kr, kc) = (rows/2, cols/2)` and zero padding outside the image; same size as `image`.
 pub fn correlate_same(image: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array2<f64> {
     let (height, width) = image.dim();
-    Correlator::new(height, width, kernel).correlate(image)
+    Correlator::<f64>::new(height, width, kernel).correlate(image)
 }
 
 /// Correlation of `height x width` images with one kernel, by FFT: the FFT plans and the
 /// kernel's spectrum are computed once and reused for every image (e.g. trace and retrace).
-pub struct Correlator {
+///
+/// Inputs and outputs are f64; the transforms run in `T` (f64 for exact results, f32 for
+/// half the memory traffic where ~1e-6 relative precision is enough).
+pub struct Correlator<T: FftNum> {
     height: usize,
     width: usize,
     kernel_radius: (usize, usize),
     /// Padded FFT size along rows (ph) and columns (pw); no wrap-around for the kernel.
     padded: (usize, usize),
-    row_forward: Arc<dyn RealToComplex<f64>>,
-    row_inverse: Arc<dyn ComplexToReal<f64>>,
-    column_forward: Arc<dyn Fft<f64>>,
-    column_inverse: Arc<dyn Fft<f64>>,
+    row_forward: Arc<dyn RealToComplex<T>>,
+    row_inverse: Arc<dyn ComplexToReal<T>>,
+    column_forward: Arc<dyn Fft<T>>,
+    column_inverse: Arc<dyn Fft<T>>,
     /// Conjugated kernel spectrum divided by ph·pw, column-major (`pw/2+1` columns of `ph`).
-    kernel_spectrum: Vec<Complex64>,
+    kernel_spectrum: Vec<Complex<T>>,
 }
 
-impl Correlator {
+impl<T: FftNum + Float> Correlator<T> {
     /// Plans correlation of `height x width` images with `kernel`.
-    pub fn new(height: usize, width: usize, kernel: ArrayView2<f64>) -> Correlator {
+    pub fn new(height: usize, width: usize, kernel: ArrayView2<f64>) -> Correlator<T> {
         let (kh, kw) = kernel.dim();
         let ph = fast_fft_size(height + kh - 1);
         let pw = fast_fft_size(width + kw - 1);
-        let mut real_planner = RealFftPlanner::<f64>::new();
-        let mut planner = FftPlanner::<f64>::new();
+        let mut real_planner = RealFftPlanner::<T>::new();
+        let mut planner = FftPlanner::<T>::new();
         let mut correlator = Correlator {
             height,
             width,
@@ -67,7 +71,7 @@ impl Correlator {
             column_inverse: planner.plan_fft_inverse(ph),
             kernel_spectrum: Vec::new(),
         };
-        let scale = 1.0 / (ph * pw) as f64;
+        let scale = T::from_f64(1.0 / (ph * pw) as f64).unwrap_or_else(T::zero);
         let mut spectrum = correlator.forward(kernel);
         spectrum.par_iter_mut().for_each(|k| *k = k.conj() * scale);
         correlator.kernel_spectrum = spectrum;
@@ -80,28 +84,28 @@ impl Correlator {
     }
 
     /// 2-D spectrum of a zero-padded real array (rows first, then columns), column-major.
-    fn forward(&self, source: ArrayView2<f64>) -> Vec<Complex64> {
+    fn forward(&self, source: ArrayView2<f64>) -> Vec<Complex<T>> {
         let (ph, pw) = self.padded;
         let spectrum_width = pw / 2 + 1;
         let (rows, cols) = source.dim();
         // Row spectra, row-major, then transposed so column transforms are contiguous.
-        let mut row_major = vec![Complex64::default(); rows * spectrum_width];
+        let mut row_major = vec![Complex::new(T::zero(), T::zero()); rows * spectrum_width];
         row_major
             .par_chunks_mut(spectrum_width)
             .enumerate()
             .for_each_init(
                 || self.row_forward.make_input_vec(),
                 |input, (r, output)| {
-                    input.iter_mut().for_each(|v| *v = 0.0);
+                    input.iter_mut().for_each(|v| *v = T::zero());
                     for (c, value) in input.iter_mut().enumerate().take(cols) {
-                        *value = source[[r, c]];
+                        *value = T::from_f64(source[[r, c]]).unwrap_or_else(T::nan);
                     }
                     self.row_forward
                         .process(input, output)
                         .expect("buffer sizes come from the plan");
                 },
             );
-        let mut column_major = vec![Complex64::default(); ph * spectrum_width];
+        let mut column_major = vec![Complex::new(T::zero(), T::zero()); ph * spectrum_width];
         column_major
             .par_chunks_mut(ph)
             .enumerate()
@@ -133,7 +137,7 @@ impl Correlator {
             .zip(self.kernel_spectrum.par_chunks(ph))
             .for_each(|(column, kernel)| {
                 for (p, k) in column.iter_mut().zip(kernel) {
-                    *p *= k;
+                    *p = *p * *k;
                 }
                 self.column_inverse.process(column);
             });
@@ -152,15 +156,15 @@ impl Correlator {
                     *value = product[k * ph + lag_row];
                 }
                 // The DC and Nyquist bins of a real signal's spectrum are real.
-                input[0].im = 0.0;
+                input[0].im = T::zero();
                 if pw.is_multiple_of(2) {
-                    input[spectrum_width - 1].im = 0.0;
+                    input[spectrum_width - 1].im = T::zero();
                 }
                 self.row_inverse
                     .process(input, output)
                     .expect("buffer sizes come from the plan");
                 for (c, value) in row.iter_mut().enumerate() {
-                    *value = output[(c + pw - kc) % pw];
+                    *value = output[(c + pw - kc) % pw].to_f64().unwrap_or(f64::NAN);
                 }
             },
         );

@@ -22,6 +22,7 @@ pub fn subtract_polynomial(
         )));
     }
     let (h, w) = z.dim();
+    let order = order as usize;
     // Coordinates scaled to [−1, 1] keep the normal equations well conditioned.
     let scale = |i: usize, n: usize| {
         if n > 1 {
@@ -30,46 +31,42 @@ pub fn subtract_polynomial(
             0.0
         }
     };
-    let exponents: Vec<(usize, usize)> = (0..=order as usize)
+    // Terms x^i·y^j with i + j ≤ order.
+    let exponents: Vec<(usize, usize)> = (0..=order)
         .flat_map(|total| (0..=total).map(move |j| (total - j, j)))
         .collect();
     let terms = exponents.len();
-    // Powers x^i per column and y^j per row, so the per-pixel work is products only.
-    let powers = |n: usize| -> Vec<Vec<f64>> {
-        (0..n)
-            .map(|k| {
-                let v = scale(k, n);
-                std::iter::successors(Some(1.0), |p| Some(p * v))
-                    .take(order as usize + 1)
-                    .collect()
-            })
-            .collect()
-    };
-    let (x_powers, y_powers) = (powers(w), powers(h));
+    // x^k per column for k ≤ 2·order, stored power-major so each power is contiguous.
+    let x_powers: Vec<Vec<f64>> = (0..=2 * order)
+        .map(|k| (0..w).map(|c| scale(c, w).powi(k as i32)).collect())
+        .collect();
+    // The normal equations only need, per row, S_k = Σ x^k and T_k = Σ x^k·z over the row's
+    // usable pixels; they are combined with powers of the row's y.
     let mut normal = DMatrix::<f64>::zeros(terms, terms);
     let mut rhs = DVector::<f64>::zeros(terms);
-    let mut basis = vec![0.0; terms];
-    let mut sums = vec![0.0; terms * terms];
     let mut used = 0usize;
-    for ((r, c), &value) in z.indexed_iter() {
-        if !value.is_finite() || mask.is_some_and(|m| !m[[r, c]]) {
-            continue;
-        }
-        for (b, &(i, j)) in basis.iter_mut().zip(&exponents) {
-            *b = x_powers[c][i] * y_powers[r][j];
-        }
-        for a in 0..terms {
-            rhs[a] += basis[a] * value;
-            for b in a..terms {
-                sums[a * terms + b] += basis[a] * basis[b];
+    let (mut s, mut t) = (vec![0.0; 2 * order + 1], vec![0.0; order + 1]);
+    for (r, row) in z.rows().into_iter().enumerate() {
+        s.iter_mut().for_each(|v| *v = 0.0);
+        t.iter_mut().for_each(|v| *v = 0.0);
+        for (c, &value) in row.iter().enumerate() {
+            if !value.is_finite() || mask.is_some_and(|m| !m[[r, c]]) {
+                continue;
             }
+            for (k, sum) in s.iter_mut().enumerate() {
+                *sum += x_powers[k][c];
+            }
+            for (k, sum) in t.iter_mut().enumerate() {
+                *sum += x_powers[k][c] * value;
+            }
+            used += 1;
         }
-        used += 1;
-    }
-    for a in 0..terms {
-        for b in a..terms {
-            normal[(a, b)] = sums[a * terms + b];
-            normal[(b, a)] = sums[a * terms + b];
+        let y = scale(r, h);
+        for (a, &(ia, ja)) in exponents.iter().enumerate() {
+            rhs[a] += y.powi(ja as i32) * t[ia];
+            for (b, &(ib, jb)) in exponents.iter().enumerate() {
+                normal[(a, b)] += y.powi((ja + jb) as i32) * s[ia + ib];
+            }
         }
     }
     if used < 2 * terms {
@@ -81,14 +78,26 @@ pub fn subtract_polynomial(
     let coefficients = normal.cholesky().map(|c| c.solve(&rhs)).ok_or_else(|| {
         FeatureError::BadParameter("background fit is singular (mask too small?)".into())
     })?;
-    Ok(Array2::from_shape_fn((h, w), |(r, c)| {
-        let surface: f64 = exponents
-            .iter()
-            .enumerate()
-            .map(|(k, &(i, j))| coefficients[k] * x_powers[c][i] * y_powers[r][j])
-            .sum();
-        z[[r, c]] - surface
-    }))
+    // Per row the surface is a polynomial in x: c_i(y) = Σ_j coef[i, j]·y^j.
+    let mut out = z.clone();
+    let mut row_coefficients = vec![0.0; order + 1];
+    for (r, mut row) in out.rows_mut().into_iter().enumerate() {
+        let y = scale(r, h);
+        row_coefficients.iter_mut().for_each(|v| *v = 0.0);
+        for (k, &(i, j)) in exponents.iter().enumerate() {
+            row_coefficients[i] += coefficients[k] * y.powi(j as i32);
+        }
+        for (c, value) in row.iter_mut().enumerate() {
+            let x = x_powers[1.min(2 * order)][c];
+            // Horner in x.
+            let surface = row_coefficients
+                .iter()
+                .rev()
+                .fold(0.0, |acc, k| acc * x + k);
+            *value -= surface;
+        }
+    }
+    Ok(out)
 }
 
 /// Removes per-line offsets along the fast axis (each line's median, or its straight-line
@@ -198,5 +207,23 @@ mod tests {
             assert!((row[0] - fixed[[0, 0]]).abs() < 1e-12);
         }
         assert!(subtract_polynomial(&z, 9, None).is_err());
+        // Order 0 removes the mean; a mask keeps an outlier region out of the fit.
+        let constant = subtract_polynomial(&Array2::from_elem((5, 7), 2.5), 0, None).unwrap();
+        assert!(constant.iter().all(|v| v.abs() < 1e-15));
+        let mut spoiled = z.clone();
+        let mut mask = Array2::from_elem((30, 40), true);
+        for r in 0..10 {
+            for c in 0..10 {
+                spoiled[[r, c]] += 1e-9;
+                mask[[r, c]] = false;
+            }
+        }
+        let flat = subtract_polynomial(&spoiled, 1, Some(&mask)).unwrap();
+        assert!(
+            flat.iter()
+                .zip(mask.iter())
+                .filter(|(_, m)| **m)
+                .all(|(v, _)| v.abs() < 1e-20)
+        );
     }
 }
