@@ -140,3 +140,64 @@ fn averaged_cell_reproduces_the_true_motif() {
     assert_eq!(tiled.dim(), (96, 144));
     assert_eq!(tiled[[48, 96]], clean.values[[0, 0]]);
 }
+
+#[test]
+fn p3m1_averaging_restores_the_symmetric_motif_of_a_tip_asymmetric_image() {
+    use dhct_lattice::PlaneGroup;
+    use dhct_unitcell::{operations, symmetrize, symmetry_residuals};
+    let graphite = Hexagonal::graphite();
+    let cell_for = |sigma: [f64; 2], angle: f64| {
+        let mut c = config(2e-12);
+        c.surface.feature.sigma_m = sigma;
+        c.surface.feature.angle_rad = angle;
+        let (output, _, points, fit) = analyse(&c);
+        let cells = local_cells(&graphite, &fit, &points, 0);
+        let g = &output.truth.geometry;
+        average_unit_cell(
+            output.pair.trace().unwrap().z.view(),
+            (g.pitch_x(), g.pitch_y()),
+            &graphite,
+            &cells,
+            48,
+        )
+        .unwrap()
+    };
+    // An asymmetric tip images each atom as an ellipse; the symmetric reference has the same
+    // second moment (the 3-fold average of the ellipse's quadratic form is isotropic).
+    let (s1, s2) = (0.75e-10, 0.5e-10);
+    let asymmetric = cell_for([s1, s2], 0.4);
+    let reference = cell_for([((s1 * s1 + s2 * s2) / 2.0).sqrt(); 2], 0.0);
+    let correlation = |a: &ndarray::Array2<f64>, b: &ndarray::Array2<f64>| {
+        let (ma, mb) = (a.mean().unwrap(), b.mean().unwrap());
+        let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+        cov / (va * vb).sqrt()
+    };
+    let residual = |cell: &dhct_unitcell::AveragedCell| {
+        symmetry_residuals(cell, &graphite)
+            .unwrap()
+            .into_iter()
+            .find(|r| r.group == PlaneGroup::P3m1)
+            .unwrap()
+            .residual
+    };
+    let symmetric = symmetrize(
+        &asymmetric,
+        &operations(PlaneGroup::P3m1, &graphite).unwrap(),
+    )
+    .unwrap();
+    let before = correlation(&asymmetric.values, &reference.values);
+    let after = correlation(&symmetric.values, &reference.values);
+    println!(
+        "p3m1 residual {:.3} -> {:.2e}; correlation with the symmetric motif {before:.4} -> {after:.4}",
+        residual(&asymmetric),
+        residual(&symmetric)
+    );
+    assert!(
+        residual(&asymmetric) > 0.05,
+        "the tip must break the symmetry"
+    );
+    assert!(residual(&symmetric) < 1e-12);
+    assert!(after >= 0.99 && after > before, "{before} -> {after}");
+}

@@ -178,6 +178,12 @@ impl FeatureSet {
         RejectionCounts::of(&self.rejected)
     }
 
+    /// Writes the whole set (features, rejections with reasons, kernel, timings) as JSON.
+    pub fn write_json<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
+        serde_json::to_writer_pretty(&mut *w, self).map_err(std::io::Error::other)?;
+        writeln!(w)
+    }
+
     /// Writes the features as CSV with a header line ([`CSV_HEADER`]).
     pub fn write_csv<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
         writeln!(w, "{CSV_HEADER}")?;

@@ -129,3 +129,19 @@ fn wrong_parameters_name_the_parameter() {
         .contains("kernel width")
     );
 }
+
+#[test]
+fn feature_sets_round_trip_through_json_and_csv_has_one_row_per_feature() {
+    let image = ImageChannel::new("Topography", "m", lattice(96));
+    let set = find_features(&image, &geometry(96, 96), ScanPass::Trace, &options(), None).unwrap();
+    let mut json = Vec::new();
+    set.write_json(&mut json).unwrap();
+    let back: dhct_features::FeatureSet = serde_json::from_slice(&json).unwrap();
+    assert_eq!(back, set);
+    let mut csv = Vec::new();
+    set.write_csv(&mut csv).unwrap();
+    let text = String::from_utf8(csv).unwrap();
+    assert_eq!(text.lines().count(), set.features.len() + 1);
+    let columns = dhct_features::CSV_HEADER.split(',').count();
+    assert!(text.lines().all(|l| l.split(',').count() == columns));
+}
