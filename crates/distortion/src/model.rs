@@ -14,89 +14,9 @@
 //! * hysteresis, trace: `d_H = −v_f·I(τ)·ê_trace`; retrace: `d_H = −v_f·(I(T) − I(τ))·ê_trace`,
 //!   `I(τ) = ∫0^τ (S − 1) dτ'`, `T` the scanning time of a line, `v_f` the fast speed.
 
+pub use dhct_scan::HysteresisLaw;
 use dhct_scan::{ScanDirection, ScanGeometry, ScanPass};
 use serde::{Deserialize, Serialize};
-
-/// The apparent local fast-axis scale `S(τ)` (dimensionless) vs seconds since line start.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
-pub enum HysteresisLaw {
-    /// The paper's quartic (eq. 13) in `u = τ/τ_s`: `S = 1 + Σ_k c_k·u^k`, k = 0..4.
-    Quartic {
-        /// `[c0..c4]`, dimensionless.
-        coefficients: [f64; 5],
-        /// `τ_s`, seconds (fixed, usually the line scan time).
-        time_scale_s: f64,
-    },
-    /// The authors' Matlab power law `S = k·τ^n` (τ in seconds, `k` in s^−n, `n > −1`).
-    Power {
-        /// `k`, s^−n.
-        k: f64,
-        /// `n`, dimensionless.
-        n: f64,
-    },
-    /// `S = 1 + A·exp(−τ/τ_h)`.
-    Exponential {
-        /// `A`, dimensionless.
-        amplitude: f64,
-        /// `τ_h`, seconds.
-        time_constant_s: f64,
-    },
-}
-
-impl HysteresisLaw {
-    /// No hysteresis (`S ≡ 1`).
-    pub fn none() -> HysteresisLaw {
-        HysteresisLaw::Exponential {
-            amplitude: 0.0,
-            time_constant_s: 1.0,
-        }
-    }
-
-    /// `S(τ)`, dimensionless.
-    pub fn scale(&self, tau: f64) -> f64 {
-        match *self {
-            HysteresisLaw::Quartic {
-                coefficients,
-                time_scale_s,
-            } => {
-                let u = tau / time_scale_s;
-                1.0 + coefficients.iter().rev().fold(0.0, |acc, &c| acc * u + c)
-            }
-            HysteresisLaw::Power { k, n } => k * tau.max(0.0).powf(n),
-            HysteresisLaw::Exponential {
-                amplitude,
-                time_constant_s,
-            } => 1.0 + amplitude * (-tau / time_constant_s).exp(),
-        }
-    }
-
-    /// `I(τ) = ∫0^τ (S − 1) dτ'`, seconds; zero for `τ ≤ 0`.
-    pub fn excess_integral(&self, tau: f64) -> f64 {
-        if tau <= 0.0 {
-            return 0.0;
-        }
-        match *self {
-            HysteresisLaw::Quartic {
-                coefficients,
-                time_scale_s,
-            } => {
-                let u = tau / time_scale_s;
-                let inner = coefficients
-                    .iter()
-                    .enumerate()
-                    .rev()
-                    .fold(0.0, |acc, (k, &c)| acc * u + c / (k + 1) as f64);
-                time_scale_s * u * inner
-            }
-            HysteresisLaw::Power { k, n } => k * tau.powf(n + 1.0) / (n + 1.0) - tau,
-            HysteresisLaw::Exponential {
-                amplitude,
-                time_constant_s,
-            } => -amplitude * time_constant_s * (-tau / time_constant_s).exp_m1(),
-        }
-    }
-}
 
 /// Drift + creep velocity of the tip relative to the sample, per display axis:
 /// `D(t) = v + a·t + C/(t + t0)` (m/s), `t` seconds since frame start, `t0` shared.

@@ -5,6 +5,7 @@
 //!   scan angle and offset. It answers, for any pixel or sub-pixel position, *when* the tip
 //!   was there ([`ScanGeometry::acquisition_time`]).
 //! * [`ScanPair`]: the trace and retrace images of one channel, sharing one geometry.
+//! * [`HysteresisLaw`]: the scanner's apparent local scale against time since line start.
 //! * [`ScanFile`]: everything a reader found in one file.
 //!
 //! # Conventions
@@ -42,6 +43,7 @@ mod direction;
 mod error;
 mod file;
 mod geometry;
+mod hysteresis;
 mod pair;
 
 pub use channel::ImageChannel;
@@ -49,4 +51,5 @@ pub use direction::{Axis, ScanDirection, ScanPass};
 pub use error::GeometryError;
 pub use file::{FileFormat, ScanFile};
 pub use geometry::{AcquisitionTime, ScanGeometry, ValueSource};
+pub use hysteresis::HysteresisLaw;
 pub use pair::ScanPair;

@@ -19,6 +19,7 @@
 //! (`d_retrace(τ) = −v·(I(T) − I(τ))·ê_trace`, `T` = scanning time of a line), which is
 //! also where the DHCT correction anchors it.
 
+pub use dhct_scan::HysteresisLaw;
 use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
@@ -26,84 +27,17 @@ use super::{AcquisitionContext, Effect, EffectConfig, direction_vector};
 use crate::SimulationError;
 use crate::error::{finite, invalid, parameter_count, positive};
 
-/// The apparent local scale `S(τ)` of a hysteresis effect (`τ` in seconds).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum HysteresisLaw {
-    /// The paper's quartic (its eq. 13) in a normalised time `u = τ/τ_s`:
-    /// `S = 1 + c0 + c1·u + c2·u² + c3·u³ + c4·u⁴`, so
-    /// `I(τ) = τ_s·Σ c_k·u^(k+1)/(k+1)`. `c0` is a constant scale error.
-    Quartic {
-        /// `[c0, c1, c2, c3, c4]`, dimensionless.
-        coefficients: [f64; 5],
-        /// `τ_s`, seconds (> 0), e.g. the line scan time. Fixed, not a fit parameter.
-        time_scale_s: f64,
-    },
-    /// The authors' Matlab power law `S = k·τ^n` (τ in seconds, so `k` is in s^−n):
-    /// `I(τ) = k·τ^(n+1)/(n+1) − τ`. Needs `k > 0` and `n > −1`.
-    Power {
-        /// `k`, s^−n (> 0).
-        k: f64,
-        /// `n`, dimensionless (> −1).
-        n: f64,
-    },
-    /// `S = 1 + A·exp(−τ/τ_h)`: `I(τ) = A·τ_h·(1 − exp(−τ/τ_h))`.
-    Exponential {
-        /// `A`, dimensionless: the excess scale at `τ = 0`.
-        amplitude: f64,
-        /// `τ_h`, seconds (> 0).
-        time_constant_s: f64,
-    },
+/// Simulator-side checks of a [`HysteresisLaw`]: domain validation with field names and
+/// parameter names for the effect interface.
+pub(crate) trait LawChecks {
+    /// Checks the law's domain; `field` names it in error messages.
+    fn validate(&self, field: &str) -> Result<(), SimulationError>;
+    /// Parameter names, optionally prefixed for the trace or retrace law.
+    fn parameter_names(&self, prefix: Prefix) -> Vec<&'static str>;
 }
 
-impl HysteresisLaw {
-    /// The apparent local scale `S(τ)`, dimensionless.
-    pub fn scale(&self, tau: f64) -> f64 {
-        match *self {
-            HysteresisLaw::Quartic {
-                coefficients,
-                time_scale_s,
-            } => {
-                let u = tau / time_scale_s;
-                1.0 + coefficients.iter().rev().fold(0.0, |acc, &c| acc * u + c)
-            }
-            HysteresisLaw::Power { k, n } => k * tau.powf(n),
-            HysteresisLaw::Exponential {
-                amplitude,
-                time_constant_s,
-            } => 1.0 + amplitude * (-tau / time_constant_s).exp(),
-        }
-    }
-
-    /// `I(τ) = ∫0^τ (S(τ') − 1) dτ'`, seconds; zero for `τ ≤ 0`.
-    pub fn excess_integral(&self, tau: f64) -> f64 {
-        if tau <= 0.0 {
-            return 0.0;
-        }
-        match *self {
-            HysteresisLaw::Quartic {
-                coefficients,
-                time_scale_s,
-            } => {
-                let u = tau / time_scale_s;
-                // Σ c_k u^(k+1)/(k+1), Horner in u.
-                let inner = coefficients
-                    .iter()
-                    .enumerate()
-                    .rev()
-                    .fold(0.0, |acc, (k, &c)| acc * u + c / (k + 1) as f64);
-                time_scale_s * u * inner
-            }
-            HysteresisLaw::Power { k, n } => k * tau.powf(n + 1.0) / (n + 1.0) - tau,
-            HysteresisLaw::Exponential {
-                amplitude,
-                time_constant_s,
-            } => -amplitude * time_constant_s * (-tau / time_constant_s).exp_m1(),
-        }
-    }
-
-    /// Checks the law's domain; `field` names it in error messages.
-    pub fn validate(&self, field: &str) -> Result<(), SimulationError> {
+impl LawChecks for HysteresisLaw {
+    fn validate(&self, field: &str) -> Result<(), SimulationError> {
         match *self {
             HysteresisLaw::Quartic {
                 coefficients,
@@ -135,7 +69,6 @@ impl HysteresisLaw {
         }
     }
 
-    /// Parameter names, optionally prefixed for the trace or retrace law.
     fn parameter_names(&self, prefix: Prefix) -> Vec<&'static str> {
         match (self, prefix) {
             (HysteresisLaw::Quartic { .. }, Prefix::None) => vec!["c0", "c1", "c2", "c3", "c4"],
@@ -163,45 +96,24 @@ impl HysteresisLaw {
             }
         }
     }
+}
 
-    /// The fit parameters (the quartic's time scale is fixed and not included).
-    pub fn parameters(&self) -> Vec<f64> {
-        match *self {
-            HysteresisLaw::Quartic { coefficients, .. } => coefficients.to_vec(),
-            HysteresisLaw::Power { k, n } => vec![k, n],
-            HysteresisLaw::Exponential {
-                amplitude,
-                time_constant_s,
-            } => vec![amplitude, time_constant_s],
-        }
-    }
-
-    /// Number of fit parameters.
-    pub fn parameter_count(&self) -> usize {
-        match self {
-            HysteresisLaw::Quartic { .. } => 5,
-            HysteresisLaw::Power { .. } | HysteresisLaw::Exponential { .. } => 2,
-        }
-    }
-
-    /// The same law with new fit parameters (length [`HysteresisLaw::parameter_count`]).
-    fn with_parameters(&self, p: &[f64]) -> HysteresisLaw {
-        match *self {
-            HysteresisLaw::Quartic { time_scale_s, .. } => HysteresisLaw::Quartic {
-                coefficients: [p[0], p[1], p[2], p[3], p[4]],
-                time_scale_s,
-            },
-            HysteresisLaw::Power { .. } => HysteresisLaw::Power { k: p[0], n: p[1] },
-            HysteresisLaw::Exponential { .. } => HysteresisLaw::Exponential {
-                amplitude: p[0],
-                time_constant_s: p[1],
-            },
-        }
-    }
+/// `law` with new fit parameters; a wrong count is an error naming the effect.
+fn relaw(law: &HysteresisLaw, effect: &str, p: &[f64]) -> Result<HysteresisLaw, SimulationError> {
+    law.with_parameters(p).ok_or_else(|| {
+        invalid(
+            effect.to_string(),
+            format!(
+                "expected {} hysteresis parameters, got {}",
+                law.parameter_count(),
+                p.len()
+            ),
+        )
+    })
 }
 
 #[derive(Clone, Copy)]
-enum Prefix {
+pub(crate) enum Prefix {
     None,
     Trace,
     Retrace,
@@ -261,7 +173,7 @@ impl Effect for FastScanHysteresis {
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn Effect>, SimulationError> {
         parameter_count(self.name(), p, self.law.parameter_count())?;
         let effect = FastScanHysteresis {
-            law: self.law.with_parameters(p),
+            law: relaw(&self.law, self.name(), p)?,
         };
         effect.validate(self.name())?;
         Ok(Box::new(effect))
@@ -317,8 +229,8 @@ impl Effect for AsymmetricHysteresis {
         let split = self.trace.parameter_count();
         parameter_count(self.name(), p, split + self.retrace.parameter_count())?;
         let effect = AsymmetricHysteresis {
-            trace: self.trace.with_parameters(&p[..split]),
-            retrace: self.retrace.with_parameters(&p[split..]),
+            trace: relaw(&self.trace, self.name(), &p[..split])?,
+            retrace: relaw(&self.retrace, self.name(), &p[split..])?,
         };
         effect.validate(self.name())?;
         Ok(Box::new(effect))
@@ -367,7 +279,7 @@ impl Effect for SlowScanHysteresis {
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn Effect>, SimulationError> {
         parameter_count(self.name(), p, self.law.parameter_count())?;
         let effect = SlowScanHysteresis {
-            law: self.law.with_parameters(p),
+            law: relaw(&self.law, self.name(), p)?,
         };
         effect.validate(self.name())?;
         Ok(Box::new(effect))
