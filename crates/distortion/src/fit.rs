@@ -2,7 +2,8 @@
 //! local distortions of trace and retrace features (pooled).
 //!
 //! * Drift + creep: `D_x(t)`, `D_y(t)` of every feature against `D(t) = v + a·t + C/(t+t0)`,
-//!   7 parameters, `t0 = exp(q)` so it stays positive. Start: a log-spaced grid over `t0`
+//!   7 parameters, `t0` bounded to [line scan time, 100 frames] through a logistic map of
+//!   `ln t0`. Start: a log-spaced grid over `t0`
 //!   with the (then linear) other six solved exactly; then Levenberg–Marquardt.
 //! * Hysteresis: `S` of every feature against the chosen law of `τ` (line time).
 //! * Robustness: Huber IRLS (4 rounds, scale from the MAD of the residuals), each axis
@@ -90,6 +91,7 @@ pub fn fit_model(
     let (drift, mut parameters) = fit_drift(
         local,
         frame_duration_s,
+        line_scan_time_s,
         options.robust_rounds,
         options.secant,
     )?;
@@ -122,7 +124,15 @@ fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
         .map(|k| {
             inverse
                 .as_ref()
-                .map_or(f64::NAN, |c| (c[(k, k)] * scale2).max(0.0).sqrt())
+                // An undetermined parameter has NaN variance: keep it NaN (f64::max drops NaN).
+                .map_or(f64::NAN, |c| {
+                    let variance = c[(k, k)] * scale2;
+                    if variance.is_nan() {
+                        f64::NAN
+                    } else {
+                        variance.max(0.0).sqrt()
+                    }
+                })
         })
         .collect()
 }
@@ -130,6 +140,7 @@ fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
 fn fit_drift(
     local: &[LocalDistortion],
     frame_duration_s: f64,
+    line_scan_time_s: f64,
     robust_rounds: usize,
     secant_mode: bool,
 ) -> Result<(DriftCreep, Vec<Parameter>), DistortionError> {
@@ -175,10 +186,18 @@ fn fit_drift(
     let Some((_, start, t0_start)) = best else {
         return Err(DistortionError::FitFailed("drift/creep"));
     };
+    // t0 is bounded to [one line's scanning time, 100 frames]: creep faster than the slow
+    // axis samples time cannot be resolved (t0 → 0 makes ln(1 + t/t0) diverge, the Matlab's
+    // singularity), and beyond 100 frames it is indistinguishable from v + a·t. A logistic
+    // map of ln t0 keeps the fit unconstrained: ln t0 = q_lo + (q_hi − q_lo)·σ(p6).
+    let (q_lo, q_hi) = (line_scan_time_s.max(1e-6).ln(), (100.0 * span).ln());
+    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let t0_of = |x: f64| (q_lo + (q_hi - q_lo) * logistic(x)).exp();
     let mut p0 = start.to_vec();
-    p0.push(t0_start.ln());
+    let fraction = ((t0_start.ln() - q_lo) / (q_hi - q_lo)).clamp(1e-6, 1.0 - 1e-6);
+    p0.push((fraction / (1.0 - fraction)).ln());
     let residuals = |p: &[f64], r: &mut [f64]| {
-        let t0 = p[6].exp();
+        let t0 = t0_of(p[6]);
         for i in 0..m {
             let quadratic = secant(|x| 0.5 * x * x, t[i], offsets[i]);
             let log = secant(|x| (x / t0).ln_1p(), t[i], offsets[i]);
@@ -218,7 +237,9 @@ fn fit_drift(
         .sum();
     let scale2 = chi2 / (2 * m).saturating_sub(7).max(1) as f64;
     let s = sigmas(&fit.inverse_normal, scale2, 7);
-    let t0 = p[6].exp();
+    let t0 = t0_of(p[6]);
+    // dt0/dp6 = t0·(q_hi − q_lo)·σ'(p6).
+    let t0_sigma = t0 * (q_hi - q_lo) * logistic(p[6]) * (1.0 - logistic(p[6])) * s[6];
     let drift = DriftCreep {
         velocity_m_per_s: [p[0] / NM, p[3] / NM],
         acceleration_m_per_s2: [p[1] / NM, p[4] / NM],
@@ -235,7 +256,7 @@ fn fit_drift(
         parameter("v_y", p[3] / NM, s[3] / NM, "m/s"),
         parameter("a_y", p[4] / NM, s[4] / NM, "m/s^2"),
         parameter("C_y", p[5] / NM, s[5] / NM, "m"),
-        parameter("t0", t0, t0 * s[6], "s"),
+        parameter("t0", t0, t0_sigma, "s"),
     ];
     Ok((drift, parameters))
 }

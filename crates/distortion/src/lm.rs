@@ -109,7 +109,7 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64])>(
         let row = jac.row(i);
         jtj += row.transpose() * row * *w;
     }
-    let inverse_normal = jtj.try_inverse();
+    let inverse_normal = covariance_inverse(&jtj);
     if p.iter().all(|v| v.is_finite()) {
         Some(LmResult {
             params: p,
@@ -119,6 +119,37 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64])>(
     } else {
         None
     }
+}
+
+/// `(JᵀWJ)⁻¹`, or, when that is singular because some parameters are not determined (e.g.
+/// one pinned at a bound, where its derivative vanishes), the inverse over the determined
+/// parameters with NaN variance and no correlations for the others.
+fn covariance_inverse(jtj: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    if let Some(inverse) = jtj.clone().try_inverse()
+        && inverse
+            .diagonal()
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+    {
+        return Some(inverse);
+    }
+    let n = jtj.nrows();
+    let largest = jtj.diagonal().iter().cloned().fold(0.0, f64::max);
+    let kept: Vec<usize> = (0..n).filter(|&k| jtj[(k, k)] > 1e-12 * largest).collect();
+    let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| jtj[(kept[i], kept[j])]);
+    let sub_inverse = sub.try_inverse()?;
+    let mut full = DMatrix::<f64>::zeros(n, n);
+    for k in 0..n {
+        if !kept.contains(&k) {
+            full[(k, k)] = f64::NAN;
+        }
+    }
+    for (i, &a) in kept.iter().enumerate() {
+        for (j, &b) in kept.iter().enumerate() {
+            full[(a, b)] = sub_inverse[(i, j)];
+        }
+    }
+    Some(full)
 }
 
 /// Huber weights for residuals `r` with scale `sigma` (tuning constant 1.345).
