@@ -13,6 +13,20 @@
 //!   wallpaper groups), and [`symmetry_residuals`]: how far a cell is from each group
 //!   compatible with its lattice, so the user can choose.
 //!
+//! ```
+//! use dhct_lattice::{Hexagonal, PlaneGroup};
+//! use dhct_unitcell::{ConfidenceEllipse, operations};
+//!
+//! // Deviations of features from their fitted sites (metres): an ellipse along x.
+//! let deviations = [[3e-12, 0.0], [-3e-12, 0.0], [0.0, 1e-12], [0.0, -1e-12]];
+//! let ellipse = ConfidenceEllipse::from_deviations(&deviations, None).unwrap();
+//! assert!(ellipse.sigma_major_m > ellipse.sigma_minor_m && ellipse.angle_rad.abs() < 1e-9);
+//! // p3m1 has 6 operations and is a symmetry of the hexagonal lattice; p4 is not.
+//! let graphite = Hexagonal::graphite();
+//! assert_eq!(operations(PlaneGroup::P3m1, &graphite).unwrap().len(), 6);
+//! assert!(operations(PlaneGroup::P4, &graphite).is_err());
+//! ```
+//!
 //! Frames and units: positions are metres in the frame of the points given to the lattice
 //! fit (normally the corrected sample frame); images are in display orientation with pixel
 //! `(column, row)` at `(column·pitch_x, row·pitch_y)`.
