@@ -33,7 +33,7 @@
 //! `r0` is the lattice's *nominal* NN distance: it calibrates the corrected image.
 
 use dhct_features::Feature;
-use dhct_lattice::{Lattice, LocalDistortionMethod};
+use dhct_lattice::{Lattice, LocalDistortionMethod, mean_bond_rotation};
 use dhct_scan::{ScanGeometry, ScanPass};
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -82,18 +82,15 @@ pub fn estimate_lattice_angle(
     lattice: &dyn Lattice,
 ) -> f64 {
     let directions = ideal_directions(lattice, 0.0);
-    let n = directions.len().max(1) as f64;
+    let period = 2.0 * std::f64::consts::PI / directions.len().max(1) as f64;
     let base = directions.first().map_or(0.0, |u| u.y.atan2(u.x));
-    let (mut sx, mut sy) = (0.0, 0.0);
-    for s in selected {
+    let bonds = selected.iter().flat_map(|s| {
         let c = points_m[s.index];
-        for &j in &s.neighbours {
-            let theta = (points_m[j][1] - c[1]).atan2(points_m[j][0] - c[0]);
-            sx += (n * (theta - base)).cos();
-            sy += (n * (theta - base)).sin();
-        }
-    }
-    sy.atan2(sx) / n
+        s.neighbours
+            .iter()
+            .map(move |&j| [points_m[j][0] - c[0], points_m[j][1] - c[1]])
+    });
+    mean_bond_rotation(bonds, base, period).unwrap_or(0.0)
 }
 
 /// The ideal NN vectors of every motif site and their negatives (deduplicated), rotated by

@@ -20,7 +20,7 @@ use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::Lattice;
+use crate::{Lattice, mean_bond_rotation};
 
 /// Why a lattice could not be fitted.
 #[derive(Debug, Error)]
@@ -207,7 +207,7 @@ pub fn angular_distribution(
     let reference = ideal.first().copied().unwrap_or(0.0);
     let (lo, hi) = ((1.0 - nn_window) * median_nn, (1.0 + nn_window) * median_nn);
     let mut counts = vec![0usize; bins.max(1)];
-    let (mut sum_cos, mut sum_sin, mut bonds) = (0.0, 0.0, 0usize);
+    let mut bond_vectors = Vec::new();
     let mut lengths = Vec::new();
     for (i, p) in points.iter().enumerate() {
         for neighbour in tree
@@ -222,26 +222,22 @@ pub fn angular_distribution(
                 continue;
             }
             let q = points[j];
-            let angle = (q[1] - p[1])
-                .atan2(q[0] - p[0])
-                .rem_euclid(std::f64::consts::PI);
+            let bond = [q[0] - p[0], q[1] - p[1]];
+            let angle = bond[1].atan2(bond[0]).rem_euclid(std::f64::consts::PI);
             let last = counts.len() - 1;
             let bin = ((angle / std::f64::consts::PI) * counts.len() as f64) as usize;
             counts[bin.min(last)] += 1;
-            let phase = 2.0 * std::f64::consts::PI * (angle - reference) / period;
-            sum_cos += phase.cos();
-            sum_sin += phase.sin();
-            bonds += 1;
+            bond_vectors.push(bond);
             lengths.push(d);
         }
     }
-    if bonds == 0 {
+    let bonds = bond_vectors.len();
+    let Some(rotation) = mean_bond_rotation(bond_vectors, reference, period) else {
         return Err(LatticeFitError::NoBonds {
             median_nn_m: median_nn,
         });
-    }
-    let lattice_angle =
-        (sum_sin.atan2(sum_cos) * period / (2.0 * std::f64::consts::PI)).rem_euclid(period);
+    };
+    let lattice_angle = rotation.rem_euclid(period);
     let width = std::f64::consts::PI / counts.len() as f64;
     Ok(AngularDistribution {
         angles_rad: (0..counts.len())

@@ -41,7 +41,7 @@ pub use fit::{
     angular_distribution, fit_lattice,
 };
 pub use motif::MotifSite;
-pub use neighbours::{LatticeSite, lattice_sites};
+pub use neighbours::{LatticeSite, lattice_sites, mean_bond_rotation};
 pub use plane_group::PlaneGroup;
 pub use presets::{Hexagonal, Honeycomb, Rectangular, Square};
 pub use user::UserLattice;

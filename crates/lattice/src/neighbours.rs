@@ -111,6 +111,25 @@ pub(crate) fn shell_distances(
     shells
 }
 
+/// The rotation of a lattice from measured bond vectors: the circular mean of
+/// `(bond angle − reference_rad)` with period `period_rad` (the period of the ideal bond
+/// directions, e.g. π/3 for hexagonal), in `(−period/2, period/2]`; `None` without bonds.
+/// `reference_rad` is the direction of any one ideal bond.
+pub fn mean_bond_rotation(
+    bonds: impl IntoIterator<Item = [f64; 2]>,
+    reference_rad: f64,
+    period_rad: f64,
+) -> Option<f64> {
+    let (mut sum_cos, mut sum_sin, mut count) = (0.0, 0.0, 0usize);
+    for [dx, dy] in bonds {
+        let phase = 2.0 * std::f64::consts::PI * (dy.atan2(dx) - reference_rad) / period_rad;
+        sum_cos += phase.cos();
+        sum_sin += phase.sin();
+        count += 1;
+    }
+    (count > 0).then(|| sum_sin.atan2(sum_cos) * period_rad / (2.0 * std::f64::consts::PI))
+}
+
 /// One feature of a lattice placed in a region: cell indices, motif site and position.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LatticeSite {
