@@ -11,7 +11,8 @@
 //!   the cells are averaged; [`tile`] repeats it to check that the boundaries are seamless.
 //! * [`symmetrize`]: the average over a plane group's operations ([`operations`], all 17
 //!   wallpaper groups), and [`symmetry_residuals`]: how far a cell is from each group
-//!   compatible with its lattice, so the user can choose.
+//!   compatible with its lattice, so the user can choose; [`asymmetric_unit`] outlines the
+//!   group's asymmetric unit on the cell.
 //!
 //! ```
 //! use dhct_lattice::{Hexagonal, PlaneGroup};
@@ -31,12 +32,14 @@
 //! fit (normally the corrected sample frame); images are in display orientation with pixel
 //! `(column, row)` at `(column·pitch_x, row·pitch_y)`.
 
+mod asymmetric_unit;
 mod average;
 mod ellipse;
 mod error;
 mod local;
 mod symmetry;
 
+pub use asymmetric_unit::asymmetric_unit;
 pub use average::{AveragedCell, average_unit_cell, tile};
 pub use ellipse::ConfidenceEllipse;
 pub use error::UnitCellError;
