@@ -38,12 +38,22 @@ pub fn find_features_in_pair(
     pair: &ScanPair,
     options: &FeatureOptions,
 ) -> Result<Vec<FeatureSet>, FeatureError> {
+    find_features_in_pair_and_correlation(pair, options, None)
+        .map(|sets| sets.into_iter().map(|(set, _)| set).collect())
+}
+
+/// Like [`find_features_in_pair`], also returning each image's normalised cross-correlation
+/// map; `mask` (true = use), if given, restricts the background fit as in [`find_features`].
+pub fn find_features_in_pair_and_correlation(
+    pair: &ScanPair,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> Result<Vec<(FeatureSet, Array2<f64>)>, FeatureError> {
     let geometry = pair.geometry();
     let prepared = Prepared::new(geometry, options)?;
     let run = |pass| {
-        pair.image(pass).map(|image| {
-            find_prepared(image, geometry, pass, options, None, &prepared).map(|(set, _)| set)
-        })
+        pair.image(pass)
+            .map(|image| find_prepared(image, geometry, pass, options, mask, &prepared))
     };
     let (trace, retrace) = rayon::join(|| run(ScanPass::Trace), || run(ScanPass::Retrace));
     trace.into_iter().chain(retrace).collect()

@@ -78,3 +78,12 @@ impl ScanPass {
     /// Both passes, trace first.
     pub const BOTH: [ScanPass; 2] = [ScanPass::Trace, ScanPass::Retrace];
 }
+
+impl std::fmt::Display for ScanPass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ScanPass::Trace => "trace",
+            ScanPass::Retrace => "retrace",
+        })
+    }
+}

@@ -82,7 +82,9 @@ mod tests {
         // Every generic point of the cell has exactly one image (mod lattice) inside.
         let mut state = 12345u64;
         let mut random = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
         let mut tested = 0;

@@ -1,0 +1,62 @@
+//! Errors of the chain, each naming the stage that failed and what to try.
+
+use dhct_distortion::DistortionError;
+use dhct_features::FeatureError;
+use dhct_lattice::{LatticeError, LatticeFitError};
+use dhct_unitcell::UnitCellError;
+use thiserror::Error;
+
+/// Everything that can stop [`crate::run`].
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    /// Finding or fitting the features failed.
+    #[error("feature finding: {0}")]
+    Features(#[from] FeatureError),
+    /// Too few features were found to analyse the lattice.
+    #[error(
+        "only {found} features found in the {pass} image (at least {needed} needed): \
+         check --nn (the nearest-neighbour distance), --polarity, and that the image is \
+         atomically resolved"
+    )]
+    TooFewFeatures {
+        /// Which image.
+        pass: String,
+        /// How many were found.
+        found: usize,
+        /// How many are needed.
+        needed: usize,
+    },
+    /// The distortion model could not be fitted.
+    #[error("distortion model: {0}")]
+    Distortion(#[from] DistortionError),
+    /// The lattice (its constant or shape) is invalid.
+    #[error("lattice: {0}")]
+    Lattice(#[from] LatticeError),
+    /// No region could be indexed by the whole-image lattice fit.
+    #[error(
+        "lattice fit: no region could be indexed ({0}); check the lattice type and --nn, \
+         or restrict the analysis to one domain with a mask"
+    )]
+    LatticeFit(LatticeFitError),
+    /// The unit-cell analysis failed.
+    #[error("unit cells: {0}")]
+    UnitCell(#[from] UnitCellError),
+    /// The mask does not match the image.
+    #[error("the mask is {mask_columns} x {mask_rows} px but the image is {columns} x {rows} px")]
+    MaskShape {
+        /// Mask width.
+        mask_columns: usize,
+        /// Mask height.
+        mask_rows: usize,
+        /// Image width.
+        columns: usize,
+        /// Image height.
+        rows: usize,
+    },
+    /// The mask selects no pixel.
+    #[error("the mask selects no pixel (is it inverted?)")]
+    EmptyMask,
+    /// An option is out of range.
+    #[error("invalid option: {0}")]
+    BadOption(String),
+}
