@@ -255,16 +255,17 @@ fn inside_region(
             && (r as usize) < rows
             && labels[[r as usize, c as usize]] == Some(label)
     };
+    const D: f64 = std::f64::consts::FRAC_1_SQRT_2;
     const DIRECTIONS: [(f64, f64); 9] = [
         (0.0, 0.0),
         (1.0, 0.0),
         (-1.0, 0.0),
         (0.0, 1.0),
         (0.0, -1.0),
-        (0.7071, 0.7071),
-        (-0.7071, 0.7071),
-        (0.7071, -0.7071),
-        (-0.7071, -0.7071),
+        (D, D),
+        (-D, D),
+        (D, -D),
+        (-D, -D),
     ];
     DIRECTIONS
         .iter()

@@ -51,7 +51,7 @@ impl PipelineOptions {
     /// Checks the options this crate adds (the stages check their own).
     pub fn validate(&self) -> Result<(), PipelineError> {
         let r = self.unit_cell.resolution;
-        if r < 8 || r % 2 != 0 || r > 1024 {
+        if r < 8 || !r.is_multiple_of(2) || r > 1024 {
             return Err(PipelineError::BadOption(format!(
                 "unit_cell.resolution must be an even number of samples in 8..=1024, got {r}"
             )));
