@@ -428,7 +428,7 @@ fn keep_cell(
         let in_range =
             |range: Option<[f64; 2]>, v: f64| range.is_none_or(|[lo, hi]| v >= lo && v <= hi);
         let typical = |stats: (f64, f64), v: f64, k: f64| {
-            !(stats.1 > 0.0) || (v - stats.0).abs() <= k * stats.1
+            stats.1.is_nan() || stats.1 <= 0.0 || (v - stats.0).abs() <= k * stats.1
         };
         in_range(selection.height_m, f.height)
             && in_range(selection.width_px, f.sigma_major_px)
