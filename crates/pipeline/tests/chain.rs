@@ -68,7 +68,7 @@ fn each_mask_region_is_its_own_domain() {
     let graphite = Hexagonal::graphite();
     let (rows, columns) = (pair.geometry().rows(), pair.geometry().columns());
     // Left and right halves, separated by a 20-px gap.
-    let mask = Array2::from_shape_fn((rows, columns), |(_, c)| c < 110 || c >= 130);
+    let mask = Array2::from_shape_fn((rows, columns), |(_, c)| !(110..130).contains(&c));
     let analysis = run(
         &pair,
         &graphite,
