@@ -1,8 +1,11 @@
 //! `dhct`: distortion correction and lattice analysis of atomically resolved STM images.
 //!
 //! Exit codes: 0 success; 1 the input or parameters were rejected (the message says why and
-//! what to try); 2 the command line itself was malformed.
+//! what to try), or in `batch` at least one file failed (the others are still written);
+//! 2 the command line itself was malformed.
 
+mod batch;
+mod correct;
 mod info;
 mod simulate;
 mod units;
@@ -27,6 +30,33 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Correct drift, creep and hysteresis in an atomically resolved image (trace and retrace
+    /// taken from the file when present), fit the lattice and average the unit cell; write
+    /// corrected images (TIFF, GSF, PNG), features.csv, model.json, unit-cell images and a
+    /// self-contained report.html into OUTDIR.
+    Correct {
+        /// The image file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF).
+        input: PathBuf,
+        /// A separate file holding the retrace image, if the input has none.
+        retrace: Option<PathBuf>,
+        /// Output directory (created if missing).
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        options: CorrectArgs,
+    },
+    /// Run `correct` on every image file in a directory (in parallel), each into its own
+    /// subdirectory of OUTDIR, and write one summary table (batch_summary.csv). A bad file
+    /// is reported and skipped.
+    Batch {
+        /// Directory of image files.
+        dir: PathBuf,
+        /// Output directory (one subdirectory per input file).
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        options: CorrectArgs,
+    },
     /// Show the channels, sizes, scan geometry and timing of an STM file
     /// (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF; detected from content).
     Info {
@@ -61,6 +91,79 @@ enum Command {
         #[arg(long)]
         print_config: bool,
     },
+}
+
+/// Options of `correct` and `batch`; each replaces the same setting of `--config`.
+#[derive(Args, Default)]
+struct CorrectArgs {
+    /// A TOML config (e.g. the config.toml a previous run wrote); flags override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// graphite (default), honeycomb, sam-sqrt3, hexagonal, square, or a lattice file
+    /// (TOML/JSON).
+    #[arg(long)]
+    lattice: Option<String>,
+    /// Nearest-neighbour distance, e.g. 2.46A or 0.246nm (a bare number is metres).
+    #[arg(long, value_parser = units::parse_length)]
+    nn: Option<f64>,
+    /// Mask image (PNG, NPY, ...): analyse only where it is bright; each connected region is
+    /// fitted as its own lattice domain.
+    #[arg(long)]
+    mask: Option<PathBuf>,
+    /// bright (atoms are maxima, default) or dark (minima).
+    #[arg(long, value_parser = parse_polarity)]
+    polarity: Option<dhct_features::Polarity>,
+    /// Plane group of the symmetry-averaged cell, e.g. p3m1 (default: the lattice's).
+    #[arg(long)]
+    plane_group: Option<dhct_lattice::PlaneGroup>,
+    /// Colour map of the pictures: gold (default), viridis, inferno, magma, plasma,
+    /// cividis, greys.
+    #[arg(long, value_parser = parse_colormap)]
+    colormap: Option<dhct_sm4_io::png_file::Colormap>,
+    /// Print a JSON summary on stdout instead of text.
+    #[arg(long)]
+    json: bool,
+    /// No progress display.
+    #[arg(long, short)]
+    quiet: bool,
+    #[command(flatten)]
+    geometry: GeometryArgs,
+}
+
+impl CorrectArgs {
+    /// The config file (if any) with the flags applied on top.
+    fn config(&self) -> anyhow::Result<correct::CorrectConfig> {
+        let base = match &self.config {
+            Some(path) => correct::CorrectConfig::read(path)?,
+            None => correct::CorrectConfig::default(),
+        };
+        Ok(base.overridden_by(correct::CorrectConfig {
+            lattice: self.lattice.clone(),
+            nn: self.nn.map(correct::Length::Metres),
+            polarity: self.polarity,
+            mask: self.mask.clone(),
+            plane_group: self.plane_group,
+            colormap: self.colormap,
+            geometry: self.geometry.overrides(),
+            ..correct::CorrectConfig::default()
+        }))
+    }
+}
+
+fn parse_polarity(text: &str) -> Result<dhct_features::Polarity, String> {
+    match text.to_ascii_lowercase().as_str() {
+        "bright" => Ok(dhct_features::Polarity::Bright),
+        "dark" => Ok(dhct_features::Polarity::Dark),
+        _ => Err(format!("'{text}' is not a polarity (use bright or dark)")),
+    }
+}
+
+fn parse_colormap(text: &str) -> Result<dhct_sm4_io::png_file::Colormap, String> {
+    dhct_sm4_io::png_file::Colormap::parse(text).ok_or_else(|| {
+        format!(
+            "'{text}' is not a colour map (gold, viridis, inferno, magma, plasma, cividis, greys)"
+        )
+    })
 }
 
 /// Scan geometry given on the command line; replaces or supplies what the file says.
@@ -108,6 +211,33 @@ fn parse_direction(text: &str) -> Result<ScanDirection, String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Correct {
+            input,
+            retrace,
+            output,
+            options,
+        } => options.config().and_then(|config| {
+            let summary = correct::run(correct::CorrectRequest {
+                input,
+                retrace: retrace.as_deref(),
+                output,
+                config,
+                progress: !options.quiet && !options.json,
+            })?;
+            if options.json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                print!("{}", correct::text_summary(&summary, output));
+            }
+            Ok(())
+        }),
+        Command::Batch {
+            dir,
+            output,
+            options,
+        } => options
+            .config()
+            .and_then(|config| batch::run(dir, output, &config, options.json, !options.quiet)),
         Command::Info {
             file,
             json,

@@ -35,6 +35,7 @@ pub enum HysteresisChoice {
 
 /// Options of [`fit_model`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct FitOptions {
     /// Hysteresis law.
     pub hysteresis: HysteresisChoice,

@@ -79,6 +79,7 @@ use serde::{Deserialize, Serialize};
 
 /// Options of [`analyse`].
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DhctOptions {
     /// Neighbour search and RDF.
     pub neighbours: NeighbourOptions,

@@ -16,6 +16,7 @@ use crate::lm::levenberg_marquardt;
 
 /// Options of the neighbour search.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NeighbourOptions {
     /// Half-width of the NN window as a fraction of each NN distance (DHCT: 0.35).
     pub window: f64,

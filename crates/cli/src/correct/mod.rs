@@ -1,0 +1,362 @@
+//! `dhct correct`: the whole DHCT chain on one file (or a trace/retrace pair of files), with
+//! every result written into an output directory and summarised in `report.html`.
+
+mod config;
+mod figures;
+mod plots;
+mod render;
+mod report;
+mod summary;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use dhct_distortion::mask::{polygon_mask, read_mask};
+use dhct_pipeline::{Analysis, PipelineOptions, Stage};
+use dhct_scan::{ImageChannel, ScanPair, ScanPass};
+use dhct_sm4_io::png_file::Colormap;
+use dhct_sm4_io::{WriteError, write_atomically};
+use indicatif::{ProgressBar, ProgressStyle};
+use ndarray::Array2;
+
+pub use config::{CorrectConfig, Length, build_lattice};
+pub use summary::RunSummary;
+
+/// What to run.
+pub struct CorrectRequest<'a> {
+    pub input: &'a Path,
+    pub retrace: Option<&'a Path>,
+    pub output: &'a Path,
+    /// The config file (if any) overridden by the command-line flags.
+    pub config: CorrectConfig,
+    /// Show progress on stderr (only when it is a terminal).
+    pub progress: bool,
+}
+
+fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    write_atomically(path, |w| w.write_all(bytes).map_err(WriteError::from))
+}
+
+/// The scan pair to analyse: the file's topography (trace and retrace when present), or
+/// the first file's trace with the second file's image as retrace.
+fn read_pair(
+    request: &CorrectRequest,
+    overrides: &dhct_sm4_io::GeometryOverrides,
+) -> Result<ScanPair> {
+    let file = dhct_sm4_io::read_path_with(request.input, overrides)
+        .with_context(|| format!("cannot read {}", request.input.display()))?;
+    let pair = file
+        .topography()
+        .with_context(|| format!("{} holds no topography image", request.input.display()))?
+        .clone();
+    let Some(retrace_path) = request.retrace else {
+        return Ok(pair);
+    };
+    let other = dhct_sm4_io::read_path_with(retrace_path, overrides)
+        .with_context(|| format!("cannot read {}", retrace_path.display()))?;
+    let other_pair = other
+        .topography()
+        .with_context(|| format!("{} holds no topography image", retrace_path.display()))?;
+    let retrace = other_pair
+        .image(ScanPass::Retrace)
+        .or_else(|| other_pair.image(ScanPass::Trace))
+        .context("the retrace file holds no image")?
+        .clone();
+    let geometry = pair.geometry().clone();
+    let trace = pair
+        .trace()
+        .context("the first file holds no trace image")?
+        .clone();
+    if (retrace.rows(), retrace.columns()) != (trace.rows(), trace.columns()) {
+        bail!(
+            "the retrace image is {} x {} px but the trace is {} x {} px",
+            retrace.columns(),
+            retrace.rows(),
+            trace.columns(),
+            trace.rows()
+        );
+    }
+    ScanPair::new(geometry, trace, Some(retrace)).context("cannot pair trace and retrace")
+}
+
+fn progress_bar(enabled: bool) -> ProgressBar {
+    if enabled && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let bar = ProgressBar::new_spinner();
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        bar.enable_steady_tick(Duration::from_millis(120));
+        bar
+    } else {
+        ProgressBar::hidden()
+    }
+}
+
+/// Runs `dhct correct`; returns the summary (also written as `model.json`).
+pub fn run(request: CorrectRequest) -> Result<RunSummary> {
+    let config = request.config.clone();
+    let bar = progress_bar(request.progress);
+    let start = Instant::now();
+    bar.set_message("reading");
+    let pair = read_pair(&request, &config.geometry)?;
+    let read_s = start.elapsed().as_secs_f64();
+    let geometry = pair.geometry().clone();
+
+    let lattice_name = config.lattice.clone().unwrap_or_else(|| "graphite".into());
+    let nn_m = config
+        .nn
+        .as_ref()
+        .map(Length::metres)
+        .transpose()
+        .context("--nn")?;
+    let lattice = build_lattice(&lattice_name, nn_m)?;
+    let mut options = config
+        .pipeline
+        .clone()
+        .unwrap_or_else(|| PipelineOptions::for_lattice(lattice.as_ref()));
+    if nn_m.is_some() || !options.features.neighbour_distance.is_finite() {
+        options.features.neighbour_distance = lattice.nearest_neighbour_distance();
+    }
+    if let Some(p) = config.polarity {
+        options.features.polarity = p;
+    }
+    if let Some(group) = config.plane_group {
+        options.unit_cell.plane_group = Some(group);
+    }
+    let mask = load_mask(&config, &geometry)?;
+
+    let analysis = dhct_pipeline::run(
+        &pair,
+        lattice.as_ref(),
+        mask.as_ref(),
+        &options,
+        &|stage: Stage| {
+            bar.set_message(stage.describe());
+        },
+    )
+    .map_err(|e| anyhow::anyhow!(hint(&e.to_string())))
+    .with_context(|| format!("analysing {}", request.input.display()))?;
+
+    bar.set_message("writing outputs and report");
+    let write_start = Instant::now();
+    std::fs::create_dir_all(request.output).with_context(|| {
+        format!(
+            "cannot create output directory {}",
+            request.output.display()
+        )
+    })?;
+    let mut summary = summary::summarise(
+        request.input.display().to_string(),
+        request.retrace.map(|p| p.display().to_string()),
+        lattice.as_ref(),
+        &geometry,
+        &analysis,
+        read_s,
+    );
+    let colormap = config.colormap.unwrap_or(Colormap::Gold);
+    let figures = figures::make_figures(&pair, lattice.as_ref(), &analysis, colormap);
+    let mut outputs = write_images(request.output, &pair, &analysis, &figures)?;
+    outputs.push(write_features_csv(request.output, &analysis)?);
+
+    // The resolved config: everything needed to repeat the run.
+    let resolved = CorrectConfig {
+        lattice: Some(lattice_name),
+        nn: Some(Length::Metres(lattice.nearest_neighbour_distance())),
+        polarity: Some(options.features.polarity),
+        colormap: Some(colormap),
+        geometry: config.geometry.clone(),
+        pipeline: Some(options.clone()),
+        ..config.clone()
+    };
+    let toml_text = format!(
+        "# dhct correct: the resolved configuration of this run (use with --config)\n{}",
+        toml::to_string(&resolved).context("cannot serialise the resolved config")?
+    );
+    write_bytes(&request.output.join("config.toml"), toml_text.as_bytes())?;
+    outputs.push("config.toml".into());
+    outputs.push("model.json".into());
+    outputs.push("report.html".into());
+    summary.outputs = outputs;
+    summary.write_s = write_start.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(&summary).context("cannot serialise model.json")?;
+    write_bytes(&request.output.join("model.json"), json.as_bytes())?;
+    let html = report::report_html(&summary, &figures);
+    write_bytes(&request.output.join("report.html"), html.as_bytes())?;
+    bar.finish_and_clear();
+    Ok(summary)
+}
+
+/// Adds what to try to the pipeline's most common failures.
+fn hint(message: &str) -> String {
+    if message.contains("too few features") || message.contains("only ") {
+        format!(
+            "{message}\nhint: check --lattice and --nn against the image, --polarity, and that the mask covers the atomically resolved part"
+        )
+    } else {
+        message.to_string()
+    }
+}
+
+fn load_mask(
+    config: &CorrectConfig,
+    geometry: &dhct_scan::ScanGeometry,
+) -> Result<Option<Array2<bool>>> {
+    let from_file = match &config.mask {
+        Some(path) => Some(read_mask(path).map_err(|e| anyhow::anyhow!("{e}"))?),
+        None => None,
+    };
+    let from_polygon = config
+        .mask_polygon
+        .as_ref()
+        .map(|polygon| polygon_mask(geometry.rows(), geometry.columns(), polygon, true));
+    Ok(match (from_file, from_polygon) {
+        (Some(a), Some(b)) => Some(
+            dhct_distortion::mask::intersect(&a, &b).map_err(|e| anyhow::anyhow!("mask: {e}"))?,
+        ),
+        (a, b) => a.or(b),
+    })
+}
+
+fn channel_like(pair: &ScanPair, pass: ScanPass, z: &Array2<f64>) -> ImageChannel {
+    let (name, unit) = pair
+        .image(pass)
+        .map(|c| (format!("{} (corrected)", c.name), c.unit.clone()))
+        .unwrap_or_else(|| ("corrected".into(), "m".into()));
+    ImageChannel::new(name, unit, z.clone())
+}
+
+fn write_images(
+    dir: &Path,
+    pair: &ScanPair,
+    analysis: &Analysis,
+    figures: &[figures::Figure],
+) -> Result<Vec<String>> {
+    let mut outputs = Vec::new();
+    let geometry = pair.geometry();
+    for pass in &analysis.passes {
+        let channel = channel_like(pair, pass.pass, &pass.corrected_image);
+        let tiff = format!("corrected_{}.tiff", pass.pass);
+        write_atomically(&dir.join(&tiff), |w| {
+            dhct_sm4_io::tiff_file::write_f32(&channel, w)
+        })?;
+        let gsf = format!("corrected_{}.gsf", pass.pass);
+        write_atomically(&dir.join(&gsf), |w| {
+            dhct_sm4_io::gsf::write_pass(&channel, geometry, pass.pass, w)
+        })?;
+        outputs.extend([tiff, gsf]);
+    }
+    if let Some(cell) = &analysis.unit_cell {
+        for (name, values) in [
+            ("unit_cell_averaged.tiff", &cell.averaged.values),
+            ("unit_cell_symmetrized.tiff", &cell.symmetrized.values),
+        ] {
+            let channel = ImageChannel::new(name, "m", values.clone());
+            write_atomically(&dir.join(name), |w| {
+                dhct_sm4_io::tiff_file::write_f32(&channel, w)
+            })?;
+            outputs.push(name.into());
+        }
+    }
+    for figure in figures {
+        let name = figure.file_name();
+        let bytes: &[u8] = match &figure.content {
+            figures::FigureContent::Png(b) => b,
+            figures::FigureContent::Svg(s) => s.as_bytes(),
+        };
+        write_bytes(&dir.join(&name), bytes)?;
+        outputs.push(name);
+    }
+    Ok(outputs)
+}
+
+/// `features.csv`: every feature of every image with all fitted fields, acquisition times,
+/// corrected position, lattice indices and deviation.
+fn write_features_csv(dir: &Path, analysis: &Analysis) -> Result<String> {
+    let name = "features.csv".to_string();
+    write_atomically(&dir.join(&name), |w| {
+        writeln!(
+            w,
+            "{},corrected_x_m,corrected_y_m,region,n,m,site,deviation_x_m,deviation_y_m",
+            dhct_features::CSV_HEADER
+        )?;
+        for pass in &analysis.passes {
+            let mut buffer = Vec::new();
+            pass.features.write_csv(&mut buffer)?;
+            let text = String::from_utf8_lossy(&buffer);
+            for (k, line) in text.lines().skip(1).enumerate() {
+                let c = &pass.corrected[k];
+                let index = match &pass.indices[k] {
+                    Some(i) => format!(
+                        "{},{},{},{},{:e},{:e}",
+                        i.region, i.n, i.m, i.site, i.deviation_m[0], i.deviation_m[1]
+                    ),
+                    None => ",,,,,".into(),
+                };
+                writeln!(w, "{line},{:e},{:e},{index}", c.x_m, c.y_m)?;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(name)
+}
+
+/// A one-screen text summary.
+pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let counts: Vec<String> = summary
+        .passes
+        .iter()
+        .map(|p| format!("{} {} ({} indexed)", p.pass, p.features, p.indexed))
+        .collect();
+    let _ = writeln!(s, "features: {}", counts.join(", "));
+    for p in &summary.parameters {
+        let _ = writeln!(
+            s,
+            "  {:<28} {}",
+            p.name,
+            report::value_with_sigma(p.value, p.sigma, &p.unit)
+        );
+    }
+    for r in &summary.regions {
+        let _ = writeln!(
+            s,
+            "region {}: a = {:.4} x {:.4} Å, angle {:.2}°, rms deviation {:.1} pm, 1σ ellipse {:.1} x {:.1} pm",
+            r.region,
+            r.lattice_constant_m[0] * 1e10,
+            r.lattice_constant_m[1] * 1e10,
+            r.angle_deg,
+            r.rms_deviation_m * 1e12,
+            r.whole_ellipse.sigma_major_m * 1e12,
+            r.whole_ellipse.sigma_minor_m * 1e12
+        );
+    }
+    if let Some(c) = &summary.unit_cell {
+        let _ = writeln!(
+            s,
+            "unit cell: {} cells averaged, symmetrised in {}",
+            c.cells_selected, c.group
+        );
+    } else if let Some(note) = &summary.unit_cell_note {
+        let _ = writeln!(s, "unit cell: not averaged ({note})");
+    }
+    let _ = writeln!(
+        s,
+        "analysis {:.2} s (read {:.2} s, write {:.2} s)",
+        summary.timings.total_s, summary.read_s, summary.write_s
+    );
+    let _ = writeln!(s, "report: {}", output.join("report.html").display());
+    s
+}
+
+/// Output directory for an input in batch mode.
+pub fn batch_output(root: &Path, input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "input".into());
+    root.join(stem)
+}

@@ -1,0 +1,231 @@
+//! Raster pictures with vector overlays (lattice sites, unit-cell outlines, asymmetric unit,
+//! confidence ellipses), encoded as PNG for the output directory and the report.
+//!
+//! Coordinates are picture pixels (x right, y down, pixel centres at integers + ½ of the
+//! upscaled grid); callers convert from image pixels or metres.
+
+use dhct_sm4_io::png_file::{Colormap, NAN_COLOUR};
+#[cfg(test)]
+use ndarray::Array2;
+use ndarray::ArrayView2;
+
+/// An 8-bit RGB picture.
+pub struct Canvas {
+    pub width: usize,
+    pub height: usize,
+    rgb: Vec<u8>,
+}
+
+/// Robust display range of an image: the 0.5 and 99.5 percentiles of its finite values
+/// (so a few spikes do not wash out the picture).
+pub fn display_range(values: ArrayView2<f64>) -> Option<(f64, f64)> {
+    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return None;
+    }
+    let step = (finite.len() / 200_000).max(1);
+    if step > 1 {
+        finite = finite.into_iter().step_by(step).collect();
+    }
+    finite.sort_by(f64::total_cmp);
+    let at = |q: f64| finite[((finite.len() - 1) as f64 * q).round() as usize];
+    let (low, high) = (at(0.005), at(0.995));
+    Some(if high > low {
+        (low, high)
+    } else {
+        (finite[0], finite[finite.len() - 1])
+    })
+}
+
+impl Canvas {
+    /// `image` through `colormap` over `range` (default: [`display_range`]), each pixel
+    /// drawn as `scale × scale` picture pixels. NaN is drawn in [`NAN_COLOUR`].
+    pub fn from_image(
+        image: ArrayView2<f64>,
+        colormap: Colormap,
+        range: Option<(f64, f64)>,
+        scale: usize,
+    ) -> Canvas {
+        let (rows, columns) = image.dim();
+        let scale = scale.max(1);
+        let (width, height) = (columns * scale, rows * scale);
+        let (low, high) = range.or_else(|| display_range(image)).unwrap_or((0.0, 1.0));
+        let span = if high > low { high - low } else { 1.0 };
+        let mut rgb = vec![0u8; width * height * 3];
+        for r in 0..rows {
+            for c in 0..columns {
+                let v = image[[r, c]];
+                let colour = if v.is_finite() {
+                    colormap.rgb(((v - low) / span).clamp(0.0, 1.0))
+                } else {
+                    NAN_COLOUR
+                };
+                for dy in 0..scale {
+                    let row = (r * scale + dy) * width;
+                    for dx in 0..scale {
+                        let i = (row + c * scale + dx) * 3;
+                        rgb[i..i + 3].copy_from_slice(&colour);
+                    }
+                }
+            }
+        }
+        Canvas { width, height, rgb }
+    }
+
+    /// A picture from a function of picture-pixel centres (used for skewed unit cells).
+    pub fn from_fn(
+        width: usize,
+        height: usize,
+        colormap: Colormap,
+        range: (f64, f64),
+        value: impl Fn(f64, f64) -> f64,
+    ) -> Canvas {
+        let span = if range.1 > range.0 {
+            range.1 - range.0
+        } else {
+            1.0
+        };
+        let mut rgb = vec![0u8; width * height * 3];
+        for y in 0..height {
+            for x in 0..width {
+                let v = value(x as f64 + 0.5, y as f64 + 0.5);
+                let colour = if v.is_finite() {
+                    colormap.rgb(((v - range.0) / span).clamp(0.0, 1.0))
+                } else {
+                    [255, 255, 255]
+                };
+                let i = (y * width + x) * 3;
+                rgb[i..i + 3].copy_from_slice(&colour);
+            }
+        }
+        Canvas { width, height, rgb }
+    }
+
+    fn blend(&mut self, x: i64, y: i64, colour: [u8; 3], alpha: f64) {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height || alpha <= 0.0 {
+            return;
+        }
+        let i = (y as usize * self.width + x as usize) * 3;
+        let a = alpha.min(1.0);
+        for (channel, &target) in self.rgb[i..i + 3].iter_mut().zip(&colour) {
+            let old = *channel as f64;
+            *channel = (old + (target as f64 - old) * a).round() as u8;
+        }
+    }
+
+    /// A filled disc (anti-aliased edge).
+    pub fn disc(&mut self, centre: [f64; 2], radius: f64, colour: [u8; 3]) {
+        let (x0, x1) = (
+            (centre[0] - radius - 1.0).floor() as i64,
+            (centre[0] + radius + 1.0).ceil() as i64,
+        );
+        let (y0, y1) = (
+            (centre[1] - radius - 1.0).floor() as i64,
+            (centre[1] + radius + 1.0).ceil() as i64,
+        );
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let d = (x as f64 + 0.5 - centre[0]).hypot(y as f64 + 0.5 - centre[1]);
+                self.blend(x, y, colour, radius + 0.5 - d);
+            }
+        }
+    }
+
+    /// A straight segment of the given width (anti-aliased).
+    pub fn line(&mut self, a: [f64; 2], b: [f64; 2], width: f64, colour: [u8; 3]) {
+        let half = 0.5 * width;
+        let (x0, x1) = (a[0].min(b[0]) - half - 1.0, a[0].max(b[0]) + half + 1.0);
+        let (y0, y1) = (a[1].min(b[1]) - half - 1.0, a[1].max(b[1]) + half + 1.0);
+        if !(x0.is_finite() && x1.is_finite() && y0.is_finite() && y1.is_finite()) {
+            return;
+        }
+        let (x0, x1) = (x0.max(0.0) as i64, x1.min(self.width as f64) as i64);
+        let (y0, y1) = (y0.max(0.0) as i64, y1.min(self.height as f64) as i64);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let length2 = dx * dx + dy * dy;
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                let t = if length2 > 0.0 {
+                    (((px - a[0]) * dx + (py - a[1]) * dy) / length2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let d = (px - a[0] - t * dx).hypot(py - a[1] - t * dy);
+                self.blend(x, y, colour, half + 0.5 - d);
+            }
+        }
+    }
+
+    /// A closed polygon outline.
+    pub fn polygon(&mut self, points: &[[f64; 2]], width: f64, colour: [u8; 3]) {
+        for i in 0..points.len() {
+            self.line(points[i], points[(i + 1) % points.len()], width, colour);
+        }
+    }
+
+    /// A "+" marker.
+    pub fn cross(&mut self, centre: [f64; 2], size: f64, width: f64, colour: [u8; 3]) {
+        let [x, y] = centre;
+        self.line([x - size, y], [x + size, y], width, colour);
+        self.line([x, y - size], [x, y + size], width, colour);
+    }
+
+    /// PNG bytes.
+    pub fn png(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        {
+            let mut encoder = png::Encoder::new(&mut out, self.width as u32, self.height as u32);
+            encoder.set_color(png::ColorType::Rgb);
+            encoder.set_depth(png::BitDepth::Eight);
+            let mut writer = encoder.write_header().expect("PNG header to memory");
+            writer
+                .write_image_data(&self.rgb)
+                .expect("PNG data to memory");
+        }
+        out
+    }
+}
+
+/// Integer upscale so the longest side is at least `target` picture pixels (max 16×).
+pub fn upscale_for(rows: usize, columns: usize, target: usize) -> usize {
+    let longest = rows.max(columns).max(1);
+    target.div_ceil(longest).clamp(1, 16)
+}
+
+/// Diverging blue–white–red colour of a signed value in `[-1, 1]`, or a sequential
+/// (viridis) colour of `t` in `[0, 1]`.
+pub fn heat_colour(t: f64) -> [u8; 3] {
+    Colormap::Inferno.rgb(t.clamp(0.0, 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn draws_inside_and_clips_outside() {
+        let image = Array2::<f64>::zeros((10, 10));
+        let mut canvas = Canvas::from_image(image.view(), Colormap::Greys, Some((0.0, 1.0)), 2);
+        assert_eq!((canvas.width, canvas.height), (20, 20));
+        canvas.line([-50.0, 10.0], [50.0, 10.0], 2.0, [255, 0, 0]);
+        canvas.disc([100.0, 100.0], 3.0, [0, 255, 0]); // entirely outside: no panic
+        canvas.line([f64::NAN, 0.0], [1.0, 1.0], 1.0, [0, 0, 255]);
+        let png = canvas.png();
+        assert_eq!(&png[1..4], b"PNG");
+        // Row 10 (the line) is red, row 2 is untouched black.
+        let at = |x: usize, y: usize| &canvas.rgb[(y * 20 + x) * 3..(y * 20 + x) * 3 + 3];
+        assert_eq!(at(5, 10), &[255, 0, 0]);
+        assert_eq!(at(5, 2), &[0, 0, 0]);
+    }
+
+    #[test]
+    fn display_range_ignores_spikes_and_nan() {
+        let mut image = Array2::from_shape_fn((100, 100), |(r, _)| r as f64);
+        image[[0, 0]] = 1e9;
+        image[[1, 1]] = f64::NAN;
+        let (low, high) = display_range(image.view()).unwrap();
+        assert!(low >= 0.0 && high < 100.0);
+        assert!(display_range(Array2::from_elem((2, 2), f64::NAN).view()).is_none());
+    }
+}

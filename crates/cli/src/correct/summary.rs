@@ -1,0 +1,234 @@
+//! The machine-readable results of a run: `model.json` (everything numeric) and the short
+//! summary printed by `--json`.
+
+use dhct_distortion::{DistortionModel, ExclusionCounts, Parameter, RdfFit};
+use dhct_lattice::{Lattice, PlaneGroup};
+use dhct_pipeline::{Analysis, SkippedRegion, StageTimings};
+use dhct_scan::{ScanGeometry, ScanPass};
+use dhct_unitcell::{ConfidenceEllipse, SymmetryResidual};
+use serde::Serialize;
+
+/// How well the fitted model describes the local distortion measurements.
+#[derive(Debug, Clone, Serialize)]
+pub struct Goodness {
+    /// Local distortion measurements used (trace + retrace).
+    pub local_measurements: usize,
+    /// RMS of measured − modelled local fast-axis scale S (dimensionless).
+    pub rms_scale_residual: f64,
+    /// RMS of measured − modelled drift velocity, x and y, m/s.
+    pub rms_drift_residual_m_per_s: [f64; 2],
+    /// RMS of the measured drift velocity about zero, x and y, m/s (what an identity model
+    /// would leave).
+    pub rms_drift_m_per_s: [f64; 2],
+}
+
+/// Per-image counts.
+#[derive(Debug, Clone, Serialize)]
+pub struct PassCounts {
+    pub pass: ScanPass,
+    pub features: usize,
+    pub candidates: usize,
+    pub rejected: usize,
+    pub selected_for_model: usize,
+    pub local_distortions: usize,
+    pub indexed: usize,
+    pub exclusions: ExclusionCounts,
+    pub rdf_fit: RdfFit,
+}
+
+/// A confidence ellipse in report units.
+#[derive(Debug, Clone, Serialize)]
+pub struct EllipseSummary {
+    pub sigma_major_m: f64,
+    pub sigma_minor_m: f64,
+    pub two_sigma_major_m: f64,
+    pub two_sigma_minor_m: f64,
+    pub angle_deg: f64,
+    pub sigma_z: Option<f64>,
+    pub count: usize,
+}
+
+impl From<&ConfidenceEllipse> for EllipseSummary {
+    fn from(e: &ConfidenceEllipse) -> Self {
+        EllipseSummary {
+            sigma_major_m: e.sigma_major_m,
+            sigma_minor_m: e.sigma_minor_m,
+            two_sigma_major_m: 2.0 * e.sigma_major_m,
+            two_sigma_minor_m: 2.0 * e.sigma_minor_m,
+            angle_deg: e.angle_rad.to_degrees(),
+            sigma_z: e.sigma_z_m,
+            count: e.count,
+        }
+    }
+}
+
+/// One region's lattice fit.
+#[derive(Debug, Clone, Serialize)]
+pub struct RegionSummary {
+    pub region: usize,
+    pub pixels: usize,
+    pub features_indexed: usize,
+    pub features_used_in_fit: usize,
+    pub origin_m: [f64; 2],
+    pub angle_deg: f64,
+    pub scale: [f64; 2],
+    /// The lattice constant implied along x and y (nominal × scale), metres.
+    pub lattice_constant_m: [f64; 2],
+    pub rms_deviation_m: f64,
+    /// Retrace offset relative to trace (Δx, Δy), metres, when both were fitted.
+    pub set_offsets_m: Vec<[f64; 2]>,
+    pub whole_ellipse: EllipseSummary,
+    pub local_ellipse: Option<EllipseSummary>,
+    pub local_cells: usize,
+}
+
+/// Unit-cell results.
+#[derive(Debug, Clone, Serialize)]
+pub struct UnitCellSummary {
+    pub group: PlaneGroup,
+    pub cells_available: usize,
+    pub cells_selected: usize,
+    pub residuals: Vec<SymmetryResidual>,
+    pub asymmetric_unit: Vec<[f64; 2]>,
+}
+
+/// Everything numeric of a run (`model.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSummary {
+    pub dhct_version: &'static str,
+    pub input: String,
+    pub retrace_input: Option<String>,
+    pub lattice: String,
+    pub nearest_neighbour_distance_m: f64,
+    pub geometry: ScanGeometry,
+    pub model: DistortionModel,
+    pub parameters: Vec<Parameter>,
+    pub goodness: Goodness,
+    pub passes: Vec<PassCounts>,
+    pub regions: Vec<RegionSummary>,
+    pub skipped_regions: Vec<SkippedRegion>,
+    pub unit_cell: Option<UnitCellSummary>,
+    pub unit_cell_note: Option<String>,
+    pub timings: StageTimings,
+    /// Reading the input, seconds.
+    pub read_s: f64,
+    /// Writing the outputs and the report, seconds (filled after writing).
+    pub write_s: f64,
+    pub outputs: Vec<String>,
+}
+
+fn rms(values: impl Iterator<Item = f64>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for v in values.filter(|v| v.is_finite()) {
+        sum += v * v;
+        n += 1;
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        (sum / n as f64).sqrt()
+    }
+}
+
+pub fn goodness(analysis: &Analysis) -> Goodness {
+    let model = &analysis.dhct.model;
+    let local: Vec<_> = analysis
+        .dhct
+        .passes
+        .iter()
+        .flat_map(|p| p.local.iter())
+        .collect();
+    Goodness {
+        local_measurements: local.len(),
+        rms_scale_residual: rms(local
+            .iter()
+            .map(|l| l.scale - model.hysteresis.scale(l.line_time_s))),
+        rms_drift_residual_m_per_s: [0, 1].map(|k| {
+            rms(local
+                .iter()
+                .map(|l| l.drift_m_per_s[k] - model.drift.velocity(l.time_s)[k]))
+        }),
+        rms_drift_m_per_s: [0, 1].map(|k| rms(local.iter().map(|l| l.drift_m_per_s[k]))),
+    }
+}
+
+pub fn summarise(
+    input: String,
+    retrace_input: Option<String>,
+    lattice: &dyn Lattice,
+    geometry: &ScanGeometry,
+    analysis: &Analysis,
+    read_s: f64,
+) -> RunSummary {
+    let [a1, a2] = lattice.primitive_vectors();
+    let nominal = [a1.norm(), a2.norm()];
+    let passes = analysis
+        .passes
+        .iter()
+        .map(|p| {
+            let dhct = analysis.dhct.passes.iter().find(|d| d.pass == p.pass);
+            PassCounts {
+                pass: p.pass,
+                features: p.features.features.len(),
+                candidates: p.features.candidates,
+                rejected: p.features.rejected.len(),
+                selected_for_model: dhct.map(|d| d.selection.selected.len()).unwrap_or(0),
+                local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
+                indexed: p.indices.iter().flatten().count(),
+                exclusions: dhct.map(|d| d.selection.exclusions).unwrap_or_default(),
+                rdf_fit: dhct.map(|d| d.selection.rdf_fit.clone()).unwrap_or(RdfFit {
+                    nn_distance_m: f64::NAN,
+                    shells_m: vec![],
+                    amplitudes: vec![],
+                    widths_m: vec![],
+                    fwhm_m: vec![],
+                }),
+            }
+        })
+        .collect();
+    let regions = analysis
+        .regions
+        .iter()
+        .map(|r| RegionSummary {
+            region: r.region,
+            pixels: r.pixels,
+            features_indexed: r.members.iter().map(Vec::len).sum(),
+            features_used_in_fit: r.fit.used,
+            origin_m: r.fit.origin_m,
+            angle_deg: r.fit.angle_rad.to_degrees(),
+            scale: r.fit.scale,
+            lattice_constant_m: [nominal[0] * r.fit.scale[0], nominal[1] * r.fit.scale[1]],
+            rms_deviation_m: r.fit.rms_deviation_m,
+            set_offsets_m: r.fit.set_offsets_m.iter().skip(1).copied().collect(),
+            whole_ellipse: (&r.whole_ellipse).into(),
+            local_ellipse: r.local_ellipse.as_ref().map(Into::into),
+            local_cells: r.local_cells.iter().map(Vec::len).sum(),
+        })
+        .collect();
+    RunSummary {
+        dhct_version: env!("CARGO_PKG_VERSION"),
+        input,
+        retrace_input,
+        lattice: lattice.name().to_string(),
+        nearest_neighbour_distance_m: lattice.nearest_neighbour_distance(),
+        geometry: geometry.clone(),
+        model: analysis.dhct.model.clone(),
+        parameters: analysis.dhct.model.parameters.clone(),
+        goodness: goodness(analysis),
+        passes,
+        regions,
+        skipped_regions: analysis.skipped_regions.clone(),
+        unit_cell: analysis.unit_cell.as_ref().map(|c| UnitCellSummary {
+            group: c.group,
+            cells_available: c.cells_available,
+            cells_selected: c.cells_selected,
+            residuals: c.residuals.clone(),
+            asymmetric_unit: c.asymmetric_unit.clone(),
+        }),
+        unit_cell_note: analysis.unit_cell_note.clone(),
+        timings: analysis.timings,
+        read_s,
+        write_s: 0.0,
+        outputs: Vec::new(),
+    }
+}
