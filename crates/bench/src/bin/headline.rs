@@ -210,9 +210,12 @@ fn summarise(runs: &[Measurement]) -> (StageTimes, StageTimes) {
     (min, med)
 }
 
+/// Reads one stage's time.
+type Stage = fn(&StageTimes) -> f64;
+
 fn stage_table(min: &StageTimes, med: &StageTimes) -> Table {
     let mut table = Table::new(&["stage", "min s", "median s"]);
-    let rows: [(&str, fn(&StageTimes) -> f64); 10] = [
+    let rows: [(&str, Stage); 10] = [
         ("read SM4", |t| t.read_s),
         ("features (both images)", |t| t.features_s),
         ("  NN + local distortion (re-timed)", |t| {
