@@ -26,6 +26,28 @@ pub enum PipelineError {
         /// How many are needed.
         needed: usize,
     },
+    /// Features were found but too few sit in the lattice's neighbour pattern.
+    #[error(
+        "only {usable} of {found} features have the lattice's full nearest-neighbour shell, \
+         at least {needed} needed. The features found are typically {:.3} Å apart while the \
+         lattice's nearest-neighbour distance is {:.3} Å{suggestion}",
+        .median_nn_m * 1e10,
+        .expected_nn_m * 1e10
+    )]
+    LatticeMismatch {
+        /// Features found (trace).
+        found: usize,
+        /// Features with a full NN shell.
+        usable: usize,
+        /// Needed for the model fit.
+        needed: usize,
+        /// Median distance from each found feature to its nearest other feature, metres.
+        median_nn_m: f64,
+        /// The lattice's NN distance, metres.
+        expected_nn_m: f64,
+        /// What to try.
+        suggestion: String,
+    },
     /// The distortion model could not be fitted.
     #[error("distortion model: {0}")]
     Distortion(#[from] DistortionError),

@@ -50,7 +50,8 @@ pub use regions::label_regions;
 use std::time::Instant;
 
 use dhct_distortion::{
-    CorrectedFeature, PassInput, Rdf, analyse, correct_features, correct_image, radial_distribution,
+    CorrectedFeature, DistortionError, PassInput, Rdf, analyse, correct_features, correct_image,
+    radial_distribution,
 };
 use dhct_features::{Feature, FeatureSet, find_features_in_pair_and_correlation};
 use dhct_lattice::{Lattice, angular_distribution, fit_lattice};
@@ -124,7 +125,39 @@ pub fn run(
             mask,
         })
         .collect();
-    let dhct = analyse(&inputs, geometry, lattice, &options.dhct)?;
+    let dhct = match analyse(&inputs, geometry, lattice, &options.dhct) {
+        Ok(dhct) => dhct,
+        Err(DistortionError::TooFewFeatures {
+            found: usable,
+            needed,
+            ..
+        }) => {
+            let features = &found_sets_first(&found).features;
+            let median_nn_m = median_nearest_distance(features);
+            let expected_nn_m = lattice.nearest_neighbour_distance();
+            let ratio = median_nn_m / expected_nn_m;
+            let suggestion = if (0.8..1.25).contains(&ratio) {
+                ": the spacing matches, so check the mask, the lattice type (neighbour count) \
+                 and the image quality"
+                    .to_string()
+            } else {
+                format!(
+                    ": if the image is calibrated, try --nn {:.3}A (or check the lattice type; \
+                     a wrong pixel size in the file scales every distance)",
+                    median_nn_m * 1e10
+                )
+            };
+            return Err(PipelineError::LatticeMismatch {
+                found: features.len(),
+                usable,
+                needed,
+                median_nn_m,
+                expected_nn_m,
+                suggestion,
+            });
+        }
+        Err(e) => return Err(e.into()),
+    };
     timings.model_s = t.elapsed().as_secs_f64();
 
     // 3. Correction.
@@ -221,6 +254,32 @@ pub fn run(
         unit_cell_note,
         timings,
     })
+}
+
+fn found_sets_first(found: &[(FeatureSet, Array2<f64>)]) -> &FeatureSet {
+    &found[0].0
+}
+
+/// Median over features of the distance to the nearest other feature (metres).
+fn median_nearest_distance(features: &[Feature]) -> f64 {
+    let step = (features.len() / 400).max(1);
+    let mut nearest: Vec<f64> = features
+        .iter()
+        .step_by(step)
+        .map(|a| {
+            features
+                .iter()
+                .filter(|b| !std::ptr::eq(*b, a))
+                .map(|b| (a.x_m - b.x_m).hypot(a.y_m - b.y_m))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .filter(|d| d.is_finite())
+        .collect();
+    if nearest.is_empty() {
+        return f64::NAN;
+    }
+    nearest.sort_by(f64::total_cmp);
+    nearest[nearest.len() / 2]
 }
 
 fn corrected_rdf(raw: &Rdf, corrected: &[CorrectedFeature], area_m2: f64) -> Option<Rdf> {

@@ -164,7 +164,10 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     // The resolved config: everything needed to repeat the run.
     let resolved = CorrectConfig {
         lattice: Some(lattice_name),
-        nn: Some(Length::Metres(lattice.nearest_neighbour_distance())),
+        // As given (a preset's own constant is exact; the NN distance derived from its
+        // vectors may differ in the last bit), in Rust's shortest round-trip form: the TOML
+        // writer prints small floats as long decimals.
+        nn: nn_m.map(|nn| Length::Text(format!("{nn:e}"))),
         polarity: Some(options.features.polarity),
         colormap: Some(colormap),
         geometry: config.geometry.clone(),
@@ -191,7 +194,9 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
 
 /// Adds what to try to the pipeline's most common failures.
 fn hint(message: &str) -> String {
-    if message.contains("too few features") || message.contains("only ") {
+    if message.contains("try --") {
+        message.to_string()
+    } else if message.contains("too few features") || message.contains("only ") {
         format!(
             "{message}\nhint: check --lattice and --nn against the image, --polarity, and that the mask covers the atomically resolved part"
         )
