@@ -232,7 +232,8 @@ pub fn run(
                 .iter()
                 .find(|p| p.pass == set.pass)
                 .map(|p| &p.selection.rdf);
-            let rdf_corrected = raw.and_then(|raw| corrected_rdf(raw, &corrected, area));
+            let rdf_corrected =
+                raw.and_then(|raw| corrected_rdf(raw, &set.features, &corrected, mask, area));
             PassOutput {
                 pass: set.pass,
                 features: set,
@@ -282,16 +283,27 @@ fn median_nearest_distance(features: &[Feature]) -> f64 {
     nearest[nearest.len() / 2]
 }
 
-fn corrected_rdf(raw: &Rdf, corrected: &[CorrectedFeature], area_m2: f64) -> Option<Rdf> {
+/// RDF of the corrected positions of the features the raw RDF used (those inside the mask,
+/// by raw position), on the raw RDF's bins.
+fn corrected_rdf(
+    raw: &Rdf,
+    features: &[Feature],
+    corrected: &[CorrectedFeature],
+    mask: Option<&Array2<bool>>,
+    area_m2: f64,
+) -> Option<Rdf> {
     if raw.r_m.len() < 2 {
         return None;
     }
     let bin = raw.r_m[1] - raw.r_m[0];
     let r_max = raw.r_m[raw.r_m.len() - 1] + 0.5 * bin;
+    let raw_px: Vec<[f64; 2]> = features.iter().map(|f| [f.x_px, f.y_px]).collect();
+    let inside = dhct_distortion::neighbours::inside_mask(&raw_px, mask);
     let points: Vec<[f64; 2]> = corrected
         .iter()
-        .filter(|c| c.x_m.is_finite() && c.y_m.is_finite())
-        .map(|c| [c.x_m, c.y_m])
+        .zip(inside)
+        .filter(|(c, inside)| *inside && c.x_m.is_finite() && c.y_m.is_finite())
+        .map(|(c, _)| [c.x_m, c.y_m])
         .collect();
     radial_distribution(&points, area_m2, r_max, bin).ok()
 }

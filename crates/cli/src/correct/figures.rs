@@ -60,6 +60,7 @@ pub fn make_figures(
     pair: &ScanPair,
     lattice: &dyn Lattice,
     analysis: &Analysis,
+    mask: Option<&Array2<bool>>,
     colormap: Colormap,
 ) -> Vec<Figure> {
     let geometry = pair.geometry();
@@ -70,17 +71,26 @@ pub fn make_figures(
         };
         let range = display_range(raw.z.view());
         let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
+        let mut canvas = Canvas::from_image(raw.z.view(), colormap, range, scale);
+        if let Some(mask) = mask {
+            canvas.dim_outside(mask, scale);
+        }
         figures.push(Figure::png(
             &format!("raw_{}", pass.pass),
             &format!("Raw {} image", pass.pass),
             format!(
-                "As acquired (controller frame), {} × {} px, {:.2} × {:.2} nm.",
+                "As acquired (controller frame), {} × {} px, {:.2} × {:.2} nm{}.",
                 geometry.columns(),
                 geometry.rows(),
                 geometry.width() * 1e9,
-                geometry.height() * 1e9
+                geometry.height() * 1e9,
+                if mask.is_some() {
+                    "; greyed: outside the mask (not analysed)"
+                } else {
+                    ""
+                }
             ),
-            &Canvas::from_image(raw.z.view(), colormap, range, scale),
+            &canvas,
         ));
         figures.push(Figure::png(
             &format!("corrected_{}", pass.pass),

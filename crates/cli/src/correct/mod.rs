@@ -157,7 +157,8 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
         read_s,
     );
     let colormap = config.colormap.unwrap_or(Colormap::Gold);
-    let figures = figures::make_figures(&pair, lattice.as_ref(), &analysis, colormap);
+    let figures =
+        figures::make_figures(&pair, lattice.as_ref(), &analysis, mask.as_ref(), colormap);
     let mut outputs = write_images(request.output, &pair, &analysis, &figures)?;
     outputs.push(write_features_csv(request.output, &analysis)?);
 

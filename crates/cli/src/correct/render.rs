@@ -113,6 +113,19 @@ impl Canvas {
         }
     }
 
+    /// Greys out (blends towards mid-grey) every image pixel where `mask` is false; the
+    /// canvas was drawn from an image of the mask's shape at `scale` picture px per pixel.
+    pub fn dim_outside(&mut self, mask: &ndarray::Array2<bool>, scale: usize) {
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let (r, c) = (y / scale.max(1), x / scale.max(1));
+                if r < mask.nrows() && c < mask.ncols() && !mask[[r, c]] {
+                    self.blend(x as i64, y as i64, [128, 128, 128], 0.6);
+                }
+            }
+        }
+    }
+
     /// A filled disc (anti-aliased edge).
     pub fn disc(&mut self, centre: [f64; 2], radius: f64, colour: [u8; 3]) {
         let (x0, x1) = (
