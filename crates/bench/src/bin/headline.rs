@@ -4,7 +4,8 @@
 //! ```sh
 //! cargo run --release -p dhct-bench --bin headline -- \
 //!     [--json OUT.json] [--sizes 512,1024,2048,4096] [--repeats 3] \
-//!     [--peers-dir DIR [--peer-size 1024]] [--sm4-out FILE] [--robustness]
+//!     [--peers-dir DIR [--peer-size 1024]] [--sm4-out FILE] [--robustness] \
+//!     [--skip-headline]
 //! python3 scripts/peers/compare.py DIR        # Atomap, stmpy Lawler–Fujita, FFT affine
 //! ```
 //!
@@ -35,6 +36,7 @@ struct Args {
     peer_size: usize,
     sm4_out: Option<PathBuf>,
     robustness: bool,
+    skip_headline: bool,
 }
 
 fn parse_args(args: &[String]) -> Result<Args, String> {
@@ -46,6 +48,7 @@ fn parse_args(args: &[String]) -> Result<Args, String> {
         peer_size: 1024,
         sm4_out: None,
         robustness: false,
+        skip_headline: false,
     };
     let mut it = args.iter();
     while let Some(arg) = it.next() {
@@ -72,6 +75,7 @@ fn parse_args(args: &[String]) -> Result<Args, String> {
             }
             "--sm4-out" => parsed.sm4_out = Some(value()?.into()),
             "--robustness" => parsed.robustness = true,
+            "--skip-headline" => parsed.skip_headline = true,
             other => return Err(format!("unknown argument {other}")),
         }
     }
@@ -277,24 +281,10 @@ fn accuracy_lines(a: &Accuracy) -> String {
     text
 }
 
-fn run(args: &Args) -> Result<(), String> {
-    let mut report = serde_json::Map::new();
-    let started = Instant::now();
-    report.insert(
-        "machine".into(),
-        json!({"cpus": cpus(), "rayon_threads": rayon::current_num_threads(),
-               "load_at_start": load_string()}),
-    );
-    println!(
-        "dhct-bench headline: {} CPUs, load {}",
-        cpus(),
-        load_string()
-    );
-    let tmp = tempfile::tempdir().map_err(|e| format!("temporary directory: {e}"))?;
-    let lattice_config = LatticeConfig::Graphite;
-
-    // 1. The headline case: per-stage times, peak memory, accuracy.
-    let (output, path, simulate_s) = simulate_to_sm4(HEADLINE_PIXELS, tmp.path())?;
+/// The headline case: repeated timed runs (each in a child process), the per-stage table,
+/// peak memory, and the accuracy of one more run against the truth.
+fn headline(args: &Args, dir: &Path, lattice_config: &LatticeConfig) -> Result<Value, String> {
+    let (output, path, simulate_s) = simulate_to_sm4(HEADLINE_PIXELS, dir)?;
     let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
     println!(
         "\n## Headline 2048² trace + retrace (graphite, 25 nm)\nsimulated in {simulate_s:.2} s, \
@@ -307,7 +297,7 @@ fn run(args: &Args) -> Result<(), String> {
     }
     let mut runs = Vec::new();
     for k in 0..args.repeats {
-        let m = measure_in_child(&path, &lattice_config)?;
+        let m = measure_in_child(&path, lattice_config)?;
         println!(
             "run {}: end to end {:.3} s, {} features, peak {:.0} MiB, {} threads, load {}",
             k + 1,
@@ -345,15 +335,36 @@ fn run(args: &Args) -> Result<(), String> {
         "\n### Accuracy vs truth (headline)\n{}",
         accuracy_lines(&acc)
     );
-    report.insert(
-        "headline".into(),
-        json!({"pixels": HEADLINE_PIXELS, "simulate_s": simulate_s, "sm4_bytes": bytes,
+    let value = json!({"pixels": HEADLINE_PIXELS, "simulate_s": simulate_s, "sm4_bytes": bytes,
                "runs": runs, "min": min, "median": med, "peak_memory_mib": peak,
-               "accuracy": acc}),
-    );
+               "accuracy": acc});
     drop(analysis);
     drop(output);
     let _ = std::fs::remove_file(&path);
+    Ok(value)
+}
+
+fn run(args: &Args) -> Result<(), String> {
+    let mut report = serde_json::Map::new();
+    let started = Instant::now();
+    report.insert(
+        "machine".into(),
+        json!({"cpus": cpus(), "rayon_threads": rayon::current_num_threads(),
+               "load_at_start": load_string()}),
+    );
+    println!(
+        "dhct-bench headline: {} CPUs, load {}",
+        cpus(),
+        load_string()
+    );
+    let tmp = tempfile::tempdir().map_err(|e| format!("temporary directory: {e}"))?;
+    let lattice_config = LatticeConfig::Graphite;
+
+    // 1. The headline case: per-stage times, peak memory, accuracy.
+    if !args.skip_headline {
+        let headline = headline(args, tmp.path(), &lattice_config)?;
+        report.insert("headline".into(), headline);
+    }
 
     // 2. Scaling curve.
     let mut scaling = Vec::new();
