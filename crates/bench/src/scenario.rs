@@ -1,6 +1,5 @@
 //! The simulated scans the benchmarks run on, and the pipeline options they use.
 
-use dhct_features::LineCorrection;
 use dhct_lattice::Lattice;
 use dhct_pipeline::PipelineOptions;
 use dhct_simulate::{SimulationConfig, presets};
@@ -23,11 +22,9 @@ pub fn headline_at(pixels: usize) -> SimulationConfig {
     config
 }
 
-/// Options of every benchmark run: the lattice's defaults, with the per-line median
-/// subtracted before feature finding (the simulated images carry line-offset noise; the
-/// feature and distortion benches use the same setting).
+/// Options of every benchmark run: the pipeline's recommended defaults for the lattice
+/// (`PipelineOptions::for_lattice`, what `dhct correct` uses: median line levelling,
+/// affine local distortion), so the numbers describe the shipped behaviour.
 pub fn pipeline_options(lattice: &dyn Lattice) -> PipelineOptions {
-    let mut options = PipelineOptions::for_lattice(lattice);
-    options.features.line_correction = LineCorrection::Median;
-    options
+    PipelineOptions::for_lattice(lattice)
 }
