@@ -1,0 +1,490 @@
+//! The candidate effects and their proposals: each candidate, given the current model,
+//! offers one or more starting models (one per point of its shape grid — a change time, a
+//! relaxation time, a vibration frequency …) whose new parameters start at zero, together
+//! with the weighted Jacobian columns of those new parameters, used for the linearised
+//! screening (the shape with the largest χ² reduction wins, then a full refit follows).
+
+use dhct_scan::ScanGeometry;
+use dhct_simulate::EffectConfig;
+use dhct_simulate::effects::{
+    AsymmetricHysteresis, ExponentialCreep, HeightCoupling, HysteresisLaw, LineDrift, LogCreep,
+    ScanCoupling, SlowScanHysteresis, TipChange, Vibration,
+};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use crate::data::Observation;
+use crate::model::{GlobalModel, ModelTerm, Term, Transform, sim_term, term_displacements, transform_of};
+use crate::spectrum::periodogram_peaks;
+use crate::terms::{CubicDrift, QuadraticField};
+
+/// An unmodelled effect the diagnosis can add to the base model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Candidate {
+    /// Drift within each line only (simulator `line-drift`): `d = v·τ`.
+    LineDrift,
+    /// Creep relaxing exponentially after a start time (`exponential-creep`).
+    ExponentialCreep,
+    /// A second logarithmic creep impulse after a start time (`creep` with `start_s > 0`).
+    SecondCreep,
+    /// Different fast-scan hysteresis laws in trace and retrace (`asymmetric-hysteresis`).
+    AsymmetricHysteresis,
+    /// Slow-scan hysteresis after the frame start (`slow-hysteresis`, exponential law).
+    SlowHysteresis,
+    /// Sinusoidal vibration (`vibration`).
+    Vibration,
+    /// A sudden lateral tip jump (`tip-change`).
+    TipChange,
+    /// Lateral shift proportional to the terrace height (`height-coupling`, T_fz).
+    HeightCoupling,
+    /// Linear slow↔fast scanner coupling (`scan-coupling`; nearly degenerate with lattice
+    /// rotation + drift, so rarely identifiable from positions).
+    ScanCoupling,
+    /// Drift with a constant jerk (`d = j·t³/6`), beyond the base velocity + acceleration.
+    HigherOrderDrift,
+    /// A smooth time-independent field quadratic in position (local strain / warped lattice).
+    LocalStrain,
+}
+
+impl Candidate {
+    /// Every candidate.
+    pub const ALL: [Candidate; 11] = [
+        Candidate::LineDrift,
+        Candidate::ExponentialCreep,
+        Candidate::SecondCreep,
+        Candidate::AsymmetricHysteresis,
+        Candidate::SlowHysteresis,
+        Candidate::Vibration,
+        Candidate::TipChange,
+        Candidate::HeightCoupling,
+        Candidate::ScanCoupling,
+        Candidate::HigherOrderDrift,
+        Candidate::LocalStrain,
+    ];
+
+    /// Kebab-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Candidate::LineDrift => "line-drift",
+            Candidate::ExponentialCreep => "exponential-creep",
+            Candidate::SecondCreep => "second-creep",
+            Candidate::AsymmetricHysteresis => "asymmetric-hysteresis",
+            Candidate::SlowHysteresis => "slow-hysteresis",
+            Candidate::Vibration => "vibration",
+            Candidate::TipChange => "tip-change",
+            Candidate::HeightCoupling => "height-coupling",
+            Candidate::ScanCoupling => "scan-coupling",
+            Candidate::HigherOrderDrift => "higher-order-drift",
+            Candidate::LocalStrain => "local-strain",
+        }
+    }
+
+    /// The candidate that models a simulator effect entry (`None` for the base model's own
+    /// effects: thermal drift, creep from the frame start, symmetric fast hysteresis).
+    pub fn of_effect(effect: &EffectConfig) -> Option<Candidate> {
+        Some(match effect {
+            EffectConfig::LineDrift(_) => Candidate::LineDrift,
+            EffectConfig::ExponentialCreep(_) => Candidate::ExponentialCreep,
+            EffectConfig::Creep(c) if c.start_s > 0.0 => Candidate::SecondCreep,
+            EffectConfig::AsymmetricHysteresis(_) => Candidate::AsymmetricHysteresis,
+            EffectConfig::SlowHysteresis(_) => Candidate::SlowHysteresis,
+            EffectConfig::Vibration(_) => Candidate::Vibration,
+            EffectConfig::TipChange(_) => Candidate::TipChange,
+            EffectConfig::HeightCoupling(_) => Candidate::HeightCoupling,
+            EffectConfig::ScanCoupling(_) => Candidate::ScanCoupling,
+            _ => return None,
+        })
+    }
+}
+
+impl std::fmt::Display for Candidate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Builds the refit's start model from the screened coefficients of the new columns.
+pub(crate) type Builder = Box<dyn Fn(&[f64]) -> Option<GlobalModel> + Send + Sync>;
+
+/// One starting point of a candidate.
+pub(crate) struct Proposal {
+    pub candidate: Candidate,
+    /// Human-readable shape (e.g. "t = 41.2 s").
+    pub shape: String,
+    /// Weighted columns of the new parameters (rows `[x0, y0, …]`).
+    pub columns: DMatrix<f64>,
+    pub build: Builder,
+    /// Parameters chosen on a grid or free in the refit beyond the columns (for BIC).
+    pub extra_parameters: usize,
+}
+
+/// What the proposals need to know.
+pub(crate) struct Context<'a> {
+    pub model: &'a GlobalModel,
+    pub geometry: &'a ScanGeometry,
+    pub observations: &'a [Observation],
+    pub sigma: [f64; 2],
+    /// Current weighted residuals, `[x0, y0, …]`.
+    pub residuals: &'a [f64],
+}
+
+/// Weighted columns `∂(d/σ)/∂p_j` of a term's parameters in `mask`.
+pub(crate) fn term_columns(
+    term: &dyn ModelTerm,
+    mask: &[bool],
+    ctx: &Context,
+) -> Option<DMatrix<f64>> {
+    let n = ctx.observations.len();
+    let names = term.parameter_names();
+    let p0 = term.parameters();
+    let base = term_displacements(term, ctx.geometry, ctx.observations);
+    let selected: Vec<usize> = (0..p0.len()).filter(|&j| mask[j]).collect();
+    let mut out = DMatrix::zeros(2 * n, selected.len());
+    for (c, &j) in selected.iter().enumerate() {
+        let (value, h) = match transform_of(names[j]) {
+            Transform::Log => (p0[j] * 1e-5f64.exp(), 1e-5),
+            Transform::Linear { typical } => {
+                let h = typical;
+                (p0[j] + h, h)
+            }
+        };
+        let mut p = p0.clone();
+        p[j] = value;
+        let moved = term.with_parameters(&p)?;
+        let d = term_displacements(moved.as_ref(), ctx.geometry, ctx.observations);
+        for i in 0..n {
+            out[(2 * i, c)] = (d[i][0] - base[i][0]) / h / ctx.sigma[0];
+            out[(2 * i + 1, c)] = (d[i][1] - base[i][1]) / h / ctx.sigma[1];
+        }
+    }
+    Some(out)
+}
+
+/// A proposal that appends `term` (or replaces term `replace`), screening the parameters in
+/// `new_mask`.
+fn term_proposal(
+    candidate: Candidate,
+    shape: String,
+    ctx: &Context,
+    term: Term,
+    new_mask: Vec<bool>,
+    replace: Option<usize>,
+    extra_parameters: usize,
+) -> Option<Proposal> {
+    let columns = term_columns(term.effect.as_ref(), &new_mask, ctx)?;
+    let mut model = ctx.model.clone();
+    let index = match replace {
+        Some(k) => {
+            model.terms[k] = term;
+            k
+        }
+        None => {
+            model.terms.push(term);
+            model.terms.len() - 1
+        }
+    };
+    let build: Builder = Box::new(move |coef: &[f64]| {
+        let mut m = model.clone();
+        let t = &mut m.terms[index];
+        let names = t.effect.parameter_names();
+        let mut p = t.effect.parameters();
+        let mut k = 0;
+        for j in 0..p.len() {
+            if new_mask[j] {
+                p[j] = match transform_of(names[j]) {
+                    Transform::Log => p[j] * coef[k].clamp(-5.0, 5.0).exp(),
+                    Transform::Linear { .. } => p[j] + coef[k],
+                };
+                k += 1;
+            }
+        }
+        t.effect = t.effect.with_parameters(&p)?;
+        Some(m)
+    });
+    Some(Proposal {
+        candidate,
+        shape,
+        columns,
+        build,
+        extra_parameters,
+    })
+}
+
+/// Log-spaced values from `lo` to `hi` (inclusive), `count ≥ 2`.
+fn log_grid(lo: f64, hi: f64, count: usize) -> Vec<f64> {
+    (0..count)
+        .map(|k| lo * (hi / lo).powf(k as f64 / (count - 1) as f64))
+        .collect()
+}
+
+/// Every proposal of `candidate` on top of the current model (empty if not applicable).
+pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
+    let g = ctx.geometry;
+    let t_max = ctx
+        .observations
+        .iter()
+        .map(|o| o.time_s)
+        .fold(0.0, f64::max)
+        .max(g.line_period());
+    let sim = |c: EffectConfig| sim_term(&c);
+    let mut out = Vec::new();
+    let mut push = |p: Option<Proposal>| {
+        if let Some(p) = p {
+            out.push(p);
+        }
+    };
+    match candidate {
+        Candidate::LineDrift => {
+            if let Some(e) = sim(EffectConfig::LineDrift(LineDrift {
+                velocity_m_per_s: [0.0, 0.0],
+            })) {
+                push(term_proposal(
+                    candidate,
+                    String::new(),
+                    ctx,
+                    Term::all_free(e, candidate.name()),
+                    vec![true, true],
+                    None,
+                    0,
+                ));
+            }
+        }
+        Candidate::ExponentialCreep => {
+            let taus = log_grid(2.0 * g.line_period(), 0.5 * t_max, 8);
+            for &tau in &taus {
+                for k in 0..16 {
+                    let start = t_max * k as f64 / 16.0;
+                    if start + tau > t_max {
+                        continue;
+                    }
+                    if let Some(e) = sim(EffectConfig::ExponentialCreep(ExponentialCreep {
+                        amplitude_m: [0.0, 0.0],
+                        time_constant_s: tau,
+                        start_s: start,
+                    })) {
+                        push(term_proposal(
+                            candidate,
+                            format!("τ = {tau:.3} s, start = {start:.2} s"),
+                            ctx,
+                            Term::new(e, vec![true, true, true, true], candidate.name()),
+                            vec![true, true, false, false],
+                            None,
+                            2,
+                        ));
+                    }
+                }
+            }
+        }
+        Candidate::SecondCreep => {
+            let t0s = log_grid(g.line_period(), 0.2 * t_max, 6);
+            for &t0 in &t0s {
+                for k in 1..16 {
+                    let start = t_max * k as f64 / 16.0;
+                    if let Some(e) = sim(EffectConfig::Creep(LogCreep {
+                        coefficient_m: [0.0, 0.0],
+                        t0_s: t0,
+                        start_s: start,
+                    })) {
+                        push(term_proposal(
+                            candidate,
+                            format!("t0 = {t0:.3} s, start = {start:.2} s"),
+                            ctx,
+                            Term::new(e, vec![true, true, true, true], candidate.name()),
+                            vec![true, true, false, false],
+                            None,
+                            2,
+                        ));
+                    }
+                }
+            }
+        }
+        Candidate::AsymmetricHysteresis => {
+            let found = ctx
+                .model
+                .terms
+                .iter()
+                .position(|t| t.effect.name() == "fast-hysteresis");
+            if let Some(k) = found
+                && let Some(EffectConfig::FastHysteresis(h)) = ctx.model.terms[k].effect.config()
+                && let Some(e) = sim(EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis {
+                    trace: h.law.clone(),
+                    retrace: h.law.clone(),
+                }))
+            {
+                let n = h.law.parameter_count();
+                let mut mask = vec![false; n];
+                mask.extend(vec![true; n]);
+                push(term_proposal(
+                    candidate,
+                    String::new(),
+                    ctx,
+                    Term::all_free(e, candidate.name()),
+                    mask,
+                    Some(k),
+                    0,
+                ));
+            }
+        }
+        Candidate::SlowHysteresis => {
+            for tau in log_grid(2.0 * g.line_period(), 0.3 * t_max, 8) {
+                if let Some(e) = sim(EffectConfig::SlowHysteresis(SlowScanHysteresis {
+                    law: HysteresisLaw::Exponential {
+                        amplitude: 0.0,
+                        time_constant_s: tau,
+                    },
+                })) {
+                    push(term_proposal(
+                        candidate,
+                        format!("τ = {tau:.3} s"),
+                        ctx,
+                        Term::all_free(e, candidate.name()),
+                        vec![true, false],
+                        None,
+                        1,
+                    ));
+                }
+            }
+        }
+        Candidate::Vibration => {
+            for f in periodogram_peaks(ctx.observations, ctx.residuals, 5) {
+                push(vibration_proposal(ctx, f));
+            }
+        }
+        Candidate::TipChange => {
+            // Every half-line start, then refined to the feature times around the best.
+            let step = g.line_period();
+            let mut t = step;
+            while t < t_max {
+                push(tip_proposal(ctx, t));
+                t += step;
+            }
+        }
+        Candidate::HeightCoupling => {
+            let spread = ctx
+                .observations
+                .iter()
+                .map(|o| o.terrace_height_m)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
+                    (lo.min(z), hi.max(z))
+                });
+            if spread.1 - spread.0 > 0.0
+                && let Some(e) = sim(EffectConfig::HeightCoupling(HeightCoupling {
+                    lateral_per_height: [0.0, 0.0],
+                }))
+            {
+                push(term_proposal(
+                    candidate,
+                    String::new(),
+                    ctx,
+                    Term::all_free(e, candidate.name()),
+                    vec![true, true],
+                    None,
+                    0,
+                ));
+            }
+        }
+        Candidate::ScanCoupling => {
+            if let Some(e) = sim(EffectConfig::ScanCoupling(ScanCoupling {
+                slow_to_fast: 0.0,
+                fast_to_slow: 0.0,
+            })) {
+                push(term_proposal(
+                    candidate,
+                    String::new(),
+                    ctx,
+                    Term::all_free(e, candidate.name()),
+                    vec![true, true],
+                    None,
+                    0,
+                ));
+            }
+        }
+        Candidate::HigherOrderDrift => {
+            let e = Box::new(CubicDrift {
+                jerk_m_per_s3: [0.0, 0.0],
+            });
+            push(term_proposal(
+                candidate,
+                String::new(),
+                ctx,
+                Term::all_free(e, candidate.name()),
+                vec![true, true],
+                None,
+                0,
+            ));
+        }
+        Candidate::LocalStrain => {
+            let e = Box::new(QuadraticField {
+                coefficients_m: [0.0; 6],
+            });
+            push(term_proposal(
+                candidate,
+                String::new(),
+                ctx,
+                Term::all_free(e, candidate.name()),
+                vec![true; 6],
+                None,
+                0,
+            ));
+        }
+    }
+    out
+}
+
+/// A tip change at `t` (s since frame start): jump free, time fixed.
+pub(crate) fn tip_proposal(ctx: &Context, t: f64) -> Option<Proposal> {
+    let e = sim_term(&EffectConfig::TipChange(TipChange {
+        time_s: t,
+        jump_m: [0.0, 0.0],
+        height_offset_m: 0.0,
+        contrast: 1.0,
+    }))?;
+    let mask = vec![false, true, true, false, false];
+    term_proposal(
+        Candidate::TipChange,
+        format!("t = {t:.3} s"),
+        ctx,
+        Term::new(e, mask.clone(), Candidate::TipChange.name()),
+        mask,
+        None,
+        1,
+    )
+}
+
+/// Vibration at `f` Hz: the screening columns are `sin`, `cos` per axis; the refit frees the
+/// frequency, amplitudes and phases.
+fn vibration_proposal(ctx: &Context, f: f64) -> Option<Proposal> {
+    let n = ctx.observations.len();
+    let mut columns = DMatrix::zeros(2 * n, 4);
+    let w = std::f64::consts::TAU * f;
+    for (i, o) in ctx.observations.iter().enumerate() {
+        let (s, c) = (w * o.time_s).sin_cos();
+        columns[(2 * i, 0)] = s * 1e-11 / ctx.sigma[0];
+        columns[(2 * i, 1)] = c * 1e-11 / ctx.sigma[0];
+        columns[(2 * i + 1, 2)] = s * 1e-11 / ctx.sigma[1];
+        columns[(2 * i + 1, 3)] = c * 1e-11 / ctx.sigma[1];
+    }
+    let model = ctx.model.clone();
+    let build: Builder = Box::new(move |coef: &[f64]| {
+        let amp = |a: f64, b: f64| (1e-11 * a.hypot(b), b.atan2(a));
+        let (ax, px) = amp(coef[0], coef[1]);
+        let (ay, py) = amp(coef[2], coef[3]);
+        let e = sim_term(&EffectConfig::Vibration(Vibration {
+            frequency_hz: f,
+            amplitude_m: [ax, ay],
+            phase_rad: [px, py],
+        }))?;
+        let mut m = model.clone();
+        m.terms
+            .push(Term::all_free(e, Candidate::Vibration.name()));
+        Some(m)
+    });
+    Some(Proposal {
+        candidate: Candidate::Vibration,
+        shape: format!("f = {f:.4} Hz"),
+        columns,
+        build,
+        extra_parameters: 1,
+    })
+}

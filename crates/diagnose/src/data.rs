@@ -1,0 +1,223 @@
+//! Observations: the features of a trace/retrace pair with their times, their lattice
+//! indices and the base DHCT "sim" prediction.
+//!
+//! The base stage runs [`dhct_distortion::analyse`] (the local-distortion DHCT fit), moves
+//! every feature to the sample frame, fits the lattice to the corrected features
+//! ([`dhct_lattice::fit_lattice`]) so that each feature gets its ideal site, and pushes the
+//! ideal site back through the fitted distortion: the predicted controller position solves
+//! `p + d(t(p), pass) = site` (Newton in pixels). The gap of that "sim" is
+//! `measured − predicted` in the controller frame.
+
+use dhct_distortion::{DhctOptions, DistortionModel, PassInput, analyse, correct_features};
+use dhct_features::Feature;
+use dhct_lattice::{Lattice, LatticeFit, LatticeFitOptions, fit_lattice};
+use dhct_scan::{ScanGeometry, ScanPass};
+use serde::{Deserialize, Serialize};
+
+use crate::DiagnoseError;
+
+/// Minimum number of indexed features for a diagnosis.
+pub const MIN_FEATURES: usize = 40;
+
+/// One feature as the diagnosis sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Observation {
+    /// Index of the feature set it came from (order of the input).
+    pub set: usize,
+    /// Index of the feature within its set.
+    pub index: usize,
+    /// Trace or retrace.
+    pub pass: ScanPass,
+    /// Measured controller position, metres (display frame).
+    pub controller_m: [f64; 2],
+    /// Seconds since frame start.
+    pub time_s: f64,
+    /// Seconds since the start of the feature's line (its own pass).
+    pub line_time_s: f64,
+    /// Local terrace level (the feature fit's background `z0` minus its median), metres.
+    pub terrace_height_m: f64,
+    /// Apparent feature height (signed amplitude), z units.
+    pub apparent_height: f64,
+    /// 1σ position uncertainty from the feature fit, metres `[x, y]`.
+    pub fit_sigma_m: [f64; 2],
+    /// Lattice indices `(n, m, site)`.
+    pub indices: (i64, i64, usize),
+    /// Ideal lattice vector `n·a1 + m·a2 + f_site`, metres, lattice frame (unrotated).
+    pub lattice_vector_m: [f64; 2],
+}
+
+/// Result of the base stage.
+#[derive(Debug, Clone)]
+pub(crate) struct Prepared {
+    pub observations: Vec<Observation>,
+    pub dhct_model: DistortionModel,
+    pub lattice_fit: LatticeFit,
+    /// Controller-frame gap of the DHCT sim, metres, per observation.
+    pub dhct_gap: Vec<[f64; 2]>,
+    /// Features dropped: not indexed or farther than the deviation limit from their site.
+    pub unindexed: usize,
+    pub input_features: usize,
+}
+
+fn check(sets: &[&[Feature]]) -> Result<(), DiagnoseError> {
+    for (s, set) in sets.iter().enumerate() {
+        for (i, f) in set.iter().enumerate() {
+            let bad = |what| DiagnoseError::NotFinite {
+                set: s,
+                index: i,
+                what,
+            };
+            if !(f.x_px.is_finite() && f.y_px.is_finite()) {
+                return Err(bad("position"));
+            }
+            if !(f.time_s.is_finite() && f.line_time_s.is_finite()) {
+                return Err(bad("acquisition time"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Solves `p + d(p) = target` for the controller pixel position `p` of `pass`.
+pub(crate) fn predict_controller(
+    model: &DistortionModel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    target_m: [f64; 2],
+    start_px: [f64; 2],
+) -> [f64; 2] {
+    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+    let f = |u: [f64; 2]| {
+        let s = model.to_sample(geometry, pass, u[0], u[1]);
+        [(s[0] - target_m[0]) / px, (s[1] - target_m[1]) / py]
+    };
+    let mut u = start_px;
+    for _ in 0..20 {
+        let r = f(u);
+        if r[0].hypot(r[1]) < 1e-7 {
+            break;
+        }
+        let h = 1e-3;
+        let rx = f([u[0] + h, u[1]]);
+        let ry = f([u[0], u[1] + h]);
+        let (a, b, c, d) = (
+            (rx[0] - r[0]) / h,
+            (ry[0] - r[0]) / h,
+            (rx[1] - r[1]) / h,
+            (ry[1] - r[1]) / h,
+        );
+        let det = a * d - b * c;
+        if det.abs() < 1e-12 {
+            break;
+        }
+        u = [
+            u[0] - (d * r[0] - b * r[1]) / det,
+            u[1] - (-c * r[0] + a * r[1]) / det,
+        ];
+    }
+    [u[0] * px, u[1] * py]
+}
+
+/// Runs the base stage on `sets` (controller frame, each of one pass).
+pub(crate) fn prepare(
+    sets: &[&[Feature]],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    dhct: &DhctOptions,
+    max_deviation_fraction: f64,
+) -> Result<Prepared, DiagnoseError> {
+    check(sets)?;
+    let sets: Vec<&[Feature]> = sets.iter().copied().filter(|s| !s.is_empty()).collect();
+    let input_features: usize = sets.iter().map(|s| s.len()).sum();
+    if input_features < MIN_FEATURES {
+        return Err(DiagnoseError::TooFewFeatures {
+            what: "diagnosis",
+            found: input_features,
+            needed: MIN_FEATURES,
+        });
+    }
+    let inputs: Vec<PassInput> = sets
+        .iter()
+        .map(|s| PassInput {
+            features: s,
+            mask: None,
+        })
+        .collect();
+    let result = analyse(&inputs, geometry, lattice, dhct)?;
+    let model = result.model;
+    let corrected: Vec<Vec<[f64; 2]>> = sets
+        .iter()
+        .map(|s| {
+            correct_features(&model, geometry, s)
+                .iter()
+                .map(|c| [c.x_m, c.y_m])
+                .collect()
+        })
+        .collect();
+    let refs: Vec<&[[f64; 2]]> = corrected.iter().map(|c| c.as_slice()).collect();
+    let fit = fit_lattice(lattice, &refs, &LatticeFitOptions::default())?;
+    let nn = lattice.nearest_neighbour_distance() * fit.scale[0].abs().max(fit.scale[1].abs());
+    let mut z0: Vec<f64> = sets
+        .iter()
+        .flat_map(|s| s.iter().map(|f| f.z0))
+        .filter(|v| v.is_finite())
+        .collect();
+    z0.sort_by(f64::total_cmp);
+    let z0_median = z0.get(z0.len() / 2).copied().unwrap_or(0.0);
+    let [a1, a2] = lattice.primitive_vectors();
+    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+    let mut observations = Vec::new();
+    let mut dhct_gap = Vec::new();
+    let mut unindexed = 0;
+    for (s, set) in sets.iter().enumerate() {
+        for (i, f) in set.iter().enumerate() {
+            let Some(p) = fit.points.get(s).and_then(|pts| pts.get(i)) else {
+                unindexed += 1;
+                continue;
+            };
+            if p.deviation_m[0].hypot(p.deviation_m[1]) > max_deviation_fraction * nn {
+                unindexed += 1;
+                continue;
+            }
+            let x = a1 * p.n as f64 + a2 * p.m as f64 + lattice.site_position(p.site);
+            let site = fit.site_position(lattice, p.n, p.m, p.site, 0);
+            let predicted = predict_controller(&model, geometry, f.pass, site, [f.x_px, f.y_px]);
+            dhct_gap.push([f.x_px * px - predicted[0], f.y_px * py - predicted[1]]);
+            let sigma = |v: f64, pitch: f64| {
+                if v.is_finite() && v > 0.0 {
+                    v * pitch
+                } else {
+                    f64::NAN
+                }
+            };
+            observations.push(Observation {
+                set: s,
+                index: i,
+                pass: f.pass,
+                controller_m: [f.x_px * px, f.y_px * py],
+                time_s: f.time_s,
+                line_time_s: f.line_time_s,
+                terrace_height_m: if f.z0.is_finite() { f.z0 - z0_median } else { 0.0 },
+                apparent_height: f.height,
+                fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
+                indices: (p.n, p.m, p.site),
+                lattice_vector_m: [x.x, x.y],
+            });
+        }
+    }
+    if observations.len() < MIN_FEATURES {
+        return Err(DiagnoseError::TooFewFeatures {
+            what: "diagnosis (indexed features)",
+            found: observations.len(),
+            needed: MIN_FEATURES,
+        });
+    }
+    Ok(Prepared {
+        observations,
+        dhct_model: model,
+        lattice_fit: fit,
+        dhct_gap,
+        unindexed,
+        input_features,
+    })
+}

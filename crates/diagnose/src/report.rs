@@ -1,0 +1,280 @@
+//! The serialisable diagnosis report and its text form.
+
+use std::fmt;
+
+use dhct_scan::ScanPass;
+use serde::{Deserialize, Serialize};
+
+use crate::candidates::Candidate;
+use crate::fit::FittedParameter;
+use crate::location::GapLocation;
+use crate::noise::NoiseFloor;
+use crate::select::CandidateScore;
+
+/// Size of a gap relative to the noise floor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GapSummary {
+    /// RMS residual per axis, metres.
+    pub rms_m: [f64; 2],
+    /// `√(χ²/2N)`: RMS residual in units of the noise floor (1 = at the floor).
+    pub gap_to_noise: f64,
+    /// `Σ (r_x/σ_x)² + (r_y/σ_y)²`.
+    pub chi2: f64,
+    /// χ² over the degrees of freedom `2N − p`.
+    pub chi2_per_dof: f64,
+    /// `2N − p`.
+    pub dof: usize,
+}
+
+impl GapSummary {
+    pub(crate) fn of(residuals: &[[f64; 2]], sigma: [f64; 2], parameters: usize) -> GapSummary {
+        let n = residuals.len().max(1) as f64;
+        let mut sq = [0.0; 2];
+        let mut chi2 = 0.0;
+        for r in residuals {
+            sq[0] += r[0] * r[0] / n;
+            sq[1] += r[1] * r[1] / n;
+            chi2 += (r[0] / sigma[0]).powi(2) + (r[1] / sigma[1]).powi(2);
+        }
+        let dof = (2 * residuals.len()).saturating_sub(parameters).max(1);
+        GapSummary {
+            rms_m: [sq[0].sqrt(), sq[1].sqrt()],
+            gap_to_noise: (chi2 / (2.0 * n)).sqrt(),
+            chi2,
+            chi2_per_dof: chi2 / dof as f64,
+            dof,
+        }
+    }
+}
+
+/// A fitted position-level model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelSummary {
+    /// Terms, in order (e.g. `thermal-drift`, `creep`, `fast-hysteresis`, `tip-change`).
+    pub terms: Vec<String>,
+    /// Every term parameter with its 1σ uncertainty (SI, the simulator's names).
+    pub parameters: Vec<FittedParameter>,
+    /// Lattice origin, metres (sample frame).
+    pub lattice_origin_m: [f64; 2],
+    /// Lattice rotation, radians.
+    pub lattice_angle_rad: f64,
+    /// Lattice scales `[s_x, s_y]` (1 = nominal; fixed unless `fit_lattice_scale`).
+    pub lattice_scale: [f64; 2],
+    /// Its gap.
+    pub gap: GapSummary,
+}
+
+/// One greedy round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GreedyRound {
+    /// Every candidate's score, best first (passing ones first).
+    pub scores: Vec<CandidateScore>,
+    /// The effect added in this round, if any passed.
+    pub accepted: Option<Candidate>,
+}
+
+/// An effect added to the model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AddedEffect {
+    /// Which.
+    pub candidate: Candidate,
+    /// Grid shape it started from.
+    pub shape: String,
+    /// Its fitted parameters with uncertainties (SI).
+    pub parameters: Vec<FittedParameter>,
+    /// Gap after adding it (and everything before it).
+    pub gap_after: GapSummary,
+}
+
+/// How far the gap shrinks (gap/noise ratios).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Shrink {
+    /// Base model (position-level fit).
+    pub before: f64,
+    /// The top-ranked candidate of round 1 (whether or not accepted).
+    pub top: Option<Candidate>,
+    /// Gap with it.
+    pub after_top: Option<f64>,
+    /// After the accepted greedy set.
+    pub after_greedy: f64,
+}
+
+/// One feature's residuals, for plots.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FeatureResidual {
+    /// Input set and index of the feature.
+    pub set: usize,
+    /// Index within its set.
+    pub index: usize,
+    /// Its pass.
+    pub pass: ScanPass,
+    /// Seconds since frame start.
+    pub time_s: f64,
+    /// Seconds since line start.
+    pub line_time_s: f64,
+    /// Measured controller position, metres.
+    pub controller_m: [f64; 2],
+    /// Controller-frame gap of the DHCT sim, `measured − predicted`, metres.
+    pub dhct_gap_m: [f64; 2],
+    /// Residual of the position-level base fit, metres.
+    pub base_m: [f64; 2],
+    /// Residual of the final model, metres.
+    pub final_m: [f64; 2],
+    /// Rejected as an outlier (not used in the fits).
+    pub outlier: bool,
+}
+
+/// Everything the diagnosis found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisReport {
+    /// Features given.
+    pub features_in: usize,
+    /// Features indexed and used.
+    pub features_used: usize,
+    /// Features not indexed (or too far from any lattice site).
+    pub unindexed: usize,
+    /// Features dropped as outliers of the base fit.
+    pub outliers: usize,
+    /// The noise floor.
+    pub noise: NoiseFloor,
+    /// Gap of the base DHCT sim (local-distortion fit, controller frame).
+    pub dhct: GapSummary,
+    /// The position-level base model (drift + creep + hysteresis + lattice).
+    pub base: ModelSummary,
+    /// Where the base gap lies.
+    pub location: Option<GapLocation>,
+    /// The greedy rounds.
+    pub rounds: Vec<GreedyRound>,
+    /// Effects added, in order.
+    pub added: Vec<AddedEffect>,
+    /// Gap before and after.
+    pub shrink: Shrink,
+    /// The final model.
+    pub final_model: ModelSummary,
+    /// Where the final gap lies.
+    pub final_location: Option<GapLocation>,
+    /// Per-feature residuals.
+    pub residuals: Vec<FeatureResidual>,
+}
+
+impl DiagnosisReport {
+    /// The effects added, in order.
+    pub fn identified(&self) -> Vec<Candidate> {
+        self.added.iter().map(|a| a.candidate).collect()
+    }
+
+    /// The top-ranked candidate of the first round, if it passed.
+    pub fn top(&self) -> Option<Candidate> {
+        self.added.first().map(|a| a.candidate)
+    }
+
+    /// JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    }
+}
+
+fn pm(v: f64) -> String {
+    format!("{:.2}", v * 1e12)
+}
+
+impl fmt::Display for DiagnosisReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "features: {} in, {} used, {} not indexed, {} outliers",
+            self.features_in, self.features_used, self.unindexed, self.outliers
+        )?;
+        let n = &self.noise;
+        writeln!(
+            f,
+            "noise floor: {} × {} pm (successive differences, {} pairs); trace/retrace {}; fit σ {}",
+            pm(n.sigma_m[0]),
+            pm(n.sigma_m[1]),
+            n.successive_pairs,
+            n.trace_retrace_m
+                .map_or("—".into(), |s| format!("{} × {} pm", pm(s[0]), pm(s[1]))),
+            n.fit_uncertainty_m
+                .map_or("—".into(), |s| format!("{} × {} pm", pm(s[0]), pm(s[1]))),
+        )?;
+        let g = |s: &GapSummary| {
+            format!(
+                "rms {} × {} pm, gap/noise {:.2}, χ²/dof {:.2}",
+                pm(s.rms_m[0]),
+                pm(s.rms_m[1]),
+                s.gap_to_noise,
+                s.chi2_per_dof
+            )
+        };
+        writeln!(f, "DHCT sim gap (controller frame): {}", g(&self.dhct))?;
+        writeln!(f, "base position-level fit:        {}", g(&self.base.gap))?;
+        if let Some(loc) = &self.location {
+            writeln!(f, "where the base gap concentrates:")?;
+            for b in loc.hot_spots.iter().take(6) {
+                writeln!(
+                    f,
+                    "  {:<28} n={:<5} χ²/dof {:.2} (z {:.1}), mean ({}, {}) pm",
+                    b.label,
+                    b.count,
+                    b.chi2_per_dof,
+                    b.excess_z,
+                    pm(b.mean_m[0]),
+                    pm(b.mean_m[1])
+                )?;
+            }
+            if let Some(p) = loc.spectrum.peaks.first() {
+                writeln!(
+                    f,
+                    "  strongest spectral peak {:.4} Hz, power {:.1}, false-alarm p {:.2e}",
+                    p.frequency_hz, p.power, p.false_alarm_probability
+                )?;
+            }
+            for c in &loc.change_points {
+                writeln!(
+                    f,
+                    "  jump at {:.2} s: ({}, {}) pm, statistic {:.0}",
+                    c.time_s,
+                    pm(c.jump_m[0]),
+                    pm(c.jump_m[1]),
+                    c.statistic
+                )?;
+            }
+        }
+        for (k, r) in self.rounds.iter().enumerate() {
+            writeln!(f, "round {}: {:<22} {:>9} {:>9} {:>8} {:>6} pass", k + 1, "candidate", "Δχ²", "ΔBIC", "CV ratio", "refit")?;
+            for s in &r.scores {
+                writeln!(
+                    f,
+                    "         {:<22} {:>9.1} {:>9.1} {:>8.4} {:>6} {}",
+                    s.candidate.name(),
+                    s.delta_chi2,
+                    s.delta_bic,
+                    s.cv_ratio,
+                    if s.refitted { "yes" } else { "no" },
+                    if s.passes { "yes" } else { "no" }
+                )?;
+            }
+        }
+        if self.added.is_empty() {
+            writeln!(f, "verdict: no unmodelled effect needed")?;
+        }
+        for a in &self.added {
+            writeln!(f, "added {} ({}): {}", a.candidate, a.shape, g(&a.gap_after))?;
+            for p in &a.parameters {
+                match p.sigma {
+                    Some(s) => writeln!(f, "    {} = {:.4e} ± {:.1e}", p.name, p.value, s)?,
+                    None => writeln!(f, "    {} = {:.4e} (fixed)", p.name, p.value)?,
+                }
+            }
+        }
+        let s = &self.shrink;
+        writeln!(
+            f,
+            "gap/noise: before {:.2}, after top ({}) {}, after greedy set {:.2}",
+            s.before,
+            s.top.map_or("—".to_string(), |c| c.to_string()),
+            s.after_top.map_or("—".to_string(), |v| format!("{v:.2}")),
+            s.after_greedy
+        )
+    }
+}

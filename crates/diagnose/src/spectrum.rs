@@ -1,0 +1,169 @@
+//! Residual spectrum vs acquisition time: a Lomb–Scargle periodogram of the weighted
+//! residuals (unevenly sampled: features are acquired at irregular times), both axes
+//! summed, as the χ² reduction of fitting one sinusoid per axis (≈ χ²₄ under pure noise).
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::Observation;
+
+/// The periodogram of the residuals.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Spectrum {
+    /// Frequencies, Hz (max-pooled to at most ~2000 points for plotting).
+    pub frequency_hz: Vec<f64>,
+    /// χ² reduction of one sinusoid per axis at each frequency (dimensionless).
+    pub power: Vec<f64>,
+    /// The strongest peaks, highest first.
+    pub peaks: Vec<SpectralPeak>,
+    /// Number of frequencies searched.
+    pub searched: usize,
+}
+
+/// A peak of the periodogram.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SpectralPeak {
+    /// Hz.
+    pub frequency_hz: f64,
+    /// χ² reduction.
+    pub power: f64,
+    /// Probability that noise alone gives a peak this high anywhere in the searched band.
+    pub false_alarm_probability: f64,
+}
+
+/// Frequency grid: from 2/T to half the inverse median spacing of consecutive times,
+/// oversampled ×2, at most 12 000 points.
+fn grid(observations: &[Observation]) -> Option<(f64, f64, usize)> {
+    let mut t: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
+    t.sort_by(f64::total_cmp);
+    let span = t.last()? - t.first()?;
+    if span <= 0.0 || t.len() < 8 {
+        return None;
+    }
+    let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    let dt = crate::noise::median(&mut gaps);
+    let f_max = 0.5 / dt;
+    let f0 = 2.0 / span;
+    let mut df = 1.0 / (2.0 * span);
+    let mut count = ((f_max - f0) / df).ceil() as usize;
+    if count > 12_000 {
+        df = (f_max - f0) / 12_000.0;
+        count = 12_000;
+    }
+    (count >= 2).then_some((f0, df, count))
+}
+
+/// Power at every grid frequency; `weighted` = `[x0, y0, x1, y1, …]`.
+pub(crate) fn periodogram(observations: &[Observation], weighted: &[f64]) -> Vec<(f64, f64)> {
+    let Some((f0, df, count)) = grid(observations) else {
+        return Vec::new();
+    };
+    let n = observations.len() as f64;
+    let mean = |axis: usize| {
+        (0..observations.len())
+            .map(|i| weighted[2 * i + axis])
+            .sum::<f64>()
+            / n
+    };
+    let (mx, my) = (mean(0), mean(1));
+    // Σ r cos θ, Σ r sin θ per axis and Σ cos 2θ, Σ sin 2θ, by phasor recurrence.
+    let mut acc = vec![[0.0f64; 6]; count];
+    for (i, o) in observations.iter().enumerate() {
+        let (rx, ry) = (weighted[2 * i] - mx, weighted[2 * i + 1] - my);
+        let theta0 = std::f64::consts::TAU * f0 * o.time_s;
+        let dtheta = std::f64::consts::TAU * df * o.time_s;
+        let (mut s, mut c) = theta0.sin_cos();
+        let (ds, dc) = dtheta.sin_cos();
+        for (k, a) in acc.iter_mut().enumerate() {
+            if k % 256 == 0 && k > 0 {
+                // Re-anchor to stop rounding drift.
+                let (s2, c2) = (theta0 + k as f64 * dtheta).sin_cos();
+                s = s2;
+                c = c2;
+            }
+            a[0] += rx * c;
+            a[1] += rx * s;
+            a[2] += ry * c;
+            a[3] += ry * s;
+            a[4] += c * c - s * s;
+            a[5] += 2.0 * s * c;
+            let ns = s * dc + c * ds;
+            c = c * dc - s * ds;
+            s = ns;
+        }
+    }
+    acc.iter()
+        .enumerate()
+        .map(|(k, a)| {
+            let f = f0 + k as f64 * df;
+            let two_wt = a[5].atan2(a[4]);
+            let (st, ct) = (0.5 * two_wt).sin_cos();
+            let c2 = a[4] * two_wt.cos() + a[5] * two_wt.sin();
+            let cc = (0.5 * (n + c2)).max(1e-9);
+            let ss = (0.5 * (n - c2)).max(1e-9);
+            let axis = |rc: f64, rs: f64| {
+                let p = ct * rc + st * rs;
+                let q = ct * rs - st * rc;
+                p * p / cc + q * q / ss
+            };
+            (f, axis(a[0], a[1]) + axis(a[2], a[3]))
+        })
+        .collect()
+}
+
+fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..p.len())
+        .filter(|&k| {
+            (k == 0 || p[k].1 >= p[k - 1].1) && (k + 1 == p.len() || p[k].1 >= p[k + 1].1)
+        })
+        .collect();
+    idx.sort_by(|&a, &b| p[b].1.total_cmp(&p[a].1));
+    idx.truncate(count);
+    idx
+}
+
+/// Frequencies (Hz) of the `count` highest periodogram peaks.
+pub(crate) fn periodogram_peaks(
+    observations: &[Observation],
+    weighted: &[f64],
+    count: usize,
+) -> Vec<f64> {
+    let p = periodogram(observations, weighted);
+    local_maxima(&p, count).into_iter().map(|k| p[k].0).collect()
+}
+
+/// The report's spectrum.
+pub(crate) fn spectrum(observations: &[Observation], weighted: &[f64]) -> Spectrum {
+    let p = periodogram(observations, weighted);
+    let searched = p.len();
+    // Independent frequencies ≈ half the oversampled grid.
+    let m = (searched as f64 / 2.0).max(1.0);
+    let peaks = local_maxima(&p, 5)
+        .into_iter()
+        .map(|k| {
+            let z = p[k].1;
+            // χ²₄ survival: e^(−z/2)(1 + z/2).
+            let single = (-z / 2.0).exp() * (1.0 + z / 2.0);
+            SpectralPeak {
+                frequency_hz: p[k].0,
+                power: z,
+                false_alarm_probability: (1.0 - (1.0 - single).powf(m)).clamp(0.0, 1.0),
+            }
+        })
+        .collect();
+    let pool = searched.div_ceil(2000).max(1);
+    let (frequency_hz, power) = p
+        .chunks(pool)
+        .map(|c| {
+            let best = c.iter().cloned().fold((0.0, f64::NEG_INFINITY), |a, b| {
+                if b.1 > a.1 { b } else { a }
+            });
+            best
+        })
+        .unzip();
+    Spectrum {
+        frequency_hz,
+        power,
+        peaks,
+        searched,
+    }
+}

@@ -1,0 +1,394 @@
+//! Simulated scans for validation: realistic base distortion (drift, acceleration, creep,
+//! power-law fast hysteresis, randomised per seed) plus chosen extra effects.
+//!
+//! Two paths:
+//! * [`simulate_positions`] (fast, used for the large sweep): the simulator's own
+//!   displacement ([`dhct_simulate::raster::Displacer`]) and feature location
+//!   ([`dhct_simulate::truth::locate`]) give every lattice site's true controller position
+//!   in trace and retrace; Gaussian localisation noise of `noise_m` per axis is added and
+//!   the acquisition time is taken at the noisy position, as the feature finder does.
+//! * [`simulate_images`]: the full chain — rendered trace/retrace images with noise, then
+//!   [`dhct_features::find_features_in_pair`].
+
+use dhct_features::{Feature, FeatureOptions, FitStatus, find_features_in_pair};
+use dhct_scan::{ScanDirection, ScanGeometry, ScanPass};
+use dhct_simulate::effects::{
+    AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, HysteresisLaw,
+    LineDrift, LogCreep, ScanCoupling, SlowScanHysteresis, ThermalDrift, TipChange, Vibration,
+};
+use dhct_simulate::raster::Displacer;
+use dhct_simulate::surface::Terrace;
+use dhct_simulate::truth::locate;
+use dhct_simulate::{
+    EffectConfig, Effect, NoiseConfig, ScanConfig, Simulation, SimulationConfig, StepEdge, presets,
+};
+use nalgebra::Vector2;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::{Candidate, DiagnoseError};
+
+/// One validation scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValidationCase {
+    /// Short name, e.g. `"tip-change #3"`.
+    pub name: String,
+    /// The withheld effects (empty = effect-free).
+    pub truth: Vec<Candidate>,
+    /// The simulation.
+    pub config: SimulationConfig,
+    /// Whether it belongs to the held-out set (seeds and magnitudes never tuned on).
+    pub held_out: bool,
+}
+
+fn sign(rng: &mut ChaCha8Rng) -> f64 {
+    if rng.random::<bool>() { 1.0 } else { -1.0 }
+}
+
+fn uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+    lo + (hi - lo) * rng.random::<f64>()
+}
+
+/// The base scan: graphite, 384 × 384 px over 6 nm, 50 nm/s (line 0.12 s, frame 92 s),
+/// randomised drift (2–10 pm/s), acceleration, creep (C 0.05–0.3 nm, t0 10–40 s) and
+/// hysteresis (`S = k·τ^n`, k 0.93–0.97, n −0.04…−0.02), random lattice angle.
+pub fn base_config(seed: u64) -> SimulationConfig {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1A6);
+    let mut config = presets::ci_small();
+    config.name = format!("validation-{seed}");
+    config.seed = seed;
+    config.scan = ScanConfig {
+        columns: 384,
+        rows: 384,
+        width_m: 6e-9,
+        height_m: 6e-9,
+        fast_speed_m_per_s: 50e-9,
+        turnaround_s: 0.0,
+        trace_fast: ScanDirection::Right,
+        slow: ScanDirection::Down,
+    };
+    config.surface.angle_rad = uniform(&mut rng, 0.0, std::f64::consts::FRAC_PI_3);
+    config.surface.origin_m = [uniform(&mut rng, 0.0, 2e-10), uniform(&mut rng, 0.0, 2e-10)];
+    let mut v = || sign(&mut rng) * uniform(&mut rng, 2e-12, 10e-12);
+    let velocity = [v(), v()];
+    let acceleration = [
+        sign(&mut rng) * uniform(&mut rng, 0.0, 2e-15),
+        sign(&mut rng) * uniform(&mut rng, 0.0, 2e-15),
+    ];
+    let creep = [
+        sign(&mut rng) * uniform(&mut rng, 0.05e-9, 0.3e-9),
+        sign(&mut rng) * uniform(&mut rng, 0.05e-9, 0.3e-9),
+    ];
+    config.effects = vec![
+        EffectConfig::ThermalDrift(ThermalDrift {
+            velocity_m_per_s: velocity,
+            acceleration_m_per_s2: acceleration,
+        }),
+        EffectConfig::Creep(LogCreep {
+            coefficient_m: creep,
+            t0_s: uniform(&mut rng, 10.0, 40.0),
+            start_s: 0.0,
+        }),
+        EffectConfig::FastHysteresis(FastScanHysteresis {
+            law: HysteresisLaw::Power {
+                k: uniform(&mut rng, 0.93, 0.97),
+                n: uniform(&mut rng, -0.04, -0.02),
+            },
+        }),
+    ];
+    config.noise = NoiseConfig {
+        white_sigma_m: 2e-12,
+        ..NoiseConfig::default()
+    };
+    config
+}
+
+/// Magnitude factor: tuned 0.8–1.2; held out 0.6–0.8 or 1.2–1.6.
+fn magnitude(rng: &mut ChaCha8Rng, held_out: bool) -> f64 {
+    if held_out {
+        if rng.random::<bool>() {
+            uniform(rng, 0.6, 0.8)
+        } else {
+            uniform(rng, 1.2, 1.6)
+        }
+    } else {
+        uniform(rng, 0.8, 1.2)
+    }
+}
+
+/// Adds `candidate`'s effect to `config` (magnitudes from `rng`); `false` if it has no
+/// simulator effect (higher-order drift, local strain).
+fn add_effect(
+    config: &mut SimulationConfig,
+    candidate: Candidate,
+    rng: &mut ChaCha8Rng,
+    held_out: bool,
+) -> bool {
+    let m = magnitude(rng, held_out);
+    let frame = 2.0 * config.scan.rows as f64 * config.scan.width_m / config.scan.fast_speed_m_per_s;
+    let base_law = config.effects.iter().find_map(|e| match e {
+        EffectConfig::FastHysteresis(h) => Some(h.law.clone()),
+        _ => None,
+    });
+    let effect = match candidate {
+        Candidate::LineDrift => EffectConfig::LineDrift(LineDrift {
+            velocity_m_per_s: [sign(rng) * m * 150e-12, sign(rng) * m * 100e-12],
+        }),
+        Candidate::ExponentialCreep => EffectConfig::ExponentialCreep(ExponentialCreep {
+            amplitude_m: [sign(rng) * m * 40e-12, sign(rng) * m * 30e-12],
+            time_constant_s: uniform(rng, 0.03, 0.13) * frame,
+            start_s: uniform(rng, 0.2, 0.65) * frame,
+        }),
+        Candidate::SecondCreep => EffectConfig::Creep(LogCreep {
+            coefficient_m: [sign(rng) * m * 15e-12, sign(rng) * m * 20e-12],
+            t0_s: uniform(rng, 0.01, 0.04) * frame,
+            start_s: uniform(rng, 0.2, 0.65) * frame,
+        }),
+        Candidate::AsymmetricHysteresis => {
+            let Some(HysteresisLaw::Power { k, n }) = base_law else {
+                return false;
+            };
+            config.effects.retain(|e| !matches!(e, EffectConfig::FastHysteresis(_)));
+            EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis {
+                trace: HysteresisLaw::Power { k, n },
+                retrace: HysteresisLaw::Power {
+                    k: k - m * 0.04,
+                    n: n - m * 0.012,
+                },
+            })
+        }
+        Candidate::SlowHysteresis => EffectConfig::SlowHysteresis(SlowScanHysteresis {
+            law: HysteresisLaw::Exponential {
+                amplitude: m * 0.3,
+                time_constant_s: uniform(rng, 0.02, 0.07) * frame,
+            },
+        }),
+        Candidate::Vibration => EffectConfig::Vibration(Vibration {
+            frequency_hz: if held_out {
+                uniform(rng, 20.0, 45.0)
+            } else {
+                uniform(rng, 2.0, 20.0)
+            },
+            amplitude_m: [m * 4e-12, m * 3e-12],
+            phase_rad: [uniform(rng, 0.0, 6.28), uniform(rng, 0.0, 6.28)],
+        }),
+        Candidate::TipChange => EffectConfig::TipChange(TipChange {
+            time_s: uniform(rng, 0.15, 0.85) * frame,
+            jump_m: [sign(rng) * m * 25e-12, sign(rng) * m * 20e-12],
+            height_offset_m: 0.0,
+            contrast: 1.0,
+        }),
+        Candidate::HeightCoupling => {
+            let angle = uniform(rng, 0.0, std::f64::consts::TAU);
+            let centre = [
+                uniform(rng, 0.35, 0.65) * config.scan.width_m,
+                uniform(rng, 0.35, 0.65) * config.scan.height_m,
+            ];
+            config.surface.steps.push(StepEdge {
+                region: dhct_simulate::Region::HalfPlane {
+                    point_m: centre,
+                    normal: [angle.cos(), angle.sin()],
+                },
+                height_m: 3.35e-10,
+            });
+            EffectConfig::HeightCoupling(HeightCoupling {
+                lateral_per_height: [sign(rng) * m * 0.06, sign(rng) * m * 0.04],
+            })
+        }
+        Candidate::ScanCoupling => EffectConfig::ScanCoupling(ScanCoupling {
+            slow_to_fast: sign(rng) * m * 0.01,
+            fast_to_slow: sign(rng) * m * 0.01,
+        }),
+        Candidate::HigherOrderDrift | Candidate::LocalStrain => return false,
+    };
+    config.effects.push(effect);
+    true
+}
+
+impl ValidationCase {
+    fn rng(seed: u64, salt: u64) -> ChaCha8Rng {
+        ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ salt)
+    }
+
+    /// The base scan with `effects` added.
+    pub fn with_effects(effects: &[Candidate], seed: u64, held_out: bool) -> ValidationCase {
+        let mut config = base_config(seed);
+        let mut rng = Self::rng(seed, 0x5EED);
+        let mut truth = Vec::new();
+        for &c in effects {
+            if add_effect(&mut config, c, &mut rng, held_out) {
+                truth.push(c);
+            }
+        }
+        let name = if truth.is_empty() {
+            format!("none #{seed}")
+        } else {
+            format!(
+                "{} #{seed}",
+                truth.iter().map(|c| c.name()).collect::<Vec<_>>().join("+")
+            )
+        };
+        config.name = name.clone();
+        ValidationCase {
+            name,
+            truth,
+            config,
+            held_out,
+        }
+    }
+
+    /// The base scan plus one effect.
+    pub fn single(candidate: Candidate, seed: u64, held_out: bool) -> ValidationCase {
+        Self::with_effects(&[candidate], seed, held_out)
+    }
+
+    /// The base scan alone.
+    pub fn effect_free(seed: u64, held_out: bool) -> ValidationCase {
+        Self::with_effects(&[], seed, held_out)
+    }
+}
+
+/// A simulated pair of feature sets.
+#[derive(Debug, Clone)]
+pub struct SimulatedScan {
+    /// The scan.
+    pub geometry: ScanGeometry,
+    /// Trace features (controller frame, with times).
+    pub trace: Vec<Feature>,
+    /// Retrace features.
+    pub retrace: Vec<Feature>,
+}
+
+fn feature(
+    id: usize,
+    pass: ScanPass,
+    geometry: &ScanGeometry,
+    x_px: f64,
+    y_px: f64,
+    sigma_m: f64,
+    height: f64,
+    z0: f64,
+) -> Feature {
+    let time = geometry.acquisition_time(pass, x_px, y_px);
+    Feature {
+        id,
+        pass,
+        x_px,
+        y_px,
+        x_m: x_px * geometry.pitch_x(),
+        y_m: y_px * geometry.pitch_y(),
+        x_sigma_px: sigma_m / geometry.pitch_x(),
+        y_sigma_px: sigma_m / geometry.pitch_y(),
+        sigma_major_px: 4.0,
+        sigma_minor_px: 4.0,
+        theta_rad: 0.0,
+        amplitude: height.abs(),
+        height,
+        z0,
+        residual_rms: 0.0,
+        pixel_count: 100,
+        ncc_peak: 1.0,
+        status: FitStatus::Converged,
+        fit_iterations: 1,
+        time_s: time.since_frame_start,
+        line_time_s: time.since_line_start,
+    }
+}
+
+/// Feature positions only (fast path): true controller positions of every lattice site
+/// plus Gaussian noise of `noise_m` (metres, per axis), drawn from `noise_seed`.
+pub fn simulate_positions(
+    config: &SimulationConfig,
+    noise_m: f64,
+    noise_seed: u64,
+) -> Result<SimulatedScan, DiagnoseError> {
+    config.validate()?;
+    let geometry = config.scan.geometry()?;
+    let lattice = config.surface.lattice.build()?;
+    let effects: Vec<Box<dyn Effect>> = config
+        .effects
+        .iter()
+        .enumerate()
+        .map(|(k, e)| e.build(&format!("effects[{k}]")))
+        .collect::<Result<_, _>>()?;
+    let terrace = Terrace::new(&config.surface, config.tip.sigma_m);
+    let displacer = Displacer::new(&geometry, &effects, &terrace);
+    let [a1, a2] = lattice.primitive_vectors();
+    let (s, c) = config.surface.angle_rad.sin_cos();
+    let rot = |v: Vector2<f64>| Vector2::new(c * v.x - s * v.y, s * v.x + c * v.y);
+    let (r1, r2) = (rot(a1), rot(a2));
+    let origin = Vector2::from(config.surface.origin_m);
+    let (w, h) = (geometry.width(), geometry.height());
+    let margin = 3.0 * lattice.nearest_neighbour_distance();
+    let reach = ((w + h) / r1.norm().min(r2.norm())).ceil() as i64 + 2;
+    let mut rng = ChaCha8Rng::seed_from_u64(noise_seed ^ 0xF00D);
+    let mut out = [Vec::new(), Vec::new()];
+    let border = 4.0;
+    for n in -reach..=reach {
+        for m in -reach..=reach {
+            for site in 0..lattice.motif().len() {
+                let p = origin + r1 * n as f64 + r2 * m as f64 + rot(lattice.site_position(site));
+                if p.x < -margin || p.y < -margin || p.x > w + margin || p.y > h + margin {
+                    continue;
+                }
+                let z = terrace.height(p);
+                for (k, pass) in ScanPass::BOTH.into_iter().enumerate() {
+                    let a = locate(&displacer, pass, p);
+                    let [x, y] = a.controller_position_px;
+                    if !a.converged
+                        || x < border
+                        || y < border
+                        || x > geometry.columns() as f64 - 1.0 - border
+                        || y > geometry.rows() as f64 - 1.0 - border
+                    {
+                        continue;
+                    }
+                    let nx: f64 = StandardNormal.sample(&mut rng);
+                    let ny: f64 = StandardNormal.sample(&mut rng);
+                    let xp = x + nx * noise_m / geometry.pitch_x();
+                    let yp = y + ny * noise_m / geometry.pitch_y();
+                    let id = out[k].len();
+                    out[k].push(feature(
+                        id,
+                        pass,
+                        &geometry,
+                        xp,
+                        yp,
+                        noise_m,
+                        config.surface.feature.height_m,
+                        z,
+                    ));
+                }
+            }
+        }
+    }
+    let [trace, retrace] = out;
+    Ok(SimulatedScan {
+        geometry,
+        trace,
+        retrace,
+    })
+}
+
+/// The full chain: rendered images, then feature finding.
+pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, DiagnoseError> {
+    let output = Simulation::from_config(config)?.run()?;
+    let lattice = config.surface.lattice.build()?;
+    let options = FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance());
+    let sets = find_features_in_pair(&output.pair, &options)?;
+    let mut trace = Vec::new();
+    let mut retrace = Vec::new();
+    for set in sets {
+        match set.pass {
+            ScanPass::Trace => trace = set.features,
+            ScanPass::Retrace => retrace = set.features,
+        }
+    }
+    Ok(SimulatedScan {
+        geometry: output.pair.geometry().clone(),
+        trace,
+        retrace,
+    })
+}
