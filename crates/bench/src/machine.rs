@@ -39,3 +39,60 @@ pub fn cpus() -> usize {
         .map(|n| n.get())
         .unwrap_or(1)
 }
+
+/// Clock ticks per second of `/proc` CPU times (`sysconf(_SC_CLK_TCK)`, 100 on Linux).
+const CLOCK_TICKS_PER_S: f64 = 100.0;
+
+/// Busy CPU time of the whole machine, all CPUs (user + nice + system + irq + softirq +
+/// steal, from the `cpu` line of `/proc/stat`), seconds.
+pub fn machine_busy_s() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/stat").ok()?;
+    let line = text.lines().find(|l| l.starts_with("cpu "))?;
+    let v: Vec<f64> = line
+        .split_whitespace()
+        .skip(1)
+        .map(|f| f.parse().unwrap_or(0.0))
+        .collect();
+    // user nice system idle iowait irq softirq steal
+    let busy = v.first()? + v.get(1)? + v.get(2)? + v.get(5)? + v.get(6)? + v.get(7)?;
+    Some(busy / CLOCK_TICKS_PER_S)
+}
+
+/// CPU time of this process, all threads (user + system from `/proc/self/stat`), seconds.
+pub fn process_cpu_s() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = &text[text.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / CLOCK_TICKS_PER_S)
+}
+
+/// CPU use of everything except this process between two samples.
+#[derive(Debug, Clone, Copy)]
+pub struct ContentionProbe {
+    machine_busy_s: Option<f64>,
+    process_s: Option<f64>,
+    start: std::time::Instant,
+}
+
+impl ContentionProbe {
+    /// Starts measuring.
+    pub fn start() -> ContentionProbe {
+        ContentionProbe {
+            machine_busy_s: machine_busy_s(),
+            process_s: process_cpu_s(),
+            start: std::time::Instant::now(),
+        }
+    }
+
+    /// Mean number of CPUs that other processes kept busy since [`ContentionProbe::start`]
+    /// (0 = the machine was ours alone; resolution 10 ms of CPU time).
+    pub fn other_cpus(&self) -> Option<f64> {
+        let wall = self.start.elapsed().as_secs_f64();
+        let machine = machine_busy_s()? - self.machine_busy_s?;
+        let own = process_cpu_s()? - self.process_s?;
+        Some(((machine - own) / wall).max(0.0))
+    }
+}

@@ -59,6 +59,8 @@ pub struct Measurement {
     pub threads: usize,
     /// Load average (1, 5, 15 min) when the run ended.
     pub load: String,
+    /// Mean number of CPUs other processes kept busy during the run (read + pipeline).
+    pub other_cpus: Option<f64>,
 }
 
 /// Reads `path` (any format `dhct_sm4_io` reads) and runs the chain on its topography.
@@ -68,6 +70,7 @@ pub fn measure_file(
     lattice: &dyn Lattice,
     options: &PipelineOptions,
 ) -> Result<(Measurement, Analysis), String> {
+    let probe = machine::ContentionProbe::start();
     let start = Instant::now();
     let file = dhct_sm4_io::read_path(path).map_err(|e| format!("reading {path:?}: {e}"))?;
     let pair = file
@@ -77,6 +80,7 @@ pub fn measure_file(
     let analysis = dhct_pipeline::run(pair, lattice, None, options, &|_| {})
         .map_err(|e| format!("pipeline: {e}"))?;
     let end_to_end_s = start.elapsed().as_secs_f64();
+    let other_cpus = probe.other_cpus();
     let (neighbours_local_s, model_fit_s) =
         model_breakdown(&analysis, pair.geometry(), lattice, options)?;
     let t = analysis.timings;
@@ -103,6 +107,7 @@ pub fn measure_file(
         peak_memory_mib: machine::peak_memory_mib(),
         threads: rayon::current_num_threads(),
         load: machine::load_string(),
+        other_cpus,
     };
     Ok((measurement, analysis))
 }

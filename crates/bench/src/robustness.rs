@@ -633,10 +633,11 @@ pub fn table(rows: &[Row]) -> Table {
                 cells.extend(std::iter::repeat_n(String::new(), 7));
             }
             Outcome::Analysis(Some(a)) => {
-                cells[3] = if row.as_expected() {
-                    "ok"
-                } else {
-                    "UNEXPECTED ok"
+                cells[3] = match (row.as_expected(), row.silently_wrong()) {
+                    (true, false) => "ok",
+                    (true, true) => "WRONG, no error",
+                    (false, true) => "UNEXPECTED: WRONG, no error",
+                    (false, false) => "UNEXPECTED ok",
                 }
                 .into();
                 cells.extend([

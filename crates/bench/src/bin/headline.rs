@@ -299,13 +299,15 @@ fn headline(args: &Args, dir: &Path, lattice_config: &LatticeConfig) -> Result<V
     for k in 0..args.repeats {
         let m = measure_in_child(&path, lattice_config)?;
         println!(
-            "run {}: end to end {:.3} s, {} features, peak {:.0} MiB, {} threads, load {}",
+            "run {}: end to end {:.3} s, {} features, peak {:.0} MiB, {} threads, load {}, \
+             other processes {:.2} CPUs",
             k + 1,
             m.times.end_to_end_s,
             m.features,
             m.peak_memory_mib.unwrap_or(f64::NAN),
             m.threads,
-            m.load
+            m.load,
+            m.other_cpus.unwrap_or(f64::NAN)
         );
         runs.push(m);
     }
@@ -380,6 +382,7 @@ fn run(args: &Args) -> Result<(), String> {
         "end to end s",
         "µs / kpx",
         "peak MiB",
+        "other CPUs",
         "load",
     ]);
     for &pixels in &args.sizes {
@@ -400,6 +403,7 @@ fn run(args: &Args) -> Result<(), String> {
             format!("{:.3}", t.end_to_end_s),
             format!("{:.2}", t.end_to_end_s * 1e9 / (pixels * pixels) as f64),
             format!("{:.0}", m.peak_memory_mib.unwrap_or(f64::NAN)),
+            format!("{:.2}", m.other_cpus.unwrap_or(f64::NAN)),
             m.load.clone(),
         ]);
         scaling.push(m);
@@ -427,7 +431,12 @@ fn run(args: &Args) -> Result<(), String> {
             robustness::table(&rows)
         );
         let unexpected = rows.iter().filter(|r| !r.as_expected()).count();
-        println!("{unexpected} of {} runs not as expected", rows.len());
+        let wrong = rows.iter().filter(|r| r.silently_wrong()).count();
+        println!(
+            "{unexpected} of {} runs not as expected; {wrong} returned an analysis far from the \
+             truth without an error",
+            rows.len()
+        );
         report.insert("robustness".into(), json!(rows));
     }
 
