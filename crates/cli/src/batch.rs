@@ -83,6 +83,7 @@ pub fn run(
                 output: &out,
                 config: config.clone(),
                 progress: false,
+                diagnose: false,
             });
             bar.inc(1);
             let seconds = start.elapsed().as_secs_f64();

@@ -6,6 +6,7 @@
 
 mod batch;
 mod correct;
+mod diagnose;
 mod info;
 mod simulate;
 mod units;
@@ -42,6 +43,9 @@ enum Command {
         /// Output directory (created if missing).
         #[arg(short, long)]
         output: PathBuf,
+        /// Also diagnose the sim-to-real gap and add it to the report (diagnosis.json).
+        #[arg(long)]
+        diagnose: bool,
         #[command(flatten)]
         options: CorrectArgs,
     },
@@ -54,6 +58,30 @@ enum Command {
         /// Output directory (one subdirectory per input file).
         #[arg(short, long)]
         output: PathBuf,
+        #[command(flatten)]
+        options: CorrectArgs,
+    },
+    /// Diagnose the sim-to-real gap: where the fitted DHCT model and the image disagree (in
+    /// time, fast-line phase, space, trace vs retrace), which unmodelled effect explains it
+    /// and how far the gap shrinks once it is added; writes diagnosis.json and
+    /// diagnosis.html into OUTDIR. With --validate, runs the withheld-effect validation on
+    /// simulated scans instead.
+    Diagnose {
+        /// The image file (not with --validate).
+        #[arg(required_unless_present = "validate")]
+        input: Option<PathBuf>,
+        /// A separate file holding the retrace image.
+        retrace: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long, required_unless_present = "validate")]
+        output: Option<PathBuf>,
+        /// Run the validation: simulate scans with one effect (and none, and two) withheld
+        /// from the model, diagnose them, print the confusion matrix and the table.
+        #[arg(long, conflicts_with = "input")]
+        validate: bool,
+        /// With --validate: at most this many seeds per case (quicker, less certain).
+        #[arg(long, requires = "validate")]
+        seeds: Option<usize>,
         #[command(flatten)]
         options: CorrectArgs,
     },
@@ -215,6 +243,7 @@ fn main() -> ExitCode {
             input,
             retrace,
             output,
+            diagnose,
             options,
         } => options.config().and_then(|config| {
             let summary = correct::run(correct::CorrectRequest {
@@ -223,6 +252,7 @@ fn main() -> ExitCode {
                 output,
                 config,
                 progress: !options.quiet && !options.json,
+                diagnose: *diagnose,
             })?;
             if options.json {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -231,6 +261,27 @@ fn main() -> ExitCode {
             }
             Ok(())
         }),
+        Command::Diagnose {
+            input,
+            retrace,
+            output,
+            validate,
+            seeds,
+            options,
+        } => {
+            if *validate {
+                diagnose::run_validation(*seeds, output.as_deref(), options.json)
+            } else {
+                match (input, output) {
+                    (Some(input), Some(output)) => options.config().and_then(|config| {
+                        diagnose::run_file(input, retrace.as_deref(), output, config, options.json)
+                    }),
+                    _ => Err(anyhow::anyhow!(
+                        "give an input file and -o OUTDIR, or --validate"
+                    )),
+                }
+            }
+        }
         Command::Batch {
             dir,
             output,

@@ -26,7 +26,7 @@ pub enum FigureContent {
 }
 
 impl Figure {
-    fn png(stem: &str, title: &str, caption: String, canvas: &Canvas) -> Figure {
+    pub(crate) fn png(stem: &str, title: &str, caption: String, canvas: &Canvas) -> Figure {
         Figure {
             stem: stem.into(),
             title: title.into(),
@@ -34,7 +34,7 @@ impl Figure {
             content: FigureContent::Png(canvas.png()),
         }
     }
-    fn svg(stem: &str, title: &str, caption: String, plot: &Plot) -> Figure {
+    pub(crate) fn svg(stem: &str, title: &str, caption: String, plot: &Plot) -> Figure {
         Figure {
             stem: stem.into(),
             title: title.into(),

@@ -2,10 +2,10 @@
 //! every result written into an output directory and summarised in `report.html`.
 
 mod config;
-mod figures;
-mod plots;
-mod render;
-mod report;
+pub(crate) mod figures;
+pub(crate) mod plots;
+pub(crate) mod render;
+pub(crate) mod report;
 mod summary;
 
 use std::io::Write;
@@ -33,15 +33,17 @@ pub struct CorrectRequest<'a> {
     pub config: CorrectConfig,
     /// Show progress on stderr (only when it is a terminal).
     pub progress: bool,
+    /// Also run the sim-to-real gap diagnosis and add it to the report.
+    pub diagnose: bool,
 }
 
-fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomically(path, |w| w.write_all(bytes).map_err(WriteError::from))
 }
 
 /// The scan pair to analyse: the file's topography (trace and retrace when present), or
 /// the first file's trace with the second file's image as retrace.
-fn read_pair(
+pub(crate) fn read_pair(
     request: &CorrectRequest,
     overrides: &dhct_sm4_io::GeometryOverrides,
 ) -> Result<ScanPair> {
@@ -81,7 +83,7 @@ fn read_pair(
     ScanPair::new(geometry, trace, Some(retrace)).context("cannot pair trace and retrace")
 }
 
-fn progress_bar(enabled: bool) -> ProgressBar {
+pub(crate) fn progress_bar(enabled: bool) -> ProgressBar {
     if enabled && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         let bar = ProgressBar::new_spinner();
         bar.set_style(
@@ -187,7 +189,38 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     summary.write_s = write_start.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(&summary).context("cannot serialise model.json")?;
     write_bytes(&request.output.join("model.json"), json.as_bytes())?;
-    let html = report::report_html(&summary, &figures);
+    let section = if request.diagnose {
+        bar.set_message("diagnosing the sim-to-real gap");
+        let sets: Vec<&[dhct_features::Feature]> = analysis
+            .passes
+            .iter()
+            .map(|p| p.features.features.as_slice())
+            .collect();
+        let diagnosis = crate::diagnose::diagnose_features(
+            &sets,
+            &geometry,
+            lattice.as_ref(),
+            mask.as_ref(),
+            &options,
+        )?;
+        write_bytes(
+            &request.output.join("diagnosis.json"),
+            diagnosis.to_json().as_bytes(),
+        )?;
+        let (section, diagnosis_figures) =
+            crate::diagnose::diagnosis_section(&diagnosis, &geometry);
+        for f in &diagnosis_figures {
+            let bytes: &[u8] = match &f.content {
+                figures::FigureContent::Png(b) => b,
+                figures::FigureContent::Svg(s) => s.as_bytes(),
+            };
+            write_bytes(&request.output.join(f.file_name()), bytes)?;
+        }
+        Some(section)
+    } else {
+        None
+    };
+    let html = report::report_html(&summary, &figures, section.as_deref());
     write_bytes(&request.output.join("report.html"), html.as_bytes())?;
     bar.finish_and_clear();
     Ok(summary)
@@ -206,7 +239,7 @@ fn hint(message: &str) -> String {
     }
 }
 
-fn load_mask(
+pub(crate) fn load_mask(
     config: &CorrectConfig,
     geometry: &dhct_scan::ScanGeometry,
 ) -> Result<Option<Array2<bool>>> {

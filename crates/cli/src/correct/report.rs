@@ -11,14 +11,14 @@ use super::plots::html_escape;
 use super::summary::RunSummary;
 use crate::info::si;
 
-const STYLE: &str = "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1180px;margin:24px auto;padding:0 16px;color:#222}
+pub(crate) const STYLE: &str = "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1180px;margin:24px auto;padding:0 16px;color:#222}
 h1{font-size:1.6em;margin-bottom:0}h2{border-bottom:1px solid #ccc;padding-bottom:4px;margin-top:2em}
 .sub{color:#666;margin-top:4px}table{border-collapse:collapse;margin:8px 0 16px}td,th{border:1px solid #ddd;padding:3px 8px;text-align:right;font-variant-numeric:tabular-nums}
 th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(520px,1fr));gap:18px}
 figure{margin:0;border:1px solid #e4e4e4;padding:8px;background:#fff}figure img,figure svg{width:100%;height:auto;image-rendering:pixelated}
 figcaption{font-size:.88em;color:#444;margin-top:6px}figcaption b{color:#222}.note{background:#fff8e0;border:1px solid #eed;padding:6px 10px}";
 
-fn row(html: &mut String, cells: &[String]) {
+pub(crate) fn row(html: &mut String, cells: &[String]) {
     html.push_str("<tr>");
     for c in cells {
         let _ = write!(html, "<td>{}</td>", html_escape(c));
@@ -26,7 +26,7 @@ fn row(html: &mut String, cells: &[String]) {
     html.push_str("</tr>\n");
 }
 
-fn header(html: &mut String, cells: &[&str]) {
+pub(crate) fn header(html: &mut String, cells: &[&str]) {
     html.push_str("<tr>");
     for c in cells {
         let _ = write!(html, "<th>{}</th>", html_escape(c));
@@ -78,7 +78,7 @@ pub fn value_with_sigma(value: f64, sigma: f64, unit: &str) -> String {
         .to_string()
 }
 
-fn figure_html(html: &mut String, figure: &Figure) {
+pub(crate) fn figure_html(html: &mut String, figure: &Figure) {
     html.push_str("<figure>");
     match &figure.content {
         FigureContent::Png(bytes) => {
@@ -105,7 +105,11 @@ fn figure_html(html: &mut String, figure: &Figure) {
 }
 
 /// The whole page.
-pub fn report_html(summary: &RunSummary, figures: &[Figure]) -> String {
+pub fn report_html(
+    summary: &RunSummary,
+    figures: &[Figure],
+    extra_section: Option<&str>,
+) -> String {
     let mut html = String::with_capacity(1 << 20);
     let _ = writeln!(
         html,
@@ -335,7 +339,11 @@ pub fn report_html(summary: &RunSummary, figures: &[Figure]) -> String {
     for f in figures {
         figure_html(&mut html, f);
     }
-    html.push_str("</div>\n<h2>Timing</h2><table>\n");
+    html.push_str("</div>\n");
+    if let Some(section) = extra_section {
+        html.push_str(section);
+    }
+    html.push_str("<h2>Timing</h2><table>\n");
     let t = &summary.timings;
     header(&mut html, &["stage", "seconds"]);
     for (name, v) in [
