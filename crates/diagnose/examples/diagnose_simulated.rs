@@ -18,7 +18,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(&c) => ValidationCase::single(c, seed, false),
         None => ValidationCase::effect_free(seed, false),
     };
-    println!("case {}: {:?}", case.name, case.truth);
+    println!(
+        "case {}: {:?}\n{:?}",
+        case.name, case.truth, case.config.effects
+    );
     let start = std::time::Instant::now();
     let scan = if images {
         simulate_images(&case.config)?
@@ -34,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let start = std::time::Instant::now();
     let report = diagnose(
-        &[&scan.trace, &scan.retrace],
+        &scan.inputs(),
         &scan.geometry,
         lattice.as_ref(),
         &DiagnoseOptions::default(),

@@ -14,7 +14,9 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::data::Observation;
-use crate::model::{GlobalModel, ModelTerm, Term, Transform, sim_term, term_displacements, transform_of};
+use crate::model::{
+    GlobalModel, ModelTerm, Term, Transform, sim_term, term_displacements, transform_of,
+};
 use crate::spectrum::periodogram_peaks;
 use crate::terms::{CubicDrift, QuadraticField};
 
@@ -251,10 +253,10 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
             }
         }
         Candidate::ExponentialCreep => {
-            let taus = log_grid(2.0 * g.line_period(), 0.5 * t_max, 8);
+            let taus = log_grid(2.0 * g.line_period(), 0.5 * t_max, 10);
             for &tau in &taus {
-                for k in 0..16 {
-                    let start = t_max * k as f64 / 16.0;
+                for k in 0..24 {
+                    let start = t_max * k as f64 / 24.0;
                     if start + tau > t_max {
                         continue;
                     }
@@ -277,10 +279,10 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
             }
         }
         Candidate::SecondCreep => {
-            let t0s = log_grid(g.line_period(), 0.2 * t_max, 6);
+            let t0s = log_grid(g.line_period(), 0.2 * t_max, 8);
             for &t0 in &t0s {
-                for k in 1..16 {
-                    let start = t_max * k as f64 / 16.0;
+                for k in 1..24 {
+                    let start = t_max * k as f64 / 24.0;
                     if let Some(e) = sim(EffectConfig::Creep(LogCreep {
                         coefficient_m: [0.0, 0.0],
                         t0_s: t0,
@@ -476,8 +478,7 @@ fn vibration_proposal(ctx: &Context, f: f64) -> Option<Proposal> {
             phase_rad: [px, py],
         }))?;
         let mut m = model.clone();
-        m.terms
-            .push(Term::all_free(e, Candidate::Vibration.name()));
+        m.terms.push(Term::all_free(e, Candidate::Vibration.name()));
         Some(m)
     });
     Some(Proposal {

@@ -22,7 +22,7 @@ pub const MIN_FEATURES: usize = 40;
 /// One feature as the diagnosis sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Observation {
-    /// Index of the feature set it came from (order of the input).
+    /// Index of the (non-empty) feature set it came from, in input order.
     pub set: usize,
     /// Index of the feature within its set.
     pub index: usize,
@@ -120,15 +120,37 @@ pub(crate) fn predict_controller(
 
 /// Runs the base stage on `sets` (controller frame, each of one pass).
 pub(crate) fn prepare(
-    sets: &[&[Feature]],
+    inputs: &[PassInput],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
     dhct: &DhctOptions,
     max_deviation_fraction: f64,
 ) -> Result<Prepared, DiagnoseError> {
-    check(sets)?;
-    let sets: Vec<&[Feature]> = sets.iter().copied().filter(|s| !s.is_empty()).collect();
-    let input_features: usize = sets.iter().map(|s| s.len()).sum();
+    let raw: Vec<&[Feature]> = inputs.iter().map(|i| i.features).collect();
+    check(&raw)?;
+    // Apply the masks (pixel under the feature's centre); keep the original indices.
+    let mut original: Vec<Vec<usize>> = Vec::new();
+    let mut owned: Vec<Vec<Feature>> = Vec::new();
+    for input in inputs {
+        let mut idx = Vec::new();
+        let mut kept = Vec::new();
+        for (i, f) in input.features.iter().enumerate() {
+            let inside = input.mask.is_none_or(|m| {
+                let (r, c) = (f.y_px.round(), f.x_px.round());
+                r >= 0.0 && c >= 0.0 && m.get((r as usize, c as usize)).copied().unwrap_or(false)
+            });
+            if inside {
+                idx.push(i);
+                kept.push(f.clone());
+            }
+        }
+        if !kept.is_empty() {
+            original.push(idx);
+            owned.push(kept);
+        }
+    }
+    let sets: Vec<&[Feature]> = owned.iter().map(|s| s.as_slice()).collect();
+    let input_features: usize = raw.iter().map(|s| s.len()).sum();
     if input_features < MIN_FEATURES {
         return Err(DiagnoseError::TooFewFeatures {
             what: "diagnosis",
@@ -192,12 +214,16 @@ pub(crate) fn prepare(
             };
             observations.push(Observation {
                 set: s,
-                index: i,
+                index: original[s][i],
                 pass: f.pass,
                 controller_m: [f.x_px * px, f.y_px * py],
                 time_s: f.time_s,
                 line_time_s: f.line_time_s,
-                terrace_height_m: if f.z0.is_finite() { f.z0 - z0_median } else { 0.0 },
+                terrace_height_m: if f.z0.is_finite() {
+                    f.z0 - z0_median
+                } else {
+                    0.0
+                },
                 apparent_height: f.height,
                 fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
                 indices: (p.n, p.m, p.site),

@@ -1,25 +1,24 @@
 //! The whole diagnosis: base stage, position-level base fit, noise floor, location of the
 //! gap, greedy selection of effects, shrink.
 
-use dhct_distortion::DhctOptions;
-use dhct_features::Feature;
+use dhct_distortion::{DhctOptions, PassInput};
 use dhct_lattice::Lattice;
 use dhct_scan::ScanGeometry;
 use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
+use crate::DiagnoseError;
 use crate::candidates::Candidate;
 use crate::data::{MIN_FEATURES, Observation, prepare};
 use crate::fit::{Fitted, fit};
 use crate::location::locate;
 use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
-use crate::noise::estimate;
+use crate::noise::{estimate, robust_sigma};
 use crate::report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
 use crate::select::{Current, SelectionOptions, folds, round};
-use crate::DiagnoseError;
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -92,7 +91,12 @@ impl DiagnoseOptions {
 fn summary(f: &Fitted, sigma: [f64; 2]) -> ModelSummary {
     let l = &f.model.lattice;
     ModelSummary {
-        terms: f.model.terms.iter().map(|t| t.effect.name().to_string()).collect(),
+        terms: f
+            .model
+            .terms
+            .iter()
+            .map(|t| t.effect.name().to_string())
+            .collect(),
         parameters: f.parameters(0),
         lattice_origin_m: l.origin_m,
         lattice_angle_rad: l.angle_rad,
@@ -103,18 +107,19 @@ fn summary(f: &Fitted, sigma: [f64; 2]) -> ModelSummary {
 
 /// Diagnoses the sim-to-real gap of one scan.
 ///
-/// `sets` are the features of each image (each set of one pass, controller frame, with
-/// acquisition times, e.g. from [`dhct_features::find_features_in_pair`]); `geometry` is
-/// their scan; `lattice` the known surface lattice (the internal standard).
+/// `inputs` are the features of each image (each set of one pass, controller frame, with
+/// acquisition times, e.g. from [`dhct_features::find_features_in_pair`]) with an optional
+/// mask (`rows × columns`, true = use; features whose centre pixel is false are ignored);
+/// `geometry` is their scan; `lattice` the known surface lattice (the internal standard).
 pub fn diagnose(
-    sets: &[&[Feature]],
+    inputs: &[PassInput],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisReport, DiagnoseError> {
     options.validate()?;
     let prepared = prepare(
-        sets,
+        inputs,
         geometry,
         lattice,
         &options.dhct,
@@ -152,7 +157,11 @@ pub fn diagnose(
         lattice: LatticeParams {
             origin_m: lf.origin_m,
             angle_rad: lf.angle_rad,
-            scale: if options.fit_lattice_scale { lf.scale } else { [1.0, 1.0] },
+            scale: if options.fit_lattice_scale {
+                lf.scale
+            } else {
+                [1.0, 1.0]
+            },
             fit_scale: options.fit_lattice_scale,
         },
     };
@@ -161,11 +170,18 @@ pub fn diagnose(
     let mut sigma = estimate(&all, &prepared.dhct_gap, geometry).sigma_m;
     let first = fit(start.clone(), geometry, &all, sigma, iterations)?;
     sigma = estimate(&all, &first.residuals, geometry).sigma_m;
+    // Outliers relative to the residuals' own robust spread (not the noise floor), so that
+    // a large unmodelled effect is not thrown away as outliers.
+    let spread = [0, 1].map(|a| {
+        let v: Vec<f64> = first.residuals.iter().map(|r| r[a]).collect();
+        robust_sigma(&v).max(sigma[a])
+    });
     let keep: Vec<bool> = first
         .residuals
         .iter()
         .map(|r| {
-            ((r[0] / sigma[0]).powi(2) + (r[1] / sigma[1]).powi(2)).sqrt() <= options.outlier_sigma
+            ((r[0] / spread[0]).powi(2) + (r[1] / spread[1]).powi(2)).sqrt()
+                <= options.outlier_sigma
         })
         .collect();
     let observations: Vec<Observation> = all
@@ -181,7 +197,13 @@ pub fn diagnose(
             needed: MIN_FEATURES,
         });
     }
-    let mut base = fit(first.model.clone(), geometry, &observations, sigma, iterations)?;
+    let mut base = fit(
+        first.model.clone(),
+        geometry,
+        &observations,
+        sigma,
+        iterations,
+    )?;
     let noise = estimate(&observations, &base.residuals, geometry);
     sigma = noise.sigma_m;
     base = fit(base.model, geometry, &observations, sigma, 2 * iterations)?;
@@ -223,12 +245,13 @@ pub fn diagnose(
                 .as_ref()
                 .map(|f| GapSummary::of(&f.residuals, sigma, f.model.free_count()).gap_to_noise);
         }
-        let winner = scored
-            .iter()
-            .find(|s| s.score.passes && s.fitted.is_some());
+        let winner = scored.iter().find(|s| s.score.passes && s.fitted.is_some());
         let accepted = winner.map(|w| w.score.candidate);
         if let Some(w) = winner {
-            let f = w.fitted.clone().unwrap_or_else(|| unreachable!("filtered on Some"));
+            let f = w
+                .fitted
+                .clone()
+                .unwrap_or_else(|| unreachable!("filtered on Some"));
             let from = current.model.terms.len();
             // A replaced term (asymmetric hysteresis) sits at its old index.
             let index = f
@@ -240,9 +263,7 @@ pub fn diagnose(
             let parameters = f
                 .parameters(0)
                 .into_iter()
-                .filter(|p| {
-                    f.model.terms[index].effect.name() == p.effect
-                })
+                .filter(|p| f.model.terms[index].effect.name() == p.effect)
                 .collect();
             added.push(AddedEffect {
                 candidate: w.score.candidate,

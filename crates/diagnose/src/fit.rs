@@ -99,7 +99,12 @@ pub(crate) fn jacobian(
         }
     }
     for (i, o) in observations.iter().enumerate() {
-        for (k, dsite) in model.lattice.derivatives(o.lattice_vector_m).iter().enumerate() {
+        for (k, dsite) in model
+            .lattice
+            .derivatives(o.lattice_vector_m)
+            .iter()
+            .enumerate()
+        {
             j[(2 * i, column + k)] = -dsite[0] / sigma[0];
             j[(2 * i + 1, column + k)] = -dsite[1] / sigma[1];
         }
@@ -109,6 +114,11 @@ pub(crate) fn jacobian(
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix (relative cut 1e-12).
 pub(crate) fn pinv_sym(a: &DMatrix<f64>) -> DMatrix<f64> {
+    pinv_sym_cut(a, 1e-12)
+}
+
+/// Pseudo-inverse with eigenvalues below `cut × max` (after unit-diagonal scaling) dropped.
+pub(crate) fn pinv_sym_cut(a: &DMatrix<f64>, cut: f64) -> DMatrix<f64> {
     let n = a.nrows();
     // Scale to unit diagonal for conditioning.
     let d: Vec<f64> = (0..n)
@@ -123,7 +133,7 @@ pub(crate) fn pinv_sym(a: &DMatrix<f64>) -> DMatrix<f64> {
     let mut inv = DMatrix::zeros(n, n);
     for k in 0..n {
         let l = eig.eigenvalues[k];
-        if l > 1e-12 * max {
+        if l > cut * max {
             let v = eig.eigenvectors.column(k);
             inv += v * v.transpose() / l;
         }

@@ -42,7 +42,7 @@
 //! // A simulated scan with a tip change the base model does not know about.
 //! let case = synth::ValidationCase::single(dhct_diagnose::Candidate::TipChange, 1, false);
 //! let scan = synth::simulate_positions(&case.config, 2e-12, 7).unwrap();
-//! let report = diagnose(&[&scan.trace, &scan.retrace], &scan.geometry,
+//! let report = diagnose(&scan.inputs(), &scan.geometry,
 //!                       &Hexagonal::graphite(), &DiagnoseOptions::default()).unwrap();
 //! println!("{report}");
 //! assert_eq!(report.top(), Some(dhct_diagnose::Candidate::TipChange));

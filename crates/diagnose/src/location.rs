@@ -155,8 +155,12 @@ pub(crate) fn change_points(
         if b - a < 4 || out.len() >= 8 {
             continue;
         }
-        let total_s = segs[a..b].iter().fold([0.0; 2], |acc, s| [acc[0] + s.1[0], acc[1] + s.1[1]]);
-        let total_w = segs[a..b].iter().fold([0.0; 2], |acc, s| [acc[0] + s.2[0], acc[1] + s.2[1]]);
+        let total_s = segs[a..b]
+            .iter()
+            .fold([0.0; 2], |acc, s| [acc[0] + s.1[0], acc[1] + s.1[1]]);
+        let total_w = segs[a..b]
+            .iter()
+            .fold([0.0; 2], |acc, s| [acc[0] + s.2[0], acc[1] + s.2[1]]);
         let mut left_s = [0.0; 2];
         let mut left_w = [0.0; 2];
         let mut best = (0.0, a, [0.0; 2]);
@@ -202,15 +206,35 @@ pub(crate) fn locate(
     geometry: &ScanGeometry,
 ) -> GapLocation {
     let t_max = observations.iter().map(|o| o.time_s).fold(0.0, f64::max);
-    let by_frame_time = binned(observations, r, sigma, |o| o.time_s, 0.0, t_max * 1.000001, 16, "t/s");
+    let by_frame_time = binned(
+        observations,
+        r,
+        sigma,
+        |o| o.time_s,
+        0.0,
+        t_max * 1.000001,
+        16,
+        "t/s",
+    );
     let lst = geometry.line_scan_time();
-    let by_fast_phase = binned(observations, r, sigma, |o| o.line_time_s / lst, 0.0, 1.0, 12, "τ/T");
+    let by_fast_phase = binned(
+        observations,
+        r,
+        sigma,
+        |o| o.line_time_s / lst,
+        0.0,
+        1.0,
+        12,
+        "τ/T",
+    );
     let map_size = 6;
     let (w, h) = (geometry.width(), geometry.height());
     let mut cells = vec![Vec::new(); map_size * map_size];
     for (i, o) in observations.iter().enumerate() {
-        let cx = ((o.controller_m[0] / w * map_size as f64).floor().max(0.0) as usize).min(map_size - 1);
-        let cy = ((o.controller_m[1] / h * map_size as f64).floor().max(0.0) as usize).min(map_size - 1);
+        let cx =
+            ((o.controller_m[0] / w * map_size as f64).floor().max(0.0) as usize).min(map_size - 1);
+        let cy =
+            ((o.controller_m[1] / h * map_size as f64).floor().max(0.0) as usize).min(map_size - 1);
         cells[cy * map_size + cx].push(i);
     }
     let by_position = cells
@@ -249,10 +273,21 @@ pub(crate) fn locate(
         .filter_map(|q| {
             let lo = q * order.len() / 5;
             let hi = (q + 1) * order.len() / 5;
-            (hi > lo).then(|| bin_of(format!("height quintile {}", q + 1), q as f64 + 0.5, &order[lo..hi], r, sigma))
+            (hi > lo).then(|| {
+                bin_of(
+                    format!("height quintile {}", q + 1),
+                    q as f64 + 0.5,
+                    &order[lo..hi],
+                    r,
+                    sigma,
+                )
+            })
         })
         .collect::<Vec<_>>();
-    let weighted: Vec<f64> = r.iter().flat_map(|v| [v[0] / sigma[0], v[1] / sigma[1]]).collect();
+    let weighted: Vec<f64> = r
+        .iter()
+        .flat_map(|v| [v[0] / sigma[0], v[1] / sigma[1]])
+        .collect();
     let mut hot_spots: Vec<Bin> = by_frame_time
         .iter()
         .chain(&by_fast_phase)

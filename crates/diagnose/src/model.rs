@@ -298,7 +298,11 @@ impl GlobalModel {
     }
 
     /// Unweighted residuals `[r_x, r_y]` (metres, sample frame) of every observation.
-    pub fn residuals(&self, geometry: &ScanGeometry, observations: &[Observation]) -> Vec<[f64; 2]> {
+    pub fn residuals(
+        &self,
+        geometry: &ScanGeometry,
+        observations: &[Observation],
+    ) -> Vec<[f64; 2]> {
         let mut r: Vec<[f64; 2]> = observations
             .iter()
             .map(|o| {
@@ -307,10 +311,11 @@ impl GlobalModel {
             })
             .collect();
         for term in &self.terms {
-            for (ri, d) in r
-                .iter_mut()
-                .zip(term_displacements(term.effect.as_ref(), geometry, observations))
-            {
+            for (ri, d) in r.iter_mut().zip(term_displacements(
+                term.effect.as_ref(),
+                geometry,
+                observations,
+            )) {
                 ri[0] += d[0];
                 ri[1] += d[1];
             }

@@ -80,8 +80,10 @@ pub(crate) fn estimate(
         order.sort_by(|&a, &b| observations[a].time_s.total_cmp(&observations[b].time_s));
         for w in order.windows(2) {
             let (a, b) = (&observations[w[0]], &observations[w[1]]);
+            // Same scan line: line starts (sub-pixel rows interpolate them) closer than
+            // half a line pair.
             let same_line = (b.time_s - b.line_time_s - (a.time_s - a.line_time_s)).abs()
-                < 0.5 * geometry.pixel_period();
+                < 0.5 * geometry.line_period();
             if same_line && b.time_s - a.time_s < max_dt {
                 diffs.push([
                     residuals[w[1]][0] - residuals[w[0]][0],

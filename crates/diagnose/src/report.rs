@@ -241,7 +241,16 @@ impl fmt::Display for DiagnosisReport {
             }
         }
         for (k, r) in self.rounds.iter().enumerate() {
-            writeln!(f, "round {}: {:<22} {:>9} {:>9} {:>8} {:>6} pass", k + 1, "candidate", "Δχ²", "ΔBIC", "CV ratio", "refit")?;
+            writeln!(
+                f,
+                "round {}: {:<22} {:>9} {:>9} {:>8} {:>6} pass",
+                k + 1,
+                "candidate",
+                "Δχ²",
+                "ΔBIC",
+                "CV ratio",
+                "refit"
+            )?;
             for s in &r.scores {
                 writeln!(
                     f,
@@ -259,7 +268,13 @@ impl fmt::Display for DiagnosisReport {
             writeln!(f, "verdict: no unmodelled effect needed")?;
         }
         for a in &self.added {
-            writeln!(f, "added {} ({}): {}", a.candidate, a.shape, g(&a.gap_after))?;
+            writeln!(
+                f,
+                "added {} ({}): {}",
+                a.candidate,
+                a.shape,
+                g(&a.gap_after)
+            )?;
             for p in &a.parameters {
                 match p.sigma {
                     Some(s) => writeln!(f, "    {} = {:.4e} ± {:.1e}", p.name, p.value, s)?,

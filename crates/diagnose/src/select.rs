@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::candidates::{Candidate, Context, Proposal, proposals, tip_proposal};
 use crate::data::Observation;
-use crate::fit::{Fitted, fit, pinv_sym, weighted};
+use crate::fit::{Fitted, fit, pinv_sym, pinv_sym_cut, weighted};
 
 /// Score of one candidate in one greedy round.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -75,7 +75,7 @@ impl Default for SelectionOptions {
             min_cv_gain: 0.02,
             min_delta_bic: 20.0,
             refit_top: 3,
-            max_iterations: 60,
+            max_iterations: 300,
         }
     }
 }
@@ -111,7 +111,7 @@ pub(crate) fn cv_mean_square(a: &DMatrix<f64>, r: &DVector<f64>, fold: &[usize],
     let gt: DMatrix<f64> = g.iter().fold(DMatrix::zeros(q, q), |acc, x| acc + x);
     let ht: DVector<f64> = h.iter().fold(DVector::zeros(q), |acc, x| acc + x);
     let deltas: Vec<DVector<f64>> = (0..k)
-        .map(|f| -pinv_sym(&(&gt - &g[f])) * (&ht - &h[f]))
+        .map(|f| -pinv_sym_cut(&(&gt - &g[f]), 1e-8) * (&ht - &h[f]))
         .collect();
     let mut sum = 0.0;
     for row in 0..a.nrows() {
@@ -256,23 +256,32 @@ pub(crate) fn round(
     let refits: Vec<Option<Fitted>> = scored[..top]
         .par_iter()
         .map(|(_, p, beta)| {
-            let model = (p.as_ref()?.build)(beta)?;
-            fit(
+            let p = p.as_ref()?;
+            let model = (p.build)(beta)?;
+            let r = fit(
                 model,
                 current.geometry,
                 current.observations,
                 current.sigma,
                 options.max_iterations,
-            )
-            .ok()
+            );
+            if let Err(e) = &r
+                && std::env::var_os("DHCT_DEBUG").is_some()
+            {
+                eprintln!("refit failed: {e}");
+            }
+            r.ok()
         })
         .collect();
     for ((s, _, _), refit) in scored.iter_mut().zip(refits) {
         let Some(f) = refit else { continue };
         let rf = weighted(&f.residuals, current.sigma);
         let chi2 = rf.norm_squared();
-        if chi2 > s.score.chi2 * 1.05 {
-            continue; // the refit wandered off: keep the screening numbers
+        if std::env::var_os("DHCT_DEBUG").is_some() {
+            eprintln!(
+                "{}: refit χ² {chi2} vs screened {}",
+                s.score.candidate, s.score.chi2
+            );
         }
         let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, s.score.added_parameters);
         let cv = cv_mean_square(&f.jacobian, &rf, current.fold, current.folds);

@@ -39,7 +39,11 @@ fn grid(observations: &[Observation]) -> Option<(f64, f64, usize)> {
     if span <= 0.0 || t.len() < 8 {
         return None;
     }
-    let mut gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    let mut gaps: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
     let dt = crate::noise::median(&mut gaps);
     let f_max = 0.5 / dt;
     let f0 = 2.0 / span;
@@ -112,9 +116,7 @@ pub(crate) fn periodogram(observations: &[Observation], weighted: &[f64]) -> Vec
 
 fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..p.len())
-        .filter(|&k| {
-            (k == 0 || p[k].1 >= p[k - 1].1) && (k + 1 == p.len() || p[k].1 >= p[k + 1].1)
-        })
+        .filter(|&k| (k == 0 || p[k].1 >= p[k - 1].1) && (k + 1 == p.len() || p[k].1 >= p[k + 1].1))
         .collect();
     idx.sort_by(|&a, &b| p[b].1.total_cmp(&p[a].1));
     idx.truncate(count);
@@ -128,7 +130,10 @@ pub(crate) fn periodogram_peaks(
     count: usize,
 ) -> Vec<f64> {
     let p = periodogram(observations, weighted);
-    local_maxima(&p, count).into_iter().map(|k| p[k].0).collect()
+    local_maxima(&p, count)
+        .into_iter()
+        .map(|k| p[k].0)
+        .collect()
 }
 
 /// The report's spectrum.
@@ -154,9 +159,13 @@ pub(crate) fn spectrum(observations: &[Observation], weighted: &[f64]) -> Spectr
     let (frequency_hz, power) = p
         .chunks(pool)
         .map(|c| {
-            let best = c.iter().cloned().fold((0.0, f64::NEG_INFINITY), |a, b| {
-                if b.1 > a.1 { b } else { a }
-            });
+            let best =
+                c.iter().cloned().fold(
+                    (0.0, f64::NEG_INFINITY),
+                    |a, b| {
+                        if b.1 > a.1 { b } else { a }
+                    },
+                );
             best
         })
         .unzip();

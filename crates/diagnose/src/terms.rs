@@ -71,7 +71,12 @@ impl ModelTerm for QuadraticField {
     }
     fn parameter_names(&self) -> Vec<&'static str> {
         vec![
-            "x_xi2_m", "x_xi_eta_m", "x_eta2_m", "y_xi2_m", "y_xi_eta_m", "y_eta2_m",
+            "x_xi2_m",
+            "x_xi_eta_m",
+            "x_eta2_m",
+            "y_xi2_m",
+            "y_xi_eta_m",
+            "y_eta2_m",
         ]
     }
     fn parameters(&self) -> Vec<f64> {
