@@ -74,7 +74,7 @@ impl DiagnoseOptions {
         if self.cv_folds < 2 || self.cv_blocks < self.cv_folds {
             return bad("cv_folds/cv_blocks", "need folds ≥ 2 and blocks ≥ folds");
         }
-        if !(self.outlier_sigma > 1.0) {
+        if self.outlier_sigma.is_nan() || self.outlier_sigma <= 1.0 {
             return bad("outlier_sigma", "must be > 1");
         }
         if !(self.max_deviation_fraction > 0.0 && self.max_deviation_fraction <= 0.5) {

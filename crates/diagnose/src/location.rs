@@ -89,6 +89,7 @@ fn bin_of(label: String, centre: f64, members: &[usize], r: &[[f64; 2]], sigma: 
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn binned<F: Fn(&Observation) -> f64>(
     observations: &[Observation],
     r: &[[f64; 2]],
@@ -164,10 +165,10 @@ pub(crate) fn change_points(
         let mut left_s = [0.0; 2];
         let mut left_w = [0.0; 2];
         let mut best = (0.0, a, [0.0; 2]);
-        for k in a..b - 1 {
+        for (k, seg) in segs.iter().enumerate().take(b - 1).skip(a) {
             for ax in 0..2 {
-                left_s[ax] += segs[k].1[ax];
-                left_w[ax] += segs[k].2[ax];
+                left_s[ax] += seg.1[ax];
+                left_w[ax] += seg.2[ax];
             }
             let mut stat = 0.0;
             let mut jump = [0.0; 2];

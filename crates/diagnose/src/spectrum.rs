@@ -159,14 +159,10 @@ pub(crate) fn spectrum(observations: &[Observation], weighted: &[f64]) -> Spectr
     let (frequency_hz, power) = p
         .chunks(pool)
         .map(|c| {
-            let best =
-                c.iter().cloned().fold(
-                    (0.0, f64::NEG_INFINITY),
-                    |a, b| {
-                        if b.1 > a.1 { b } else { a }
-                    },
-                );
-            best
+            c.iter().cloned().fold(
+                (0.0, f64::NEG_INFINITY),
+                |a, b| if b.1 > a.1 { b } else { a },
+            )
         })
         .unzip();
     Spectrum {

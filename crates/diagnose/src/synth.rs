@@ -182,7 +182,10 @@ fn add_effect(
                 uniform(rng, 0.3, 1.2)
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
-            phase_rad: [uniform(rng, 0.0, 6.28), uniform(rng, 0.0, 6.28)],
+            phase_rad: [
+                uniform(rng, 0.0, std::f64::consts::TAU),
+                uniform(rng, 0.0, std::f64::consts::TAU),
+            ],
         }),
         Candidate::TipChange => EffectConfig::TipChange(TipChange {
             time_s: uniform(rng, 0.15, 0.85) * frame,
@@ -271,6 +274,7 @@ pub struct SimulatedScan {
     pub retrace: Vec<Feature>,
 }
 
+#[allow(clippy::too_many_arguments)]
 fn feature(
     id: usize,
     pass: ScanPass,
