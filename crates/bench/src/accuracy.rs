@@ -32,11 +32,19 @@ pub struct Accuracy {
     pub recall: f64,
     /// Per-axis rms of found − true controller position, pixels.
     pub feature_rms_px: f64,
+    /// The same along x (fast axis) and y (slow axis) separately, pixels.
+    pub feature_rms_xy_px: [f64; 2],
     /// Per-axis rms of the fits' own 1σ position uncertainties (the Cramér–Rao bound
     /// evaluated at the fitted parameters with the fit's residual noise), pixels.
     pub crlb_px: f64,
     /// `feature_rms_px / crlb_px`.
     pub feature_rms_over_crlb: f64,
+    /// Per-axis CRLB for the simulated feature shape under the simulated white noise alone
+    /// (an isolated Gaussian; see [`crate::crlb`]), pixels. NaN without white noise or for
+    /// molecule-like features.
+    pub crlb_white_px: f64,
+    /// `feature_rms_px / crlb_white_px`.
+    pub feature_rms_over_crlb_white: f64,
     /// 2-D rms of found − true controller position (localisation noise floor), metres.
     pub noise_floor_m: f64,
     /// 2-D rms of raw position − true sample position after one translation, metres.
@@ -215,6 +223,14 @@ pub fn accuracy(
         .sum::<f64>()
         / (2.0 * n))
         .sqrt();
+    let axis_rms = |k: usize| {
+        (matches
+            .iter()
+            .map(|m| (m.found_px[k] - m.truth_px[k]).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+    };
     let crlb_px = (matches.iter().map(|m| sq(m.sigma_px)).sum::<f64>() / (2.0 * n)).sqrt();
     let noise_floor_m = (matches
         .iter()
@@ -247,6 +263,7 @@ pub fn accuracy(
         })
         .collect();
     let corrected_rms_m = rms_after_translation(&corrected);
+    let crlb_white_px = white_noise_crlb_px(truth, geometry, lattice);
     let all: usize = analysis
         .passes
         .iter()
@@ -286,8 +303,11 @@ pub fn accuracy(
         truth_in_image: truth_count,
         recall: matches.len() as f64 / truth_count.max(1) as f64,
         feature_rms_px,
+        feature_rms_xy_px: [axis_rms(0), axis_rms(1)],
         crlb_px,
         feature_rms_over_crlb: feature_rms_px / crlb_px,
+        crlb_white_px,
+        feature_rms_over_crlb_white: feature_rms_px / crlb_white_px,
         noise_floor_m,
         uncorrected_rms_m: rms_after_translation(&uncorrected),
         corrected_rms_m,
@@ -296,4 +316,26 @@ pub fn accuracy(
         lattice_constant_error,
         parameters,
     }
+}
+
+/// The white-noise CRLB of the simulated feature shape (round Gaussians only), pixels.
+fn white_noise_crlb_px(truth: &GroundTruth, geometry: &ScanGeometry, lattice: &dyn Lattice) -> f64 {
+    let config = &truth.config;
+    let shape = &config.surface.feature;
+    let tip = config.tip.sigma_m;
+    let noise = config.noise.white_sigma_m;
+    if !shape.lobes.is_empty() || shape.sigma_m[0] != shape.sigma_m[1] || noise <= 0.0 {
+        return f64::NAN;
+    }
+    // Tip broadening keeps the volume: σ² → σ² + σ_tip², peak × σ² / (σ² + σ_tip²).
+    let sigma2 = shape.sigma_m[0].powi(2) + tip * tip;
+    let amplitude = shape.height_m.abs() * shape.sigma_m[0].powi(2) / sigma2;
+    let pitch = geometry.pitch_x();
+    let radius_px =
+        dhct_features::FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
+            .fit_radius_fraction
+            * lattice.nearest_neighbour_distance()
+            / pitch;
+    crate::crlb::position_crlb_px(sigma2.sqrt() / pitch, amplitude, noise, radius_px)
+        .unwrap_or(f64::NAN)
 }

@@ -8,6 +8,7 @@
 //! in `tests/` run a small robustness sweep and the determinism check.
 
 pub mod accuracy;
+pub mod crlb;
 pub mod determinism;
 pub mod machine;
 pub mod measure;

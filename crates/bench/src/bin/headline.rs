@@ -246,7 +246,8 @@ fn stage_table(min: &StageTimes, med: &StageTimes) -> Table {
 fn accuracy_lines(a: &Accuracy) -> String {
     let mut text = format!(
         "features: {} found, {} matched of {} true ({:.2} % recall), {:.2} % indexed\n\
-         feature rms {:.4} px per axis vs fit CRLB {:.4} px: ratio {:.3}\n\
+         feature rms {:.4} px per axis (x {:.4}, y {:.4}) vs fit CRLB {:.4} px: ratio {:.3}; vs white-noise \
+         CRLB of the simulated shape {:.4} px: ratio {:.3}\n\
          noise floor {:.3} pm; uncorrected {:.1} pm; DHCT corrected rms vs truth {:.3} pm \
          (= {:.3} x floor)\n\
          lattice constant error (largest region): x {:+.4} %, y {:+.4} % ({:+.3}, {:+.3} pm)\n",
@@ -256,8 +257,12 @@ fn accuracy_lines(a: &Accuracy) -> String {
         100.0 * a.recall,
         100.0 * a.indexed_fraction,
         a.feature_rms_px,
+        a.feature_rms_xy_px[0],
+        a.feature_rms_xy_px[1],
         a.crlb_px,
         a.feature_rms_over_crlb,
+        a.crlb_white_px,
+        a.feature_rms_over_crlb_white,
         a.noise_floor_m * 1e12,
         a.uncorrected_rms_m * 1e12,
         a.corrected_rms_m * 1e12,
