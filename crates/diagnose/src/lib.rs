@@ -12,9 +12,10 @@
 //!    law and the lattice origin and angle fitted together to all feature positions,
 //!    minimising `|to_sample(measured, t) − ideal site|²` (see `model`'s docs). The
 //!    simulator's own effects ([`dhct_simulate::Effect`]) are the model terms.
-//! 3. **Noise floor** ([`NoiseFloor`]), independent of the model: successive differences of
-//!    neighbouring features within a line, cross-checked by trace/retrace pairs of the same
-//!    site and the feature fits' own uncertainties. Gap/noise and χ²/dof follow.
+//! 3. **Noise floor** ([`NoiseFloor`]), independent of the model: trace/retrace pairs of the
+//!    same site (for one pass, successive differences of neighbouring features within a
+//!    line), cross-checked by the feature fits' own uncertainties. Gap/noise and χ²/dof
+//!    follow.
 //! 4. **Where** ([`GapLocation`]): residuals binned by frame time, fast phase, position,
 //!    pass and feature height; a Lomb–Scargle spectrum; change points.
 //! 5. **Which effect** ([`Candidate`]): every candidate is screened on a grid of its shape

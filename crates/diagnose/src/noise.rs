@@ -21,7 +21,8 @@ use crate::data::Observation;
 /// The noise floor and its independent estimates, metres per axis `[x, y]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NoiseFloor {
-    /// The floor used for weights, χ² and gap/noise (the successive-difference estimate).
+    /// The floor used for weights, χ² and gap/noise (trace/retrace pairs, else successive
+    /// differences, else the feature fits).
     pub sigma_m: [f64; 2],
     /// Successive-difference estimate.
     pub successive_difference_m: [f64; 2],
@@ -124,11 +125,11 @@ pub(crate) fn estimate(
         [median(&mut x), median(&mut y)]
     });
     let trace_retrace_m = (tr.len() >= 10).then(|| pair_sigma(&tr));
-    // Fall back to trace/retrace, then to the fits, when too few successive pairs exist.
-    let sigma_m = if diffs.len() >= 20 && successive.iter().all(|s| *s > 0.0) {
-        successive
-    } else if let Some(t) = trace_retrace_m.filter(|t| t.iter().all(|s| *s > 0.0)) {
+    // Trace/retrace pairs first (validated), then successive differences, then the fits.
+    let sigma_m = if let Some(t) = trace_retrace_m.filter(|t| t.iter().all(|s| *s > 0.0)) {
         t
+    } else if diffs.len() >= 20 && successive.iter().all(|s| *s > 0.0) {
+        successive
     } else if let Some(f) = fit_uncertainty_m.filter(|f| f.iter().all(|s| *s > 0.0)) {
         f
     } else {
