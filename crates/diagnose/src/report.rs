@@ -188,9 +188,17 @@ impl fmt::Display for DiagnosisReport {
         let n = &self.noise;
         writeln!(
             f,
-            "noise floor: {} × {} pm (successive differences, {} pairs); trace/retrace {}; fit σ {}",
+            "noise floor: {} × {} pm (from {}); successive differences {} × {} pm ({} pairs); \
+             trace/retrace {}; fit σ {}",
             pm(n.sigma_m[0]),
             pm(n.sigma_m[1]),
+            if n.trace_retrace_m.is_some() {
+                format!("{} trace/retrace pairs", n.trace_retrace_pairs)
+            } else {
+                "successive differences".to_string()
+            },
+            pm(n.successive_difference_m[0]),
+            pm(n.successive_difference_m[1]),
             n.successive_pairs,
             n.trace_retrace_m
                 .map_or("—".into(), |s| format!("{} × {} pm", pm(s[0]), pm(s[1]))),
