@@ -311,7 +311,8 @@ def run_inside(directory, out_json, failed):
     print(f"dhct:   {ours['features_per_s']:.0f} features/s ({ours['threads']} threads), "
           f"feature rms {ours_feature_rms_px:.4f} px; corrected rms vs truth "
           f"{ours_rigid * 1e12:.2f} pm rigid / {ours_translation * 1e12:.2f} pm translation; "
-          f"model + correction {distortion_s:.3f} s, features + model + correction {chain_s:.3f} s")
+          f"model + correction {distortion_s:.3f} s, features + model + correction {chain_s:.3f} s "
+          f"(load {ours['load']}, other processes {ours.get('other_cpus') or float('nan'):.2f} CPUs)")
     print(f"        raw positions {report['dhct']['raw_rigid_rms_m'] * 1e12:.1f} pm; best affine "
           f"fitted to the truth (oracle) {report['dhct']['oracle_affine_rms_m'] * 1e12:.2f} pm")
 

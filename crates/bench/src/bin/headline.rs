@@ -511,6 +511,7 @@ fn write_peer_files(dir: &Path, pixels: usize) -> Result<Value, String> {
         "lattice": "graphite",
         "threads": measurement.threads,
         "load": measurement.load,
+        "other_cpus": measurement.other_cpus,
         "times": measurement.times,
         "features_both_passes": measurement.features,
         "trace_features": trace_features,
