@@ -219,7 +219,7 @@ pub fn diagnosis_section(
              yellow {:.1} pm (99th percentile).",
             top * 1e12
         ),
-        content: FigureContent::Png(canvas.png()),
+        content: FigureContent::Png(canvas.png(), canvas.preview(1100).map(|p| p.png())),
     });
 
     let mut html = String::from("<h2>Sim-to-real gap diagnosis</h2>\n<table>\n");
@@ -407,7 +407,7 @@ pub fn run_file(
     let (section, figures) = diagnosis_section(&report, &geometry);
     for f in &figures {
         let bytes: &[u8] = match &f.content {
-            FigureContent::Png(b) => b,
+            FigureContent::Png(b, _) => b,
             FigureContent::Svg(s) => s.as_bytes(),
         };
         correct::write_bytes(&output.join(f.file_name()), bytes)?;

@@ -24,6 +24,9 @@ pub struct Analysis {
     pub unit_cell: Option<UnitCellAnalysis>,
     /// Why there is no unit-cell analysis, if there is none.
     pub unit_cell_note: Option<String>,
+    /// Plausibility warnings: results that may be wrong without any stage failing
+    /// (e.g. a corrected lattice constant far from the nominal one).
+    pub warnings: Vec<String>,
     /// Wall time of each stage.
     pub timings: StageTimings,
 }

@@ -222,7 +222,7 @@ pub fn run(
         .unwrap_or((geometry.rows() * geometry.columns()) as f64)
         * geometry.pitch_x()
         * geometry.pitch_y();
-    let passes = found
+    let passes: Vec<PassOutput> = found
         .into_iter()
         .zip(corrected)
         .zip(indices)
@@ -245,6 +245,7 @@ pub fn run(
             }
         })
         .collect();
+    let warnings = plausibility_warnings(lattice, &regions, &passes);
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(Analysis {
         passes,
@@ -253,8 +254,69 @@ pub fn run(
         skipped_regions,
         unit_cell,
         unit_cell_note,
+        warnings,
         timings,
     })
+}
+
+/// Fitted lattice scale beyond which a warning is given (fraction).
+pub const SCALE_WARNING: f64 = 0.03;
+
+/// Results that look wrong although every stage succeeded.
+fn plausibility_warnings(
+    lattice: &dyn Lattice,
+    regions: &[RegionFit],
+    passes: &[PassOutput],
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for r in regions {
+        let worst = r
+            .fit
+            .scale
+            .iter()
+            .map(|s| (s - 1.0).abs())
+            .fold(0.0, f64::max);
+        if worst > SCALE_WARNING {
+            warnings.push(format!(
+                "region {}: the corrected lattice is {:.1} % x {:.1} % of the nominal {} lattice \
+                 (scales {:.4}, {:.4}); check the pixel size in the file, --nn, and the drift \
+                 model (a drift near the slow-scan speed is not recoverable)",
+                r.region,
+                100.0 * r.fit.scale[0],
+                100.0 * r.fit.scale[1],
+                lattice.name(),
+                r.fit.scale[0],
+                r.fit.scale[1]
+            ));
+        }
+        let offset = r
+            .fit
+            .set_offsets_m
+            .iter()
+            .skip(1)
+            .map(|o| o[0].hypot(o[1]))
+            .fold(0.0, f64::max);
+        if offset > 0.25 * lattice.nearest_neighbour_distance() {
+            warnings.push(format!(
+                "region {}: trace and retrace disagree by {:.1} pm after correction (more than a \
+                 quarter of the NN distance)",
+                r.region,
+                offset * 1e12
+            ));
+        }
+    }
+    for p in passes {
+        let total = p.features.features.len();
+        let indexed = p.indices.iter().flatten().count();
+        if total > 0 && (indexed as f64) < 0.5 * total as f64 {
+            warnings.push(format!(
+                "{}: only {indexed} of {total} features were indexed by the lattice fit (use a \
+                 mask to exclude steps, defects and other domains)",
+                p.pass
+            ));
+        }
+    }
+    warnings
 }
 
 fn found_sets_first(found: &[(FeatureSet, Array2<f64>)]) -> &FeatureSet {
@@ -463,7 +525,11 @@ fn fit_regions(
         return Err(match first_error {
             Some(e) => PipelineError::LatticeFit(e),
             None => PipelineError::TooFewFeatures {
-                pass: "masked".into(),
+                pass: if mask.is_some() {
+                    "largest mask region of the trace".into()
+                } else {
+                    "trace".into()
+                },
                 found: skipped.iter().map(|s| s.features).max().unwrap_or(0),
                 needed: options.regions.min_features,
             },

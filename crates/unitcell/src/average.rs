@@ -1,6 +1,7 @@
 use dhct_lattice::Lattice;
 use nalgebra::Vector2;
 use ndarray::{Array2, ArrayView2};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::{LocalCell, UnitCellError};
@@ -51,25 +52,41 @@ pub fn average_unit_cell(
         return Err(UnitCellError::BadPitch(pitch.0, pitch.1));
     }
     let [a1, a2] = lattice.primitive_vectors();
-    let mut sum = Array2::<f64>::zeros((resolution, resolution));
-    let mut sample = Array2::<f64>::zeros((resolution, resolution));
-    let (mut used, mut skipped) = (0usize, 0usize);
-    'cells: for cell in cells {
-        let t = cell.transform();
-        let origin = Vector2::from(cell.origin_m);
-        for ((i, j), value) in sample.indexed_iter_mut() {
-            let (u, v) = (j as f64 / resolution as f64, i as f64 / resolution as f64);
-            let p = origin + t * (a1 * u + a2 * v);
-            match bilinear(image, p.x / pitch.0, p.y / pitch.1) {
-                Some(z) => *value = z,
-                None => {
-                    skipped += 1;
-                    continue 'cells;
+    // Cells are summed in fixed-size chunks in parallel and the chunk sums added in chunk
+    // order, so the result does not depend on the number of threads.
+    const CHUNK: usize = 128;
+    let partial: Vec<(Array2<f64>, usize, usize)> = cells
+        .par_chunks(CHUNK)
+        .map(|chunk| {
+            let mut sum = Array2::<f64>::zeros((resolution, resolution));
+            let mut sample = Array2::<f64>::zeros((resolution, resolution));
+            let (mut used, mut skipped) = (0usize, 0usize);
+            'cells: for cell in chunk {
+                let t = cell.transform();
+                let origin = Vector2::from(cell.origin_m);
+                for ((i, j), value) in sample.indexed_iter_mut() {
+                    let (u, v) = (j as f64 / resolution as f64, i as f64 / resolution as f64);
+                    let p = origin + t * (a1 * u + a2 * v);
+                    match bilinear(image, p.x / pitch.0, p.y / pitch.1) {
+                        Some(z) => *value = z,
+                        None => {
+                            skipped += 1;
+                            continue 'cells;
+                        }
+                    }
                 }
+                sum += &sample;
+                used += 1;
             }
-        }
-        sum += &sample;
-        used += 1;
+            (sum, used, skipped)
+        })
+        .collect();
+    let mut sum = Array2::<f64>::zeros((resolution, resolution));
+    let (mut used, mut skipped) = (0usize, 0usize);
+    for (chunk_sum, chunk_used, chunk_skipped) in &partial {
+        sum += chunk_sum;
+        used += chunk_used;
+        skipped += chunk_skipped;
     }
     if used == 0 {
         return Err(UnitCellError::NoCompleteCell);

@@ -7,6 +7,7 @@ use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
 use dhct_unitcell::ConfidenceEllipse;
 use ndarray::{Array2, s};
+use rayon::prelude::*;
 
 use super::plots::{BLUE, GREEN, ORANGE, Plot, Series, Style, VERMILION, thin};
 use super::render::{Canvas, display_range, heat_colour, upscale_for};
@@ -21,7 +22,9 @@ pub struct Figure {
 }
 
 pub enum FigureContent {
-    Png(Vec<u8>),
+    /// The full-resolution PNG (the file) and, for large pictures, a smaller preview for
+    /// the report.
+    Png(Vec<u8>, Option<Vec<u8>>),
     Svg(String),
 }
 
@@ -31,7 +34,7 @@ impl Figure {
             stem: stem.into(),
             title: title.into(),
             caption,
-            content: FigureContent::Png(canvas.png()),
+            content: FigureContent::Png(canvas.png(), canvas.preview(1100).map(|p| p.png())),
         }
     }
     pub(crate) fn svg(stem: &str, title: &str, caption: String, plot: &Plot) -> Figure {
@@ -44,7 +47,7 @@ impl Figure {
     }
     pub fn file_name(&self) -> String {
         match self.content {
-            FigureContent::Png(_) => format!("{}.png", self.stem),
+            FigureContent::Png(..) => format!("{}.png", self.stem),
             FigureContent::Svg(_) => format!("{}.svg", self.stem),
         }
     }
@@ -58,69 +61,80 @@ const RED_PX: [u8; 3] = [240, 60, 40];
 /// All figures, in report order.
 pub fn make_figures(
     pair: &ScanPair,
-    lattice: &dyn Lattice,
+    lattice: &(dyn Lattice + Sync),
     analysis: &Analysis,
     mask: Option<&Array2<bool>>,
     colormap: Colormap,
 ) -> Vec<Figure> {
     let geometry = pair.geometry();
-    let mut figures = Vec::new();
+    let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
+    // Each job makes one or more figures; they run in parallel (PNG encoding dominates) and
+    // are collected in this order.
+    type Job<'a> = Box<dyn Fn() -> Vec<Figure> + Send + Sync + 'a>;
+    let mut jobs: Vec<Job> = Vec::new();
     for pass in &analysis.passes {
         let Some(raw) = pair.image(pass.pass) else {
             continue;
         };
         let range = display_range(raw.z.view());
-        let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
-        let mut canvas = Canvas::from_image(raw.z.view(), colormap, range, scale);
-        if let Some(mask) = mask {
-            canvas.dim_outside(mask, scale);
-        }
-        figures.push(Figure::png(
-            &format!("raw_{}", pass.pass),
-            &format!("Raw {} image", pass.pass),
-            format!(
-                "As acquired (controller frame), {} × {} px, {:.2} × {:.2} nm{}.",
-                geometry.columns(),
-                geometry.rows(),
-                geometry.width() * 1e9,
-                geometry.height() * 1e9,
-                if mask.is_some() {
-                    "; greyed: outside the mask (not analysed)"
-                } else {
-                    ""
-                }
-            ),
-            &canvas,
-        ));
-        figures.push(Figure::png(
-            &format!("corrected_{}", pass.pass),
-            &format!("Corrected {} image", pass.pass),
-            "Resampled onto the sample-frame grid with the fitted drift/creep/hysteresis model \
-             (same pixel grid and colour scale as the raw image; z values are not altered; \
-             magenta = no data)."
-                .into(),
-            &Canvas::from_image(pass.corrected_image.view(), colormap, range, scale),
-        ));
+        jobs.push(Box::new(move || {
+            let mut canvas = Canvas::from_image(raw.z.view(), colormap, range, scale);
+            if let Some(mask) = mask {
+                canvas.dim_outside(mask, scale);
+            }
+            vec![Figure::png(
+                &format!("raw_{}", pass.pass),
+                &format!("Raw {} image", pass.pass),
+                format!(
+                    "As acquired (controller frame), {} × {} px, {:.2} × {:.2} nm{}.",
+                    geometry.columns(),
+                    geometry.rows(),
+                    geometry.width() * 1e9,
+                    geometry.height() * 1e9,
+                    if mask.is_some() {
+                        "; greyed: outside the mask (not analysed)"
+                    } else {
+                        ""
+                    }
+                ),
+                &canvas,
+            )]
+        }));
+        jobs.push(Box::new(move || {
+            vec![Figure::png(
+                &format!("corrected_{}", pass.pass),
+                &format!("Corrected {} image", pass.pass),
+                "Resampled onto the sample-frame grid with the fitted drift/creep/hysteresis \
+                 model (same pixel grid and colour scale as the raw image; z values are not \
+                 altered; magenta = no data)."
+                    .into(),
+                &Canvas::from_image(pass.corrected_image.view(), colormap, range, scale),
+            )]
+        }));
     }
     for pass in &analysis.passes {
-        let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
         if let Some(ncc) = &pass.correlation {
-            figures.push(Figure::png(
-                &format!("ncc_{}", pass.pass),
-                &format!("Normalised cross-correlation ({})", pass.pass),
-                format!(
-                    "NCC with the Gaussian kernel (σ = {:.2} px), −1 (black) to 1 (yellow); \
-                     {} features found of {} candidates.",
-                    pass.features.kernel_sigma_px,
-                    pass.features.features.len(),
-                    pass.features.candidates
-                ),
-                &Canvas::from_image(ncc.view(), Colormap::Viridis, Some((-1.0, 1.0)), scale),
-            ));
+            jobs.push(Box::new(move || {
+                vec![Figure::png(
+                    &format!("ncc_{}", pass.pass),
+                    &format!("Normalised cross-correlation ({})", pass.pass),
+                    format!(
+                        "NCC with the Gaussian kernel (σ = {:.2} px), −1 (black) to 1 \
+                         (yellow); {} features found of {} candidates.",
+                        pass.features.kernel_sigma_px,
+                        pass.features.features.len(),
+                        pass.features.candidates
+                    ),
+                    &Canvas::from_image(ncc.view(), Colormap::Viridis, Some((-1.0, 1.0)), scale),
+                )]
+            }));
         }
     }
-    figures.push(rdf_plot(analysis));
-    if let Some(adf) = analysis.regions.first().and_then(|r| r.adf.as_ref()) {
+    jobs.push(Box::new(|| vec![rdf_plot(analysis)]));
+    jobs.push(Box::new(|| {
+        let Some(adf) = analysis.regions.first().and_then(|r| r.adf.as_ref()) else {
+            return Vec::new();
+        };
         let points = adf
             .angles_rad
             .iter()
@@ -133,7 +147,7 @@ pub fn make_figures(
             "bonds",
         )
         .with(Series::new("corrected", points, Style::Bars, BLUE));
-        figures.push(Figure::svg(
+        vec![Figure::svg(
             "adf",
             "Angular distribution (ADF, paper Fig. S2)",
             format!(
@@ -143,42 +157,55 @@ pub fn make_figures(
                 adf.lattice_angle_rad.to_degrees()
             ),
             &plot,
-        ));
-    }
-    figures.push(hysteresis_plot(geometry, analysis));
-    figures.extend(drift_plots(analysis));
-    if let Some(region) = analysis.regions.first() {
-        figures.push(deviation_scatter(region));
-    }
-    figures.push(deviation_map(geometry, lattice, analysis));
-    if let Some(f) = lattice_overlay(geometry, lattice, analysis, colormap) {
-        figures.push(f);
-    }
+        )]
+    }));
+    jobs.push(Box::new(|| vec![hysteresis_plot(geometry, analysis)]));
+    jobs.push(Box::new(|| drift_plots(analysis)));
+    jobs.push(Box::new(|| {
+        analysis
+            .regions
+            .first()
+            .map(deviation_scatter)
+            .into_iter()
+            .collect()
+    }));
+    jobs.push(Box::new(|| {
+        vec![deviation_map(geometry, lattice, analysis)]
+    }));
+    jobs.push(Box::new(|| {
+        lattice_overlay(geometry, lattice, analysis, colormap)
+            .into_iter()
+            .collect()
+    }));
     if let Some(cell) = &analysis.unit_cell {
         let region = analysis.regions.first();
-        figures.push(cell_picture(
-            "unit_cell_averaged",
-            "Translationally averaged unit cell (paper Fig. 10)",
-            lattice,
-            cell,
-            false,
-            region,
-            colormap,
-        ));
-        figures.push(cell_picture(
-            "unit_cell_symmetrized",
-            &format!(
-                "Symmetry-averaged unit cell, {} (paper Fig. 11)",
-                cell.group
-            ),
-            lattice,
-            cell,
-            true,
-            region,
-            colormap,
-        ));
+        jobs.push(Box::new(move || {
+            vec![cell_picture(
+                "unit_cell_averaged",
+                "Translationally averaged unit cell (paper Fig. 10)",
+                lattice,
+                cell,
+                false,
+                region,
+                colormap,
+            )]
+        }));
+        jobs.push(Box::new(move || {
+            vec![cell_picture(
+                "unit_cell_symmetrized",
+                &format!(
+                    "Symmetry-averaged unit cell, {} (paper Fig. 11)",
+                    cell.group
+                ),
+                lattice,
+                cell,
+                true,
+                region,
+                colormap,
+            )]
+        }));
     }
-    figures
+    jobs.par_iter().flat_map_iter(|job| job()).collect()
 }
 
 fn rdf_plot(analysis: &Analysis) -> Figure {

@@ -211,7 +211,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
             crate::diagnose::diagnosis_section(&diagnosis, &geometry);
         for f in &diagnosis_figures {
             let bytes: &[u8] = match &f.content {
-                figures::FigureContent::Png(b) => b,
+                figures::FigureContent::Png(b, _) => b,
                 figures::FigureContent::Svg(s) => s.as_bytes(),
             };
             write_bytes(&request.output.join(f.file_name()), bytes)?;
@@ -302,7 +302,7 @@ fn write_images(
     for figure in figures {
         let name = figure.file_name();
         let bytes: &[u8] = match &figure.content {
-            figures::FigureContent::Png(b) => b,
+            figures::FigureContent::Png(b, _) => b,
             figures::FigureContent::Svg(s) => s.as_bytes(),
         };
         write_bytes(&dir.join(&name), bytes)?;
@@ -387,6 +387,9 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
         "analysis {:.2} s (read {:.2} s, write {:.2} s)",
         summary.timings.total_s, summary.read_s, summary.write_s
     );
+    for w in &summary.warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
     let _ = writeln!(s, "report: {}", output.join("report.html").display());
     s
 }

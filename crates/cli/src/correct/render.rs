@@ -184,13 +184,45 @@ impl Canvas {
         self.line([x, y - size], [x, y + size], width, colour);
     }
 
-    /// PNG bytes.
+    /// A box-filtered copy at most `max_side` px along its longer side, or `None` when
+    /// this canvas is already that small.
+    pub fn preview(&self, max_side: usize) -> Option<Canvas> {
+        let factor = self.width.max(self.height).div_ceil(max_side.max(1));
+        if factor <= 1 {
+            return None;
+        }
+        let (width, height) = (self.width / factor, self.height / factor);
+        let mut rgb = vec![0u8; width * height * 3];
+        let n = (factor * factor) as u32;
+        for y in 0..height {
+            for x in 0..width {
+                let mut sum = [0u32; 3];
+                for dy in 0..factor {
+                    let row = (y * factor + dy) * self.width;
+                    for dx in 0..factor {
+                        let i = (row + x * factor + dx) * 3;
+                        for (s, &v) in sum.iter_mut().zip(&self.rgb[i..i + 3]) {
+                            *s += v as u32;
+                        }
+                    }
+                }
+                let i = (y * width + x) * 3;
+                for (out, s) in rgb[i..i + 3].iter_mut().zip(sum) {
+                    *out = ((s + n / 2) / n) as u8;
+                }
+            }
+        }
+        Some(Canvas { width, height, rgb })
+    }
+
+    /// PNG bytes (fast compression: these are pictures to look at, written on every run).
     pub fn png(&self) -> Vec<u8> {
         let mut out = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut out, self.width as u32, self.height as u32);
             encoder.set_color(png::ColorType::Rgb);
             encoder.set_depth(png::BitDepth::Eight);
+            encoder.set_compression(png::Compression::Fast);
             let mut writer = encoder.write_header().expect("PNG header to memory");
             writer
                 .write_image_data(&self.rgb)

@@ -81,8 +81,9 @@ pub fn value_with_sigma(value: f64, sigma: f64, unit: &str) -> String {
 pub(crate) fn figure_html(html: &mut String, figure: &Figure) {
     html.push_str("<figure>");
     match &figure.content {
-        FigureContent::Png(bytes) => {
-            let data = base64::engine::general_purpose::STANDARD.encode(bytes);
+        FigureContent::Png(full, preview) => {
+            let data =
+                base64::engine::general_purpose::STANDARD.encode(preview.as_ref().unwrap_or(full));
             let _ = write!(
                 html,
                 "<img alt='{}' src='data:image/png;base64,{data}'>",
@@ -131,6 +132,13 @@ pub fn report_html(
         summary.dhct_version
     );
 
+    for w in &summary.warnings {
+        let _ = writeln!(
+            html,
+            "<p class='note'><b>Warning:</b> {}</p>",
+            html_escape(w)
+        );
+    }
     html.push_str("<h2>Scan and features</h2><table>\n");
     header(&mut html, &["", "value"]);
     row(

@@ -109,6 +109,8 @@ pub struct RunSummary {
     pub skipped_regions: Vec<SkippedRegion>,
     pub unit_cell: Option<UnitCellSummary>,
     pub unit_cell_note: Option<String>,
+    /// Plausibility warnings (see `dhct_pipeline::Analysis::warnings`).
+    pub warnings: Vec<String>,
     pub timings: StageTimings,
     /// Reading the input, seconds.
     pub read_s: f64,
@@ -226,6 +228,7 @@ pub fn summarise(
             asymmetric_unit: c.asymmetric_unit.clone(),
         }),
         unit_cell_note: analysis.unit_cell_note.clone(),
+        warnings: analysis.warnings.clone(),
         timings: analysis.timings,
         read_s,
         write_s: 0.0,
