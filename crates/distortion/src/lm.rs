@@ -2,6 +2,7 @@
 //! RDF, drift/creep and hysteresis fits (few parameters, up to ~10⁵ residuals).
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// Result of [`levenberg_marquardt`].
 pub(crate) struct LmResult {
@@ -13,21 +14,22 @@ pub(crate) struct LmResult {
     pub inverse_normal: Option<DMatrix<f64>>,
 }
 
-fn jacobian<F: Fn(&[f64], &mut [f64])>(f: &F, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
+/// Forward-difference Jacobian, one column per parameter, columns in parallel (each column
+/// is computed the same way whatever the thread count, so the result is deterministic).
+fn jacobian<F: Fn(&[f64], &mut [f64]) + Sync>(f: &F, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
     let (m, n) = (r0.len(), p.len());
-    let mut jac = DMatrix::zeros(m, n);
-    let mut q = p.to_vec();
-    let mut r = vec![0.0; m];
-    for j in 0..n {
-        let h = 1e-7 * p[j].abs().max(1e-3);
-        q[j] = p[j] + h;
-        f(&q, &mut r);
-        for i in 0..m {
-            jac[(i, j)] = (r[i] - r0[i]) / h;
-        }
-        q[j] = p[j];
-    }
-    jac
+    let columns: Vec<Vec<f64>> = (0..n)
+        .into_par_iter()
+        .map(|j| {
+            let mut q = p.to_vec();
+            let mut r = vec![0.0; m];
+            let h = 1e-7 * p[j].abs().max(1e-3);
+            q[j] = p[j] + h;
+            f(&q, &mut r);
+            r.iter().zip(r0).map(|(r, r0)| (r - r0) / h).collect()
+        })
+        .collect();
+    DMatrix::from_fn(m, n, |i, j| columns[j][i])
 }
 
 fn cost(r: &[f64], w: &[f64]) -> f64 {
@@ -35,7 +37,7 @@ fn cost(r: &[f64], w: &[f64]) -> f64 {
 }
 
 /// Minimises `Σ w_i r_i(p)²` from `p0`. `f(p, r)` writes the `m` residuals.
-pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64])>(
+pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
     f: F,
     m: usize,
     p0: &[f64],

@@ -37,6 +37,26 @@ impl Figure {
             content: FigureContent::Png(canvas.png(), canvas.preview(1100).map(|p| p.png())),
         }
     }
+    /// A picture kept only at reduced size (at most `max_side` px): for views whose full
+    /// resolution is in another output (raw data, NCC, the deviation table).
+    pub(crate) fn png_reduced(
+        stem: &str,
+        title: &str,
+        caption: String,
+        canvas: &Canvas,
+        max_side: usize,
+    ) -> Figure {
+        let bytes = canvas
+            .preview(max_side)
+            .map(|p| p.png())
+            .unwrap_or_else(|| canvas.png());
+        Figure {
+            stem: stem.into(),
+            title: title.into(),
+            caption,
+            content: FigureContent::Png(bytes, None),
+        }
+    }
     pub(crate) fn svg(stem: &str, title: &str, caption: String, plot: &Plot) -> Figure {
         Figure {
             stem: stem.into(),
@@ -52,6 +72,9 @@ impl Figure {
         }
     }
 }
+
+/// Longest side of the pictures kept only as views (raw, NCC, deviation map), px.
+const REDUCED: usize = 1100;
 
 const WHITE: [u8; 3] = [255, 255, 255];
 const CYAN: [u8; 3] = [0, 220, 255];
@@ -82,7 +105,7 @@ pub fn make_figures(
             if let Some(mask) = mask {
                 canvas.dim_outside(mask, scale);
             }
-            vec![Figure::png(
+            vec![Figure::png_reduced(
                 &format!("raw_{}", pass.pass),
                 &format!("Raw {} image", pass.pass),
                 format!(
@@ -98,6 +121,7 @@ pub fn make_figures(
                     }
                 ),
                 &canvas,
+                REDUCED,
             )]
         }));
         jobs.push(Box::new(move || {
@@ -115,7 +139,7 @@ pub fn make_figures(
     for pass in &analysis.passes {
         if let Some(ncc) = &pass.correlation {
             jobs.push(Box::new(move || {
-                vec![Figure::png(
+                vec![Figure::png_reduced(
                     &format!("ncc_{}", pass.pass),
                     &format!("Normalised cross-correlation ({})", pass.pass),
                     format!(
@@ -126,6 +150,7 @@ pub fn make_figures(
                         pass.features.candidates
                     ),
                     &Canvas::from_image(ncc.view(), Colormap::Viridis, Some((-1.0, 1.0)), scale),
+                    REDUCED,
                 )]
             }));
         }
@@ -476,7 +501,7 @@ fn deviation_map(geometry: &ScanGeometry, lattice: &dyn Lattice, analysis: &Anal
             );
         }
     }
-    Figure::png(
+    Figure::png_reduced(
         "deviation_map",
         "Deviation heat map (paper Fig. S3)",
         format!(
@@ -492,6 +517,7 @@ fn deviation_map(geometry: &ScanGeometry, lattice: &dyn Lattice, analysis: &Anal
                 * 1e12
         ),
         &canvas,
+        REDUCED,
     )
 }
 

@@ -20,6 +20,7 @@ use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::{WriteError, write_atomically};
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
+use rayon::prelude::*;
 
 pub use config::{CorrectConfig, Length, build_lattice};
 pub use summary::RunSummary;
@@ -159,10 +160,28 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
         read_s,
     );
     let colormap = config.colormap.unwrap_or(Colormap::Gold);
-    let figures =
-        figures::make_figures(&pair, lattice.as_ref(), &analysis, mask.as_ref(), colormap);
-    let mut outputs = write_images(request.output, &pair, &analysis, &figures)?;
-    outputs.push(write_features_csv(request.output, &analysis)?);
+    // Figures, data images and the feature table are independent: made and written in
+    // parallel.
+    let ((figures, images), csv) = rayon::join(
+        || {
+            rayon::join(
+                || {
+                    figures::make_figures(
+                        &pair,
+                        lattice.as_ref(),
+                        &analysis,
+                        mask.as_ref(),
+                        colormap,
+                    )
+                },
+                || write_data_images(request.output, &pair, &analysis),
+            )
+        },
+        || write_features_csv(request.output, &analysis),
+    );
+    let mut outputs = images?;
+    outputs.push(csv?);
+    outputs.extend(write_figure_files(request.output, &figures)?);
 
     // The resolved config: everything needed to repeat the run.
     let resolved = CorrectConfig {
@@ -267,48 +286,61 @@ fn channel_like(pair: &ScanPair, pass: ScanPass, z: &Array2<f64>) -> ImageChanne
     ImageChannel::new(name, unit, z.clone())
 }
 
-fn write_images(
-    dir: &Path,
-    pair: &ScanPair,
-    analysis: &Analysis,
-    figures: &[figures::Figure],
-) -> Result<Vec<String>> {
-    let mut outputs = Vec::new();
+/// The data images: corrected images (TIFF, GSF) and the unit cells (TIFF), written in
+/// parallel.
+fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result<Vec<String>> {
     let geometry = pair.geometry();
+    let mut jobs: Vec<(String, ImageChannel, Option<ScanPass>)> = Vec::new();
     for pass in &analysis.passes {
         let channel = channel_like(pair, pass.pass, &pass.corrected_image);
-        let tiff = format!("corrected_{}.tiff", pass.pass);
-        write_atomically(&dir.join(&tiff), |w| {
-            dhct_sm4_io::tiff_file::write_f32(&channel, w)
-        })?;
-        let gsf = format!("corrected_{}.gsf", pass.pass);
-        write_atomically(&dir.join(&gsf), |w| {
-            dhct_sm4_io::gsf::write_pass(&channel, geometry, pass.pass, w)
-        })?;
-        outputs.extend([tiff, gsf]);
+        jobs.push((
+            format!("corrected_{}.tiff", pass.pass),
+            channel.clone(),
+            None,
+        ));
+        jobs.push((
+            format!("corrected_{}.gsf", pass.pass),
+            channel,
+            Some(pass.pass),
+        ));
     }
     if let Some(cell) = &analysis.unit_cell {
         for (name, values) in [
             ("unit_cell_averaged.tiff", &cell.averaged.values),
             ("unit_cell_symmetrized.tiff", &cell.symmetrized.values),
         ] {
-            let channel = ImageChannel::new(name, "m", values.clone());
-            write_atomically(&dir.join(name), |w| {
-                dhct_sm4_io::tiff_file::write_f32(&channel, w)
-            })?;
-            outputs.push(name.into());
+            jobs.push((
+                name.into(),
+                ImageChannel::new(name, "m", values.clone()),
+                None,
+            ));
         }
     }
-    for figure in figures {
-        let name = figure.file_name();
-        let bytes: &[u8] = match &figure.content {
-            figures::FigureContent::Png(b, _) => b,
-            figures::FigureContent::Svg(s) => s.as_bytes(),
-        };
-        write_bytes(&dir.join(&name), bytes)?;
-        outputs.push(name);
-    }
-    Ok(outputs)
+    jobs.par_iter()
+        .map(|(name, channel, gsf_pass)| {
+            write_atomically(&dir.join(name), |w| match gsf_pass {
+                Some(pass) => dhct_sm4_io::gsf::write_pass(channel, geometry, *pass, w),
+                None => dhct_sm4_io::tiff_file::write_f32(channel, w),
+            })?;
+            Ok(name.clone())
+        })
+        .collect()
+}
+
+/// Every figure as its own file, written in parallel.
+fn write_figure_files(dir: &Path, figures: &[figures::Figure]) -> Result<Vec<String>> {
+    figures
+        .par_iter()
+        .map(|figure| {
+            let name = figure.file_name();
+            let bytes: &[u8] = match &figure.content {
+                figures::FigureContent::Png(b, _) => b,
+                figures::FigureContent::Svg(s) => s.as_bytes(),
+            };
+            write_bytes(&dir.join(&name), bytes)?;
+            Ok(name)
+        })
+        .collect()
 }
 
 /// `features.csv`: every feature of every image with all fitted fields, acquisition times,
