@@ -259,6 +259,10 @@ pub fn run(
     })
 }
 
+/// Ratio of the lattice-fit deviation to the features' localisation uncertainty beyond
+/// which a warning is given.
+pub const DEVIATION_WARNING: f64 = 3.0;
+
 /// Fitted lattice scale beyond which a warning is given (fraction).
 pub const SCALE_WARNING: f64 = 0.03;
 
@@ -302,6 +306,46 @@ fn plausibility_warnings(
                  quarter of the NN distance)",
                 r.region,
                 offset * 1e12
+            ));
+        }
+    }
+    // The corrected lattice should deviate from its fit about as much as the features'
+    // own localisation uncertainty; far more means the model missed something.
+    for r in regions {
+        let mut sigmas: Vec<f64> = Vec::new();
+        for (k, members) in r.members.iter().enumerate() {
+            let Some(pass) = passes.iter().find(|p| p.pass == r.passes[k]) else {
+                continue;
+            };
+            let pitch = (pass.features.features.first())
+                .map(|f| {
+                    if f.x_px != 0.0 {
+                        f.x_m / f.x_px
+                    } else {
+                        f64::NAN
+                    }
+                })
+                .unwrap_or(f64::NAN);
+            sigmas.extend(members.iter().map(|&i| {
+                let f = &pass.features.features[i];
+                pitch.abs() * (0.5 * (f.x_sigma_px.powi(2) + f.y_sigma_px.powi(2))).sqrt()
+            }));
+        }
+        sigmas.retain(|s| s.is_finite() && *s > 0.0);
+        if sigmas.is_empty() {
+            continue;
+        }
+        sigmas.sort_by(f64::total_cmp);
+        let localisation = sigmas[sigmas.len() / 2];
+        let ratio = r.whole_ellipse.sigma_major_m / localisation;
+        if ratio > DEVIATION_WARNING {
+            warnings.push(format!(
+                "region {}: features deviate {:.1} pm (1σ, major axis) from the fitted lattice, \
+                 {ratio:.1}× their localisation uncertainty ({:.1} pm): the drift model may not \
+                 describe this scan, or the surface is not the lattice given (run dhct diagnose)",
+                r.region,
+                r.whole_ellipse.sigma_major_m * 1e12,
+                localisation * 1e12
             ));
         }
     }
