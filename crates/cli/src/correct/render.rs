@@ -217,6 +217,15 @@ impl Canvas {
 
     /// PNG bytes (fast compression: these are pictures to look at, written on every run).
     pub fn png(&self) -> Vec<u8> {
+        if self.width == 0 || self.height == 0 {
+            // An empty picture (e.g. a crop of nothing) is a 1 × 1 white PNG, not a panic.
+            return Canvas {
+                width: 1,
+                height: 1,
+                rgb: vec![255; 3],
+            }
+            .png();
+        }
         let mut out = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut out, self.width as u32, self.height as u32);
