@@ -433,3 +433,32 @@ fn batch_continues_past_a_bad_file() {
             .any(|l| l.contains("bad.sm4") && l.contains(",false,"))
     );
 }
+
+#[test]
+fn correct_with_diagnosis_adds_the_gap_section() {
+    let out = tempfile::tempdir().unwrap();
+    ok(&dhct()
+        .args(["correct", "--quiet", "--diagnose"])
+        .arg(workspace_file("data/simulated_graphite.sm4"))
+        .arg("-o")
+        .arg(out.path())
+        .output()
+        .unwrap());
+    let diagnosis: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("diagnosis.json")).unwrap())
+            .unwrap();
+    // The gap is measured against an independent noise floor and is near it for this
+    // simulation of exactly the base model's effects.
+    let gap = diagnosis["base"]["gap"]["gap_to_noise"].as_f64().unwrap();
+    assert!(gap > 0.5 && gap < 1.5, "gap/noise {gap}");
+    let html = std::fs::read_to_string(out.path().join("report.html")).unwrap();
+    for needle in [
+        "Sim-to-real gap diagnosis",
+        "Gap against frame time",
+        "Spectrum of the residuals",
+        "Where the gap lies (map)",
+    ] {
+        assert!(html.contains(needle), "report lacks {needle}");
+    }
+    assert!(out.path().join("diagnosis_map.png").is_file());
+}
