@@ -22,7 +22,7 @@ use crate::correct::plots::{
 };
 use crate::correct::render::{Canvas, heat_colour};
 use crate::correct::report::{STYLE, figure_html, header, row};
-use crate::correct::{self, CorrectConfig, Length, build_lattice};
+use crate::correct::{self, CorrectConfig};
 
 /// Runs the diagnosis on already found features (trace first); `mask` (raw-image pixels,
 /// true = use) restricts it as it restricts the correction.
@@ -370,33 +370,11 @@ pub fn run_file(
     config: CorrectConfig,
     json: bool,
 ) -> Result<()> {
-    let request = correct::CorrectRequest {
-        input,
-        retrace,
-        output,
-        config: config.clone(),
-        progress: false,
-        diagnose: false,
-    };
-    let pair = correct::read_pair(&request, &config.geometry)?;
+    let pair = correct::read_pair(input, retrace, &config.geometry)?;
     let geometry = pair.geometry().clone();
-    let nn_m = config
-        .nn
-        .as_ref()
-        .map(Length::metres)
-        .transpose()
-        .context("--nn")?;
-    let lattice = build_lattice(config.lattice.as_deref().unwrap_or("graphite"), nn_m)?;
-    let mut options = config
-        .pipeline
-        .clone()
-        .unwrap_or_else(|| PipelineOptions::for_lattice(lattice.as_ref()));
-    if nn_m.is_some() || !options.features.neighbour_distance.is_finite() {
-        options.features.neighbour_distance = lattice.nearest_neighbour_distance();
-    }
-    if let Some(p) = config.polarity {
-        options.features.polarity = p;
-    }
+    let correct::Resolved {
+        lattice, options, ..
+    } = correct::resolve(&config)?;
     let mask = correct::load_mask(&config, &geometry)?;
     let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
     let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
@@ -405,13 +383,7 @@ pub fn run_file(
         .with_context(|| format!("cannot create {}", output.display()))?;
     correct::write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
     let (section, figures) = diagnosis_section(&report, &geometry);
-    for f in &figures {
-        let bytes: &[u8] = match &f.content {
-            FigureContent::Png(b, _) => b,
-            FigureContent::Svg(s) => s.as_bytes(),
-        };
-        correct::write_bytes(&output.join(f.file_name()), bytes)?;
-    }
+    correct::write_figure_files(output, &figures)?;
     let page = format!(
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dhct diagnosis: {}</title><style>{STYLE}</style></head><body><h1>DHCT sim-to-real gap</h1><p class='sub'>{} · lattice {}</p>{section}</body></html>\n",
         html_escape(&input.display().to_string()),

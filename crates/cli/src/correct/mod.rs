@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use dhct_distortion::mask::{polygon_mask, read_mask};
+use dhct_lattice::Lattice;
 use dhct_pipeline::{Analysis, PipelineOptions, Stage};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
@@ -45,16 +46,17 @@ pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 /// The scan pair to analyse: the file's topography (trace and retrace when present), or
 /// the first file's trace with the second file's image as retrace.
 pub(crate) fn read_pair(
-    request: &CorrectRequest,
+    input: &Path,
+    retrace: Option<&Path>,
     overrides: &dhct_sm4_io::GeometryOverrides,
 ) -> Result<ScanPair> {
-    let file = dhct_sm4_io::read_path_with(request.input, overrides)
-        .with_context(|| format!("cannot read {}", request.input.display()))?;
+    let file = dhct_sm4_io::read_path_with(input, overrides)
+        .with_context(|| format!("cannot read {}", input.display()))?;
     let pair = file
         .topography()
-        .with_context(|| format!("{} holds no topography image", request.input.display()))?
+        .with_context(|| format!("{} holds no topography image", input.display()))?
         .clone();
-    let Some(retrace_path) = request.retrace else {
+    let Some(retrace_path) = retrace else {
         return Ok(pair);
     };
     let other = dhct_sm4_io::read_path_with(retrace_path, overrides)
@@ -104,31 +106,16 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let bar = progress_bar(request.progress);
     let start = Instant::now();
     bar.set_message("reading");
-    let pair = read_pair(&request, &config.geometry)?;
+    let pair = read_pair(request.input, request.retrace, &config.geometry)?;
     let read_s = start.elapsed().as_secs_f64();
     let geometry = pair.geometry().clone();
 
-    let lattice_name = config.lattice.clone().unwrap_or_else(|| "graphite".into());
-    let nn_m = config
-        .nn
-        .as_ref()
-        .map(Length::metres)
-        .transpose()
-        .context("--nn")?;
-    let lattice = build_lattice(&lattice_name, nn_m)?;
-    let mut options = config
-        .pipeline
-        .clone()
-        .unwrap_or_else(|| PipelineOptions::for_lattice(lattice.as_ref()));
-    if nn_m.is_some() || !options.features.neighbour_distance.is_finite() {
-        options.features.neighbour_distance = lattice.nearest_neighbour_distance();
-    }
-    if let Some(p) = config.polarity {
-        options.features.polarity = p;
-    }
-    if let Some(group) = config.plane_group {
-        options.unit_cell.plane_group = Some(group);
-    }
+    let Resolved {
+        lattice_name,
+        nn_m,
+        lattice,
+        options,
+    } = resolve(&config)?;
     let mask = load_mask(&config, &geometry)?;
 
     let analysis = dhct_pipeline::run(
@@ -228,13 +215,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
         )?;
         let (section, diagnosis_figures) =
             crate::diagnose::diagnosis_section(&diagnosis, &geometry);
-        for f in &diagnosis_figures {
-            let bytes: &[u8] = match &f.content {
-                figures::FigureContent::Png(b, _) => b,
-                figures::FigureContent::Svg(s) => s.as_bytes(),
-            };
-            write_bytes(&request.output.join(f.file_name()), bytes)?;
-        }
+        write_figure_files(request.output, &diagnosis_figures)?;
         Some(section)
     } else {
         None
@@ -243,6 +224,48 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     write_bytes(&request.output.join("report.html"), html.as_bytes())?;
     bar.finish_and_clear();
     Ok(summary)
+}
+
+/// What a config resolves to before any data is read.
+pub(crate) struct Resolved {
+    /// The lattice as named (preset or file).
+    pub lattice_name: String,
+    /// The nearest-neighbour distance given, if any, metres.
+    pub nn_m: Option<f64>,
+    pub lattice: Box<dyn Lattice + Send + Sync>,
+    /// The config's pipeline options (or the lattice's defaults) with the flags applied.
+    pub options: PipelineOptions,
+}
+
+/// The lattice and pipeline options of `config` (shared by `correct` and `diagnose`).
+pub(crate) fn resolve(config: &CorrectConfig) -> Result<Resolved> {
+    let lattice_name = config.lattice.clone().unwrap_or_else(|| "graphite".into());
+    let nn_m = config
+        .nn
+        .as_ref()
+        .map(Length::metres)
+        .transpose()
+        .context("--nn")?;
+    let lattice = build_lattice(&lattice_name, nn_m)?;
+    let mut options = config
+        .pipeline
+        .clone()
+        .unwrap_or_else(|| PipelineOptions::for_lattice(lattice.as_ref()));
+    if nn_m.is_some() || !options.features.neighbour_distance.is_finite() {
+        options.features.neighbour_distance = lattice.nearest_neighbour_distance();
+    }
+    if let Some(p) = config.polarity {
+        options.features.polarity = p;
+    }
+    if let Some(group) = config.plane_group {
+        options.unit_cell.plane_group = Some(group);
+    }
+    Ok(Resolved {
+        lattice_name,
+        nn_m,
+        lattice,
+        options,
+    })
 }
 
 /// Adds what to try to the pipeline's most common failures.
@@ -328,7 +351,7 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
 }
 
 /// Every figure as its own file, written in parallel.
-fn write_figure_files(dir: &Path, figures: &[figures::Figure]) -> Result<Vec<String>> {
+pub(crate) fn write_figure_files(dir: &Path, figures: &[figures::Figure]) -> Result<Vec<String>> {
     figures
         .par_iter()
         .map(|figure| {
