@@ -17,23 +17,45 @@ pub struct AveragedCell {
     pub skipped: usize,
 }
 
-/// Bilinear sample of `image` at pixel position `(x, y)`; `None` outside or on NaN.
-fn bilinear(image: ArrayView2<f64>, x: f64, y: f64) -> Option<f64> {
-    let (rows, cols) = image.dim();
-    if !(x >= 0.0 && y >= 0.0 && x <= (cols - 1) as f64 && y <= (rows - 1) as f64) {
-        return None;
+/// Bilinear sampling of a contiguous row-major image at pixel positions `(x, y)` (x along
+/// columns). NaN pixels give NaN.
+struct Sampler<'a> {
+    data: &'a [f64],
+    rows: usize,
+    cols: usize,
+}
+
+impl<'a> Sampler<'a> {
+    fn new(image: ArrayView2<'a, f64>) -> Self {
+        let (rows, cols) = image.dim();
+        let data = image
+            .to_slice()
+            .expect("the caller makes the view contiguous");
+        Sampler { data, rows, cols }
     }
-    let (c0, r0) = (
-        (x.floor() as usize).min(cols.saturating_sub(2)),
-        (y.floor() as usize).min(rows.saturating_sub(2)),
-    );
-    let (c1, r1) = ((c0 + 1).min(cols - 1), (r0 + 1).min(rows - 1));
-    let (fx, fy) = (x - c0 as f64, y - r0 as f64);
-    let value = image[[r0, c0]] * (1.0 - fx) * (1.0 - fy)
-        + image[[r0, c1]] * fx * (1.0 - fy)
-        + image[[r1, c0]] * (1.0 - fx) * fy
-        + image[[r1, c1]] * fx * fy;
-    value.is_finite().then_some(value)
+
+    /// Whether `p` lies within the pixel centres (where bilinear sampling is defined).
+    fn contains(&self, p: Vector2<f64>) -> bool {
+        self.rows >= 2
+            && self.cols >= 2
+            && p.x >= 0.0
+            && p.y >= 0.0
+            && p.x <= (self.cols - 1) as f64
+            && p.y <= (self.rows - 1) as f64
+    }
+
+    /// The bilinear value at `(x, y)`, which must satisfy [`Sampler::contains`].
+    #[inline]
+    fn at(&self, x: f64, y: f64) -> f64 {
+        let c0 = (x as usize).min(self.cols - 2);
+        let r0 = (y as usize).min(self.rows - 2);
+        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+        let top = &self.data[r0 * self.cols + c0..r0 * self.cols + c0 + 2];
+        let bottom = &self.data[(r0 + 1) * self.cols + c0..(r0 + 1) * self.cols + c0 + 2];
+        let upper = top[0] + fx * (top[1] - top[0]);
+        let lower = bottom[0] + fx * (bottom[1] - bottom[0]);
+        upper + fy * (lower - upper)
+    }
 }
 
 /// Averages `image` (pixel pitch `pitch` = (x, y) metres) over `cells`, each resampled
@@ -52,39 +74,66 @@ pub fn average_unit_cell(
         return Err(UnitCellError::BadPitch(pitch.0, pitch.1));
     }
     let [a1, a2] = lattice.primitive_vectors();
+    // A contiguous row-major copy only when the view is not one already.
+    let owned;
+    let image = match image.as_slice() {
+        Some(_) => image,
+        None => {
+            owned = image.as_standard_layout().into_owned();
+            owned.view()
+        }
+    };
+    let sampler = Sampler::new(image);
+    let pixel = |p: Vector2<f64>| Vector2::new(p.x / pitch.0, p.y / pitch.1);
     // Cells are summed in fixed-size chunks in parallel and the chunk sums added in chunk
     // order, so the result does not depend on the number of threads.
     const CHUNK: usize = 128;
-    let partial: Vec<(Array2<f64>, usize, usize)> = cells
+    let partial: Vec<(Vec<f64>, usize, usize)> = cells
         .par_chunks(CHUNK)
         .map(|chunk| {
-            let mut sum = Array2::<f64>::zeros((resolution, resolution));
-            let mut sample = Array2::<f64>::zeros((resolution, resolution));
+            let mut sum = vec![0.0; resolution * resolution];
+            let mut sample = vec![0.0; resolution * resolution];
             let (mut used, mut skipped) = (0usize, 0usize);
-            'cells: for cell in chunk {
+            for cell in chunk {
+                // The cell is an affine image of the fractional grid: its sample positions
+                // (pixels) are `p0 + j·du + i·dv`, all inside when the four corners are.
                 let t = cell.transform();
-                let origin = Vector2::from(cell.origin_m);
-                for ((i, j), value) in sample.indexed_iter_mut() {
-                    let (u, v) = (j as f64 / resolution as f64, i as f64 / resolution as f64);
-                    let p = origin + t * (a1 * u + a2 * v);
-                    match bilinear(image, p.x / pitch.0, p.y / pitch.1) {
-                        Some(z) => *value = z,
-                        None => {
-                            skipped += 1;
-                            continue 'cells;
+                let p0 = pixel(Vector2::from(cell.origin_m));
+                let du = pixel(t * a1) / resolution as f64;
+                let dv = pixel(t * a2) / resolution as f64;
+                let last = (resolution - 1) as f64;
+                let corners_inside = [(0.0, 0.0), (last, 0.0), (0.0, last), (last, last)]
+                    .iter()
+                    .all(|&(j, i)| sampler.contains(p0 + du * j + dv * i));
+                let mut finite = corners_inside;
+                if corners_inside {
+                    for (i, row) in sample.chunks_exact_mut(resolution).enumerate() {
+                        let start = p0 + dv * i as f64;
+                        for (j, value) in row.iter_mut().enumerate() {
+                            let p = start + du * j as f64;
+                            *value = sampler.at(p.x, p.y);
                         }
+                        finite &= row.iter().all(|v| v.is_finite());
                     }
                 }
-                sum += &sample;
-                used += 1;
+                if finite {
+                    sum.iter_mut().zip(&sample).for_each(|(s, v)| *s += v);
+                    used += 1;
+                } else {
+                    skipped += 1;
+                }
             }
             (sum, used, skipped)
         })
         .collect();
     let mut sum = Array2::<f64>::zeros((resolution, resolution));
+    let sum_slice = sum.as_slice_mut().expect("a new array is contiguous");
     let (mut used, mut skipped) = (0usize, 0usize);
     for (chunk_sum, chunk_used, chunk_skipped) in &partial {
-        sum += chunk_sum;
+        sum_slice
+            .iter_mut()
+            .zip(chunk_sum)
+            .for_each(|(s, v)| *s += v);
         used += chunk_used;
         skipped += chunk_skipped;
     }
