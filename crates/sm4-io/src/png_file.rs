@@ -98,6 +98,36 @@ impl Colormap {
     }
 }
 
+/// A colour map sampled at [`ColourTable::ENTRIES`] evenly spaced positions, for drawing
+/// whole images: a lookup per pixel instead of a spline evaluation. Entries differ from
+/// [`Colormap::rgb`] by at most one 8-bit level.
+#[derive(Debug, Clone)]
+pub struct ColourTable {
+    entries: Vec<[u8; 3]>,
+}
+
+impl ColourTable {
+    /// Number of sampled positions.
+    pub const ENTRIES: usize = 4096;
+
+    /// The table of `colormap`.
+    pub fn new(colormap: Colormap) -> Self {
+        let last = (Self::ENTRIES - 1) as f64;
+        ColourTable {
+            entries: (0..Self::ENTRIES)
+                .map(|k| colormap.rgb(k as f64 / last))
+                .collect(),
+        }
+    }
+
+    /// The colour at position `t` (0 = lowest value, 1 = highest; clamped; NaN = lowest).
+    #[inline]
+    pub fn rgb(&self, t: f64) -> [u8; 3] {
+        let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+        self.entries[(t * (Self::ENTRIES - 1) as f64 + 0.5) as usize]
+    }
+}
+
 /// The z range a colour-mapped picture shows: `low` (first colour) to `high` (last colour),
 /// in the channel's unit. `None` when the image has no finite value.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -153,10 +183,11 @@ pub fn write_colormap<W: Write>(
     let range = channel
         .finite_range()
         .map(|(low, high)| ZRange { low, high });
+    let table = ColourTable::new(colormap);
     let mut data = Vec::with_capacity(channel.rows() * channel.columns() * 3);
     for &value in channel.z.iter() {
         let rgb = match range {
-            Some(range) if value.is_finite() => colormap.rgb(range.position(value)),
+            Some(range) if value.is_finite() => table.rgb(range.position(value)),
             _ => NAN_COLOUR,
         };
         data.extend_from_slice(&rgb);

@@ -4,7 +4,7 @@
 //! Coordinates are picture pixels (x right, y down, pixel centres at integers + ½ of the
 //! upscaled grid); callers convert from image pixels or metres.
 
-use dhct_sm4_io::png_file::{Colormap, NAN_COLOUR};
+use dhct_sm4_io::png_file::{Colormap, ColourTable, NAN_COLOUR};
 #[cfg(test)]
 use ndarray::Array2;
 use ndarray::ArrayView2;
@@ -51,12 +51,13 @@ impl Canvas {
         let (width, height) = (columns * scale, rows * scale);
         let (low, high) = range.or_else(|| display_range(image)).unwrap_or((0.0, 1.0));
         let span = if high > low { high - low } else { 1.0 };
+        let table = ColourTable::new(colormap);
         let mut rgb = vec![0u8; width * height * 3];
         for r in 0..rows {
             for c in 0..columns {
                 let v = image[[r, c]];
                 let colour = if v.is_finite() {
-                    colormap.rgb(((v - low) / span).clamp(0.0, 1.0))
+                    table.rgb((v - low) / span)
                 } else {
                     NAN_COLOUR
                 };
@@ -85,12 +86,13 @@ impl Canvas {
         } else {
             1.0
         };
+        let table = ColourTable::new(colormap);
         let mut rgb = vec![0u8; width * height * 3];
         for y in 0..height {
             for x in 0..width {
                 let v = value(x as f64 + 0.5, y as f64 + 0.5);
                 let colour = if v.is_finite() {
-                    colormap.rgb(((v - range.0) / span).clamp(0.0, 1.0))
+                    table.rgb((v - range.0) / span)
                 } else {
                     [255, 255, 255]
                 };
