@@ -72,16 +72,42 @@ pub fn pixel_sample_positions(
 ) -> (Array2<f64>, Array2<f64>) {
     let (rows, columns) = (geometry.rows(), geometry.columns());
     let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
-    let positions: Vec<[f64; 2]> = (0..rows * columns)
-        .into_par_iter()
+    // Pixels share the hysteresis lag of their fast index: tabulate it once (the table is
+    // used only where a pixel's line time is bit-identical to the tabulated one).
+    let pixel_period = geometry.pixel_period();
+    let lags: Vec<(f64, f64)> = (0..geometry.fast_len())
         .map(|k| {
-            let (r, c) = (k / columns, k % columns);
-            let [x, y] = model.to_sample(geometry, pass, c as f64, r as f64);
-            [x / px, y / py]
+            let tau = (k as f64 + 0.5) * pixel_period;
+            (tau, model.hysteresis_lag(geometry, pass, tau))
         })
         .collect();
-    let x = Array2::from_shape_fn((rows, columns), |(r, c)| positions[r * columns + c][0]);
-    let y = Array2::from_shape_fn((rows, columns), |(r, c)| positions[r * columns + c][1]);
+    let mut x = Array2::<f64>::zeros((rows, columns));
+    let mut y = Array2::<f64>::zeros((rows, columns));
+    let contiguous = "a new array is contiguous";
+    x.as_slice_mut()
+        .expect(contiguous)
+        .par_chunks_mut(columns.max(1))
+        .zip(
+            y.as_slice_mut()
+                .expect(contiguous)
+                .par_chunks_mut(columns.max(1)),
+        )
+        .enumerate()
+        .for_each(|(r, (x_row, y_row))| {
+            for (c, (x, y)) in x_row.iter_mut().zip(y_row.iter_mut()).enumerate() {
+                let (xc, yc) = (c as f64, r as f64);
+                let time = geometry.acquisition_time(pass, xc, yc);
+                let tau = time.since_line_start;
+                let k = (tau / pixel_period - 0.5).round();
+                let lag = match lags.get(k as usize) {
+                    Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
+                    _ => model.hysteresis_lag(geometry, pass, tau),
+                };
+                let d = model.displacement_with_lag(geometry, time.since_frame_start, lag);
+                *x = (xc * px + d[0]) / px;
+                *y = (yc * py + d[1]) / py;
+            }
+        });
     (x, y)
 }
 
@@ -125,17 +151,25 @@ pub fn resample_mesh(
     if rows < 2 || columns < 2 || out_rows == 0 || out_columns == 0 {
         return out;
     }
+    let (xs, ys, z) = (
+        xs.as_standard_layout(),
+        ys.as_standard_layout(),
+        z.as_standard_layout(),
+    );
+    let contiguous = "standard-layout arrays are contiguous";
+    let (xs, ys, z) = (
+        xs.as_slice().expect(contiguous),
+        ys.as_slice().expect(contiguous),
+        z.as_slice().expect(contiguous),
+    );
     // The y range covered by each row of quads.
     let quad_rows: Vec<(f64, f64)> = (0..rows - 1)
         .map(|r| {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for rr in [r, r + 1] {
-                for c in 0..columns {
-                    let y = ys[[rr, c]];
-                    if y.is_finite() {
-                        lo = lo.min(y);
-                        hi = hi.max(y);
-                    }
+            for &y in &ys[r * columns..(r + 2) * columns] {
+                if y.is_finite() {
+                    lo = lo.min(y);
+                    hi = hi.max(y);
                 }
             }
             (lo, hi)
@@ -144,63 +178,146 @@ pub fn resample_mesh(
     let band = out_rows
         .div_ceil(4 * rayon::current_num_threads().max(1))
         .max(8);
-    let mut chunks: Vec<ndarray::ArrayViewMut2<f64>> =
-        out.axis_chunks_iter_mut(ndarray::Axis(0), band).collect();
-    chunks.par_iter_mut().enumerate().for_each(|(k, chunk)| {
-        let first = k * band;
-        let last = first + chunk.nrows() - 1;
-        for (r, (lo, hi)) in quad_rows.iter().enumerate() {
-            if *hi < first as f64 - 1.0 || *lo > last as f64 + 1.0 {
-                continue;
-            }
-            for c in 0..columns - 1 {
-                let p = |rr: usize, cc: usize| (xs[[rr, cc]], ys[[rr, cc]], z[[rr, cc]]);
-                let (a, b, cc, d) = (p(r, c), p(r, c + 1), p(r + 1, c + 1), p(r + 1, c));
-                for triangle in [[a, b, cc], [a, cc, d]] {
-                    rasterise(triangle, chunk, first, out_columns);
+    let out_slice = out.as_slice_mut().expect(contiguous);
+    out_slice
+        .par_chunks_mut(band * out_columns)
+        .enumerate()
+        .for_each(|(k, chunk)| {
+            let rows = chunk.len() / out_columns;
+            let mut target = Band {
+                values: chunk,
+                first: k * band,
+                rows,
+                columns: out_columns,
+            };
+            let last = target.first + target.rows - 1;
+            for (r, (lo, hi)) in quad_rows.iter().enumerate() {
+                if *hi < target.first as f64 - 1.0 || *lo > last as f64 + 1.0 {
+                    continue;
+                }
+                let vertex = |rr: usize, c: usize| {
+                    let i = rr * columns + c;
+                    (xs[i], ys[i], z[i])
+                };
+                for c in 0..columns - 1 {
+                    let (a, b, cc, d) = (
+                        vertex(r, c),
+                        vertex(r, c + 1),
+                        vertex(r + 1, c + 1),
+                        vertex(r + 1, c),
+                    );
+                    target.rasterise_quad([a, b, cc, d]);
                 }
             }
-        }
-    });
+        });
     out
 }
 
-/// Writes the barycentric interpolation of one triangle into the output rows
-/// `first .. first + band.nrows()`.
-fn rasterise(
-    vertices: [(f64, f64, f64); 3],
-    band: &mut ndarray::ArrayViewMut2<f64>,
+/// `floor` without a libm call (the baseline x86-64 target has no rounding instruction).
+#[inline]
+fn fast_floor(v: f64) -> f64 {
+    let t = v as i64 as f64;
+    if t > v { t - 1.0 } else { t }
+}
+
+#[inline]
+fn fast_ceil(v: f64) -> f64 {
+    -fast_floor(-v)
+}
+
+/// A little slack so grid points on an edge (up to rounding) are not lost.
+const SLACK: f64 = 1e-9;
+
+/// Output rows `first .. first + rows` (row-major, `columns` wide).
+struct Band<'a> {
+    values: &'a mut [f64],
     first: usize,
-    out_columns: usize,
-) {
-    let [(x0, y0, z0), (x1, y1, z1), (x2, y2, z2)] = vertices;
-    let det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
-    if det.abs() < 1e-12 || !det.is_finite() {
-        return;
+    rows: usize,
+    columns: usize,
+}
+
+impl Band<'_> {
+    /// Integer grid range (columns, rows) of the bounding box of `points`, clipped to the
+    /// band; `None` when it holds no grid point.
+    #[inline]
+    fn grid_box(&self, xs: [f64; 4], ys: [f64; 4]) -> Option<(usize, usize, usize, usize)> {
+        let lo_x = xs[0].min(xs[1]).min(xs[2]).min(xs[3]);
+        let hi_x = xs[0].max(xs[1]).max(xs[2]).max(xs[3]);
+        let lo_y = ys[0].min(ys[1]).min(ys[2]).min(ys[3]);
+        let hi_y = ys[0].max(ys[1]).max(ys[2]).max(ys[3]);
+        let c_lo = fast_ceil(lo_x - SLACK).max(0.0);
+        let c_hi = fast_floor(hi_x + SLACK).min(self.columns as f64 - 1.0);
+        let r_lo = fast_ceil(lo_y - SLACK).max(self.first as f64);
+        let r_hi = fast_floor(hi_y + SLACK).min((self.first + self.rows) as f64 - 1.0);
+        // `!(a <= b)` also rejects NaN.
+        if !(c_lo <= c_hi && r_lo <= r_hi) {
+            return None;
+        }
+        Some((c_lo as usize, c_hi as usize, r_lo as usize, r_hi as usize))
     }
-    let (lo_x, hi_x) = (x0.min(x1).min(x2), x0.max(x1).max(x2));
-    let (lo_y, hi_y) = (y0.min(y1).min(y2), y0.max(y1).max(y2));
-    // A little slack so grid points on an edge (up to rounding) are not lost.
-    let slack = 1e-9;
-    let c_lo = (lo_x - slack).ceil().max(0.0);
-    let c_hi = (hi_x + slack).floor().min(out_columns as f64 - 1.0);
-    let r_lo = (lo_y - slack).ceil().max(first as f64);
-    let r_hi = (hi_y + slack)
-        .floor()
-        .min((first + band.nrows()) as f64 - 1.0);
-    if c_lo > c_hi || r_lo > r_hi {
-        return;
-    }
-    for r in r_lo as usize..=r_hi as usize {
-        let y = r as f64;
-        for c in c_lo as usize..=c_hi as usize {
-            let x = c as f64;
-            let l1 = ((x - x0) * (y2 - y0) - (x2 - x0) * (y - y0)) / det;
-            let l2 = ((x1 - x0) * (y - y0) - (x - x0) * (y1 - y0)) / det;
-            let l0 = 1.0 - l1 - l2;
-            if l0 >= -slack && l1 >= -slack && l2 >= -slack {
-                band[[r - first, c]] = l0 * z0 + l1 * z1 + l2 * z2;
+
+    /// Writes the barycentric interpolation of the quad `a b c d` (split along `a c` into
+    /// the triangles `a b c` and `a c d`; a grid point on the diagonal takes `a c d`'s value,
+    /// as if the triangles were drawn in that order) at every grid point it covers.
+    #[inline]
+    fn rasterise_quad(&mut self, corners: [(f64, f64, f64); 4]) {
+        let Some((c_lo, c_hi, r_lo, r_hi)) =
+            self.grid_box(corners.map(|v| v.0), corners.map(|v| v.1))
+        else {
+            return;
+        };
+        let [a, b, c, d] = corners;
+        let second = Triangle::new(a, c, d);
+        let first = Triangle::new(a, b, c);
+        for r in r_lo..=r_hi {
+            let y = r as f64;
+            let out = &mut self.values[(r - self.first) * self.columns..];
+            for (column, value) in out.iter_mut().enumerate().take(c_hi + 1).skip(c_lo) {
+                let x = column as f64;
+                if let Some(z) = second.as_ref().and_then(|t| t.interpolate(x, y)) {
+                    *value = z;
+                } else if let Some(z) = first.as_ref().and_then(|t| t.interpolate(x, y)) {
+                    *value = z;
+                }
             }
         }
+    }
+}
+
+/// A non-degenerate triangle prepared for barycentric interpolation: its first vertex, the
+/// edge vectors to the other two, and the z of all three.
+struct Triangle {
+    origin: (f64, f64),
+    edge1: (f64, f64),
+    edge2: (f64, f64),
+    det: f64,
+    z: [f64; 3],
+}
+
+impl Triangle {
+    /// `None` when the triangle is degenerate or has a non-finite vertex position.
+    #[inline]
+    fn new(v0: (f64, f64, f64), v1: (f64, f64, f64), v2: (f64, f64, f64)) -> Option<Self> {
+        let edge1 = (v1.0 - v0.0, v1.1 - v0.1);
+        let edge2 = (v2.0 - v0.0, v2.1 - v0.1);
+        let det = edge1.0 * edge2.1 - edge2.0 * edge1.1;
+        (det.abs() >= 1e-12 && det.is_finite()).then_some(Triangle {
+            origin: (v0.0, v0.1),
+            edge1,
+            edge2,
+            det,
+            z: [v0.2, v1.2, v2.2],
+        })
+    }
+
+    /// The interpolated z at grid point `(x, y)` if it lies inside (up to [`SLACK`]).
+    #[inline]
+    fn interpolate(&self, x: f64, y: f64) -> Option<f64> {
+        let (dx, dy) = (x - self.origin.0, y - self.origin.1);
+        let l1 = (dx * self.edge2.1 - self.edge2.0 * dy) / self.det;
+        let l2 = (self.edge1.0 * dy - dx * self.edge1.1) / self.det;
+        let l0 = 1.0 - l1 - l2;
+        (l0 >= -SLACK && l1 >= -SLACK && l2 >= -SLACK)
+            .then(|| l0 * self.z[0] + l1 * self.z[1] + l2 * self.z[2])
     }
 }

@@ -132,15 +132,26 @@ impl DistortionModel {
         t: f64,
         tau: f64,
     ) -> [f64; 2] {
-        let drift = self.drift.displacement(t);
-        let trace = direction_vector(geometry.trace_fast());
-        let lag = match pass {
+        self.displacement_with_lag(geometry, t, self.hysteresis_lag(geometry, pass, tau))
+    }
+
+    /// The hysteresis lag `∫(S − 1) dτ` (seconds of fast-axis travel) accumulated at line
+    /// time `τ` (s since the line start of `pass`); the retrace runs the law backwards.
+    pub fn hysteresis_lag(&self, geometry: &ScanGeometry, pass: ScanPass, tau: f64) -> f64 {
+        match pass {
             ScanPass::Trace => self.hysteresis.excess_integral(tau),
             ScanPass::Retrace => {
                 self.hysteresis.excess_integral(geometry.line_scan_time())
                     - self.hysteresis.excess_integral(tau)
             }
-        };
+        }
+    }
+
+    /// Displacement (metres, display frame) at acquisition time `t` (s since frame start)
+    /// with hysteresis lag `lag` from [`DistortionModel::hysteresis_lag`].
+    pub fn displacement_with_lag(&self, geometry: &ScanGeometry, t: f64, lag: f64) -> [f64; 2] {
+        let drift = self.drift.displacement(t);
+        let trace = direction_vector(geometry.trace_fast());
         let h = -geometry.fast_speed() * lag;
         [drift[0] + h * trace[0], drift[1] + h * trace[1]]
     }
