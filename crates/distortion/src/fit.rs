@@ -10,9 +10,10 @@
 //!   weighted by its own robust scale. Uncertainties: `σ̂²·(JᵀWJ)⁻¹`.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::lm::{huber_weights, levenberg_marquardt, mad_sigma};
+use crate::lm::{Problem, huber_weights, levenberg_marquardt, mad_sigma};
 use crate::model::{DistortionModel, DriftCreep, HysteresisLaw, Parameter};
 use crate::{DistortionError, LocalDistortion};
 
@@ -159,29 +160,46 @@ fn fit_drift(
     let dx: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[0] * NM).collect();
     let dy: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[1] * NM).collect();
     let m = t.len();
-    // Start: grid over t0, linear in the rest.
+    // The acceleration column does not depend on any parameter: computed once.
+    let quadratic: Vec<f64> = t
+        .iter()
+        .zip(&offsets)
+        .map(|(&t, offsets)| secant(|x| 0.5 * x * x, t, offsets))
+        .collect();
+    let creep_column = |t0: f64| -> Vec<f64> {
+        t.iter()
+            .zip(&offsets)
+            .map(|(&t, offsets)| secant(|x| (x / t0).ln_1p(), t, offsets))
+            .collect()
+    };
+    // Start: grid over t0 (in parallel; the first best in grid order wins), linear in the
+    // rest.
     let span = frame_duration_s.max(1e-9);
+    let grid: Vec<Option<(f64, [f64; 6], f64)>> = (0..=48)
+        .into_par_iter()
+        .map(|k| {
+            let t0 = span * 10f64.powf(-3.0 + 5.0 * k as f64 / 48.0);
+            let log = creep_column(t0);
+            let design = DMatrix::from_fn(m, 3, |i, j| match j {
+                0 => 1.0,
+                1 => quadratic[i],
+                _ => log[i],
+            });
+            let px = linear_ls(&design, &DVector::from_column_slice(&dx))?;
+            let py = linear_ls(&design, &DVector::from_column_slice(&dy))?;
+            let fx = &design * &px;
+            let fy = &design * &py;
+            let sse: f64 = (0..m)
+                .map(|i| (fx[i] - dx[i]).powi(2) + (fy[i] - dy[i]).powi(2))
+                .sum();
+            sse.is_finite()
+                .then_some((sse, [px[0], px[1], px[2], py[0], py[1], py[2]], t0))
+        })
+        .collect();
     let mut best: Option<(f64, [f64; 6], f64)> = None;
-    for k in 0..=48 {
-        let t0 = span * 10f64.powf(-3.0 + 5.0 * k as f64 / 48.0);
-        let design = DMatrix::from_fn(m, 3, |i, j| match j {
-            0 => 1.0,
-            1 => secant(|x| 0.5 * x * x, t[i], offsets[i]),
-            _ => secant(|x| (x / t0).ln_1p(), t[i], offsets[i]),
-        });
-        let (Some(px), Some(py)) = (
-            linear_ls(&design, &DVector::from_column_slice(&dx)),
-            linear_ls(&design, &DVector::from_column_slice(&dy)),
-        ) else {
-            continue;
-        };
-        let fx = &design * &px;
-        let fy = &design * &py;
-        let sse: f64 = (0..m)
-            .map(|i| (fx[i] - dx[i]).powi(2) + (fy[i] - dy[i]).powi(2))
-            .sum();
-        if sse.is_finite() && best.as_ref().is_none_or(|b| sse < b.0) {
-            best = Some((sse, [px[0], px[1], px[2], py[0], py[1], py[2]], t0));
+    for candidate in grid.into_iter().flatten() {
+        if best.as_ref().is_none_or(|b| candidate.0 < b.0) {
+            best = Some(candidate);
         }
     }
     let Some((_, start, t0_start)) = best else {
@@ -190,26 +208,25 @@ fn fit_drift(
     // t0 is bounded to [one line's scanning time, 100 frames]: creep faster than the slow
     // axis samples time cannot be resolved (t0 → 0 makes ln(1 + t/t0) diverge, the Matlab's
     // singularity), and beyond 100 frames it is indistinguishable from v + a·t. A logistic
-    // map of ln t0 keeps the fit unconstrained: ln t0 = q_lo + (q_hi − q_lo)·σ(p6).
-    let (q_lo, q_hi) = (line_scan_time_s.max(1e-6).ln(), (100.0 * span).ln());
-    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
-    let t0_of = |x: f64| (q_lo + (q_hi - q_lo) * logistic(x)).exp();
+    // map of ln t0 keeps the fit unconstrained ([`LogisticLog`]).
+    let t0_map = LogisticLog {
+        lo: line_scan_time_s.max(1e-6).ln(),
+        hi: (100.0 * span).ln(),
+    };
     let mut p0 = start.to_vec();
-    let fraction = ((t0_start.ln() - q_lo) / (q_hi - q_lo)).clamp(1e-6, 1.0 - 1e-6);
-    p0.push((fraction / (1.0 - fraction)).ln());
-    let residuals = |p: &[f64], r: &mut [f64]| {
-        let t0 = t0_of(p[6]);
-        for i in 0..m {
-            let quadratic = secant(|x| 0.5 * x * x, t[i], offsets[i]);
-            let log = secant(|x| (x / t0).ln_1p(), t[i], offsets[i]);
-            r[i] = p[0] + p[1] * quadratic + p[2] * log - dx[i];
-            r[m + i] = p[3] + p[4] * quadratic + p[5] * log - dy[i];
-        }
+    p0.push(t0_map.parameter(t0_start));
+    let residuals = DriftProblem {
+        t: &t,
+        offsets: &offsets,
+        quadratic: &quadratic,
+        dx: &dx,
+        dy: &dy,
+        t0_map,
     };
     let mut weights = vec![1.0; 2 * m];
     let mut result = None;
     for round in 0..=robust_rounds.max(1) {
-        let fit = levenberg_marquardt(residuals, 2 * m, &p0, &weights, 200)
+        let fit = levenberg_marquardt(&residuals, 2 * m, &p0, &weights, 200)
             .ok_or(DistortionError::FitFailed("drift/creep"))?;
         p0.clone_from(&fit.params);
         let (rx, ry) = fit.residuals.split_at(m);
@@ -228,7 +245,7 @@ fn fit_drift(
     }
     let fit = result.ok_or(DistortionError::FitFailed("drift/creep"))?;
     // One more evaluation of the normal matrix with the final weights.
-    let fit = levenberg_marquardt(residuals, 2 * m, &fit.params, &weights, 0).unwrap_or(fit);
+    let fit = levenberg_marquardt(&residuals, 2 * m, &fit.params, &weights, 0).unwrap_or(fit);
     let p = &fit.params;
     let chi2: f64 = fit
         .residuals
@@ -238,9 +255,8 @@ fn fit_drift(
         .sum();
     let scale2 = chi2 / (2 * m).saturating_sub(7).max(1) as f64;
     let s = sigmas(&fit.inverse_normal, scale2, 7);
-    let t0 = t0_of(p[6]);
-    // dt0/dp6 = t0·(q_hi − q_lo)·σ'(p6).
-    let t0_sigma = t0 * (q_hi - q_lo) * logistic(p[6]) * (1.0 - logistic(p[6])) * s[6];
+    let t0 = t0_map.t0(p[6]);
+    let t0_sigma = t0_map.derivative(p[6]) * s[6];
     let drift = DriftCreep {
         velocity_m_per_s: [p[0] / NM, p[3] / NM],
         acceleration_m_per_s2: [p[1] / NM, p[4] / NM],
@@ -260,6 +276,97 @@ fn fit_drift(
         parameter("t0", t0, t0_sigma, "s"),
     ];
     Ok((drift, parameters))
+}
+
+/// `t0 = exp(lo + (hi − lo)·σ(p))`: the creep time constant as a function of an
+/// unconstrained parameter `p` (σ the logistic function), bounded to `[e^lo, e^hi]`.
+#[derive(Debug, Clone, Copy)]
+struct LogisticLog {
+    lo: f64,
+    hi: f64,
+}
+
+impl LogisticLog {
+    fn logistic(p: f64) -> f64 {
+        1.0 / (1.0 + (-p).exp())
+    }
+
+    fn t0(&self, p: f64) -> f64 {
+        (self.lo + (self.hi - self.lo) * Self::logistic(p)).exp()
+    }
+
+    /// `dt0/dp = t0·(hi − lo)·σ(p)·(1 − σ(p))`.
+    fn derivative(&self, p: f64) -> f64 {
+        let s = Self::logistic(p);
+        self.t0(p) * (self.hi - self.lo) * s * (1.0 - s)
+    }
+
+    /// The `p` of `t0` (clamped just inside the bounds).
+    fn parameter(&self, t0: f64) -> f64 {
+        let fraction = ((t0.ln() - self.lo) / (self.hi - self.lo)).clamp(1e-6, 1.0 - 1e-6);
+        (fraction / (1.0 - fraction)).ln()
+    }
+}
+
+/// The drift/creep fit: measured local drift velocities `(dx, dy)` (nm/s) against the
+/// secant of `v + a·t + C·ln(1 + t/t0)`'s derivative. Parameters
+/// `[v_x, a_x, C_x, v_y, a_y, C_y, p]` with `t0 = t0_map.t0(p)`; residuals x then y.
+/// Linear in all but `p`, so the Jacobian is analytic and cheap.
+struct DriftProblem<'a> {
+    t: &'a [f64],
+    offsets: &'a [&'a [f64]],
+    quadratic: &'a [f64],
+    dx: &'a [f64],
+    dy: &'a [f64],
+    t0_map: LogisticLog,
+}
+
+impl DriftProblem<'_> {
+    fn creep_column(&self, t0: f64) -> Vec<f64> {
+        self.t
+            .par_iter()
+            .zip(self.offsets)
+            .map(|(&t, offsets)| secant(|x| (x / t0).ln_1p(), t, offsets))
+            .collect()
+    }
+}
+
+impl Problem for DriftProblem<'_> {
+    fn residuals(&self, p: &[f64], r: &mut [f64]) {
+        let m = self.t.len();
+        let log = self.creep_column(self.t0_map.t0(p[6]));
+        let (rx, ry) = r.split_at_mut(m);
+        for i in 0..m {
+            rx[i] = p[0] + p[1] * self.quadratic[i] + p[2] * log[i] - self.dx[i];
+            ry[i] = p[3] + p[4] * self.quadratic[i] + p[5] * log[i] - self.dy[i];
+        }
+    }
+
+    fn jacobian(&self, p: &[f64], _r0: &[f64]) -> DMatrix<f64> {
+        let m = self.t.len();
+        let t0 = self.t0_map.t0(p[6]);
+        let log = self.creep_column(t0);
+        // ∂ ln(1 + x/t0) / ∂t0 = −x / (t0·(t0 + x)), through the same (linear) secant.
+        let dt0 = self.t0_map.derivative(p[6]);
+        let dlog: Vec<f64> = self
+            .t
+            .par_iter()
+            .zip(self.offsets)
+            .map(|(&t, offsets)| dt0 * secant(|x| -x / (t0 * (t0 + x)), t, offsets))
+            .collect();
+        let mut jac = DMatrix::zeros(2 * m, 7);
+        for i in 0..m {
+            jac[(i, 0)] = 1.0;
+            jac[(i, 1)] = self.quadratic[i];
+            jac[(i, 2)] = log[i];
+            jac[(i, 6)] = p[2] * dlog[i];
+            jac[(m + i, 3)] = 1.0;
+            jac[(m + i, 4)] = self.quadratic[i];
+            jac[(m + i, 5)] = log[i];
+            jac[(m + i, 6)] = p[5] * dlog[i];
+        }
+        jac
+    }
 }
 
 fn fit_hysteresis(
@@ -361,7 +468,7 @@ fn fit_hysteresis(
     let mut weights = vec![1.0; m];
     let mut last = None;
     for round in 0..=options.robust_rounds.max(1) {
-        let fit = levenberg_marquardt(residuals, m, &p, &weights, 200)
+        let fit = levenberg_marquardt(&residuals, m, &p, &weights, 200)
             .ok_or(DistortionError::FitFailed("hysteresis"))?;
         p.clone_from(&fit.params);
         let sigma = mad_sigma(&fit.residuals).max(1e-300);
@@ -374,7 +481,7 @@ fn fit_hysteresis(
         last = Some(fit);
     }
     let fit = last.ok_or(DistortionError::FitFailed("hysteresis"))?;
-    let fit = levenberg_marquardt(residuals, m, &fit.params, &weights, 0).unwrap_or(fit);
+    let fit = levenberg_marquardt(&residuals, m, &fit.params, &weights, 0).unwrap_or(fit);
     let chi2: f64 = fit
         .residuals
         .iter()

@@ -1,5 +1,6 @@
-//! A small weighted Levenberg–Marquardt with a finite-difference Jacobian, used for the
-//! RDF, drift/creep and hysteresis fits (few parameters, up to ~10⁵ residuals).
+//! A small weighted Levenberg–Marquardt, used for the RDF, drift/creep and hysteresis fits
+//! (few parameters, up to ~10⁵ residuals). The Jacobian is the problem's own where it
+//! knows it analytically, forward differences otherwise.
 
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -14,9 +15,28 @@ pub(crate) struct LmResult {
     pub inverse_normal: Option<DMatrix<f64>>,
 }
 
+/// A weighted least-squares problem for [`levenberg_marquardt`]. Any
+/// `Fn(&[f64], &mut [f64])` writing the residuals is one (with a finite-difference Jacobian).
+pub(crate) trait Problem: Sync {
+    /// Writes the residuals at `p` into `r`.
+    fn residuals(&self, p: &[f64], r: &mut [f64]);
+
+    /// The Jacobian `∂r/∂p` at `p` (`r0`: the residuals there); forward differences unless
+    /// the problem knows it analytically.
+    fn jacobian(&self, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
+        forward_difference(self, p, r0)
+    }
+}
+
+impl<F: Fn(&[f64], &mut [f64]) + Sync> Problem for F {
+    fn residuals(&self, p: &[f64], r: &mut [f64]) {
+        self(p, r)
+    }
+}
+
 /// Forward-difference Jacobian, one column per parameter, columns in parallel (each column
 /// is computed the same way whatever the thread count, so the result is deterministic).
-fn jacobian<F: Fn(&[f64], &mut [f64]) + Sync>(f: &F, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
+fn forward_difference<P: Problem + ?Sized>(problem: &P, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
     let (m, n) = (r0.len(), p.len());
     let columns: Vec<Vec<f64>> = (0..n)
         .into_par_iter()
@@ -25,7 +45,7 @@ fn jacobian<F: Fn(&[f64], &mut [f64]) + Sync>(f: &F, p: &[f64], r0: &[f64]) -> D
             let mut r = vec![0.0; m];
             let h = 1e-7 * p[j].abs().max(1e-3);
             q[j] = p[j] + h;
-            f(&q, &mut r);
+            problem.residuals(&q, &mut r);
             r.iter().zip(r0).map(|(r, r0)| (r - r0) / h).collect()
         })
         .collect();
@@ -36,9 +56,9 @@ fn cost(r: &[f64], w: &[f64]) -> f64 {
     r.iter().zip(w).map(|(r, w)| w * r * r).sum()
 }
 
-/// Minimises `Σ w_i r_i(p)²` from `p0`. `f(p, r)` writes the `m` residuals.
-pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
-    f: F,
+/// Minimises `Σ w_i r_i(p)²` of the `m` residuals of `problem` from `p0`.
+pub(crate) fn levenberg_marquardt<P: Problem + ?Sized>(
+    problem: &P,
     m: usize,
     p0: &[f64],
     weights: &[f64],
@@ -47,7 +67,7 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
     let n = p0.len();
     let mut p = p0.to_vec();
     let mut r = vec![0.0; m];
-    f(&p, &mut r);
+    problem.residuals(&p, &mut r);
     let mut c = cost(&r, weights);
     if !c.is_finite() {
         return None;
@@ -55,7 +75,7 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
     let mut lambda = 1e-3;
     let mut trial = vec![0.0; m];
     for _ in 0..max_iterations {
-        let jac = jacobian(&f, &p, &r);
+        let jac = problem.jacobian(&p, &r);
         let mut jtj = DMatrix::<f64>::zeros(n, n);
         let mut jtr = DVector::<f64>::zeros(n);
         for i in 0..m {
@@ -84,7 +104,7 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
                 continue;
             };
             let q: Vec<f64> = p.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
-            f(&q, &mut trial);
+            problem.residuals(&q, &mut trial);
             let ct = cost(&trial, weights);
             if ct.is_finite() && ct <= c {
                 let small = step
@@ -105,7 +125,7 @@ pub(crate) fn levenberg_marquardt<F: Fn(&[f64], &mut [f64]) + Sync>(
             break;
         }
     }
-    let jac = jacobian(&f, &p, &r);
+    let jac = problem.jacobian(&p, &r);
     let mut jtj = DMatrix::<f64>::zeros(n, n);
     for (i, w) in weights.iter().enumerate().take(m) {
         let row = jac.row(i);

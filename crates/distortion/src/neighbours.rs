@@ -195,7 +195,7 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
             r[i] = model - g;
         }
     };
-    let fit = levenberg_marquardt(residuals, m, &p0, &vec![1.0; m], 300)
+    let fit = levenberg_marquardt(&residuals, m, &p0, &vec![1.0; m], 300)
         .ok_or(DistortionError::FitFailed("RDF"))?;
     let p = fit.params;
     let a = p[2 * ns] * a0;
