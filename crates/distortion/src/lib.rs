@@ -103,8 +103,12 @@ pub struct PassInput<'a> {
 pub struct PassAnalysis {
     /// Trace or retrace.
     pub pass: ScanPass,
-    /// Neighbours, RDF, selection.
+    /// Neighbours, RDF, selection, in the controller frame (the raw positions).
     pub selection: NeighbourSelection,
+    /// Neighbours found again among the positions corrected by a first model fit, when
+    /// that selects markedly more features (see [`analyse`]); `local` then uses these.
+    #[serde(default)]
+    pub refined_selection: Option<NeighbourSelection>,
     /// Estimated lattice angle, radians (display frame).
     pub lattice_angle_rad: f64,
     /// Local distortion of every usable selected feature.
@@ -120,7 +124,27 @@ pub struct DhctResult {
     pub passes: Vec<PassAnalysis>,
 }
 
+impl PassAnalysis {
+    /// The selection whose neighbours the local distortions were measured with.
+    pub fn used_selection(&self) -> &NeighbourSelection {
+        self.refined_selection.as_ref().unwrap_or(&self.selection)
+    }
+}
+
+/// A refined selection replaces the raw one only if it selects more than this factor as
+/// many features.
+const REFINE_GAIN: f64 = 1.1;
+
 /// Runs neighbours, local distortion and the joint fit over all given passes.
+///
+/// Neighbours are first found among the raw (controller-frame) positions. A large drift
+/// squeezes part of the raw lattice out of the NN window, and the features that stay
+/// selected are the less distorted ones, which biases the fit (at a drift of 30 % of the
+/// slow-scan speed, 20 % of the features stay and the slow scale comes out 0.8 % off).
+/// So the neighbours are found again among the positions corrected by that first fit,
+/// where the lattice is nearly ideal; if that selects markedly more features, the local
+/// distortions are measured again (raw positions, the new neighbour sets) and the model
+/// re-fitted, up to twice.
 pub fn analyse(
     inputs: &[PassInput],
     geometry: &ScanGeometry,
@@ -143,34 +167,128 @@ pub fn analyse(
             lattice,
             &options.neighbours,
         )?;
-        let points_m: Vec<[f64; 2]> = points_px
-            .iter()
-            .map(|p| [p[0] * geometry.pitch_x(), p[1] * geometry.pitch_y()])
-            .collect();
-        let angle = estimate_lattice_angle(&points_m, &selection.selected, lattice);
-        let local = local_distortions(
-            input.features,
-            &selection.selected,
-            &LocalSettings {
-                geometry,
-                lattice,
-                method,
-                lattice_angle_rad: angle,
-            },
-        );
-        passes.push(PassAnalysis {
-            pass,
-            selection,
-            lattice_angle_rad: angle,
-            local,
-        });
+        passes.push(measure_pass(
+            input, pass, selection, None, geometry, lattice, method,
+        ));
     }
+    let mut model = fit_pooled(&passes, geometry, options)?;
+    for _ in 0..2 {
+        let mut refined = Vec::with_capacity(passes.len());
+        let mut gained = false;
+        for (input, previous) in inputs
+            .iter()
+            .filter(|i| !i.features.is_empty())
+            .zip(&passes)
+        {
+            let selection = select_in_sample_frame(input, &model, geometry, lattice, options)?;
+            let before = previous.used_selection().selected.len();
+            if selection.selected.len() as f64 > REFINE_GAIN * before as f64 {
+                gained = true;
+            }
+            refined.push(selection);
+        }
+        if !gained {
+            break;
+        }
+        passes = passes
+            .into_iter()
+            .zip(inputs.iter().filter(|i| !i.features.is_empty()))
+            .zip(refined)
+            .map(|((previous, input), selection)| {
+                measure_pass(
+                    input,
+                    previous.pass,
+                    previous.selection,
+                    Some(selection),
+                    geometry,
+                    lattice,
+                    method,
+                )
+            })
+            .collect();
+        model = fit_pooled(&passes, geometry, options)?;
+    }
+    Ok(DhctResult { model, passes })
+}
+
+/// Local distortions of one pass with the neighbours of `refined` (else `selection`).
+fn measure_pass(
+    input: &PassInput,
+    pass: ScanPass,
+    selection: NeighbourSelection,
+    refined: Option<NeighbourSelection>,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    method: LocalDistortionMethod,
+) -> PassAnalysis {
+    let points_m: Vec<[f64; 2]> = input
+        .features
+        .iter()
+        .map(|f| [f.x_px * geometry.pitch_x(), f.y_px * geometry.pitch_y()])
+        .collect();
+    let used = refined.as_ref().unwrap_or(&selection);
+    let angle = estimate_lattice_angle(&points_m, &used.selected, lattice);
+    let local = local_distortions(
+        input.features,
+        &used.selected,
+        &LocalSettings {
+            geometry,
+            lattice,
+            method,
+            lattice_angle_rad: angle,
+        },
+    );
+    PassAnalysis {
+        pass,
+        selection,
+        refined_selection: refined,
+        lattice_angle_rad: angle,
+        local,
+    }
+}
+
+/// Neighbour selection among the features of `input` moved to the sample frame by `model`.
+/// Features outside the mask (judged at their raw position) are left out first; indices
+/// refer to `input.features`.
+fn select_in_sample_frame(
+    input: &PassInput,
+    model: &DistortionModel,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+) -> Result<NeighbourSelection, DistortionError> {
+    let raw: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+    let inside = neighbours::inside_mask(&raw, input.mask);
+    let kept: Vec<usize> = (0..raw.len()).filter(|&i| inside[i]).collect();
+    let corrected: Vec<[f64; 2]> = kept
+        .iter()
+        .map(|&i| {
+            let f = &input.features[i];
+            let [x, y] = model.to_sample(geometry, f.pass, f.x_px, f.y_px);
+            [x / geometry.pitch_x(), y / geometry.pitch_y()]
+        })
+        .collect();
+    let mut selection = select_features(&corrected, geometry, None, lattice, &options.neighbours)?;
+    selection.exclusions.outside_mask = raw.len() - kept.len();
+    for s in &mut selection.selected {
+        s.index = kept[s.index];
+        for n in &mut s.neighbours {
+            *n = kept[*n];
+        }
+    }
+    Ok(selection)
+}
+
+fn fit_pooled(
+    passes: &[PassAnalysis],
+    geometry: &ScanGeometry,
+    options: &DhctOptions,
+) -> Result<DistortionModel, DistortionError> {
     let pooled: Vec<LocalDistortion> = passes.iter().flat_map(|p| p.local.clone()).collect();
-    let model = fit_model(
+    fit_model(
         &pooled,
         geometry.frame_duration(),
         geometry.line_scan_time(),
         &options.fit,
-    )?;
-    Ok(DhctResult { model, passes })
+    )
 }

@@ -197,7 +197,11 @@ pub fn report_html(
                 p.features.to_string(),
                 p.candidates.to_string(),
                 p.rejected.to_string(),
-                p.selected_for_model.to_string(),
+                if p.neighbours_refined {
+                    format!("{} (found in the corrected frame)", p.selected_for_model)
+                } else {
+                    p.selected_for_model.to_string()
+                },
                 p.local_distortions.to_string(),
                 p.indexed.to_string(),
                 format!("{:.3} Å", p.rdf_fit.nn_distance_m * 1e10),

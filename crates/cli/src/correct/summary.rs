@@ -33,6 +33,9 @@ pub struct PassCounts {
     pub local_distortions: usize,
     pub indexed: usize,
     pub exclusions: ExclusionCounts,
+    /// Whether the neighbours were found again in the frame corrected by a first fit (a
+    /// large distortion left too few raw features with their full NN shell).
+    pub neighbours_refined: bool,
     pub rdf_fit: RdfFit,
 }
 
@@ -174,10 +177,13 @@ pub fn summarise(
                 features: p.features.features.len(),
                 candidates: p.features.candidates,
                 rejected: p.features.rejected.len(),
-                selected_for_model: dhct.map(|d| d.selection.selected.len()).unwrap_or(0),
+                selected_for_model: dhct.map(|d| d.used_selection().selected.len()).unwrap_or(0),
                 local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
                 indexed: p.indices.iter().flatten().count(),
-                exclusions: dhct.map(|d| d.selection.exclusions).unwrap_or_default(),
+                exclusions: dhct
+                    .map(|d| d.used_selection().exclusions)
+                    .unwrap_or_default(),
+                neighbours_refined: dhct.is_some_and(|d| d.refined_selection.is_some()),
                 rdf_fit: dhct.map(|d| d.selection.rdf_fit.clone()).unwrap_or(RdfFit {
                     nn_distance_m: f64::NAN,
                     shells_m: vec![],
