@@ -68,7 +68,7 @@ pub use local::{LocalDistortion, LocalSettings, estimate_lattice_angle, local_di
 pub use model::{DistortionModel, DriftCreep, HysteresisLaw, Parameter};
 pub use neighbours::{
     AngleStats, ExclusionCounts, NeighbourOptions, NeighbourSelection, Rdf, RdfFit,
-    SelectedFeature, nn_angle_stats, radial_distribution, select_features,
+    SelectedFeature, nn_angle_stats, radial_distribution, select_features, select_nearest,
 };
 
 use dhct_features::Feature;
@@ -105,10 +105,13 @@ pub struct PassAnalysis {
     pub pass: ScanPass,
     /// Neighbours, RDF, selection, in the controller frame (the raw positions).
     pub selection: NeighbourSelection,
-    /// Neighbours found again among the positions corrected by a first model fit, when
-    /// that selects markedly more features (see [`analyse`]); `local` then uses these.
+    /// The neighbours `local` was measured with when they are not `selection`'s (see
+    /// [`analyse`] and `neighbour_source`).
     #[serde(default)]
     pub refined_selection: Option<NeighbourSelection>,
+    /// Where the neighbours `local` was measured with came from.
+    #[serde(default)]
+    pub neighbour_source: NeighbourSource,
     /// Estimated lattice angle, radians (display frame).
     pub lattice_angle_rad: f64,
     /// Local distortion of every usable selected feature.
@@ -122,6 +125,19 @@ pub struct DhctResult {
     pub model: DistortionModel,
     /// Per-pass diagnostics.
     pub passes: Vec<PassAnalysis>,
+}
+
+/// How the neighbours of the local distortions were found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NeighbourSource {
+    /// The NN window among the raw (controller-frame) positions.
+    #[default]
+    RawWindow,
+    /// The `k` nearest raw positions (the window selected too few features).
+    RawNearest,
+    /// The NN window among the positions corrected by a first model fit.
+    CorrectedFrame,
 }
 
 impl PassAnalysis {
@@ -144,7 +160,9 @@ const REFINE_GAIN: f64 = 1.1;
 /// So the neighbours are found again among the positions corrected by that first fit,
 /// where the lattice is nearly ideal; if that selects markedly more features, the local
 /// distortions are measured again (raw positions, the new neighbour sets) and the model
-/// re-fitted, up to twice.
+/// re-fitted, up to twice. Beyond ~30 % no raw feature keeps its full shell in the window;
+/// the first model then comes from each feature's `k` nearest neighbours
+/// ([`select_nearest`]).
 pub fn analyse(
     inputs: &[PassInput],
     geometry: &ScanGeometry,
@@ -171,6 +189,35 @@ pub fn analyse(
             input, pass, selection, None, geometry, lattice, method,
         ));
     }
+    let windowed: usize = passes.iter().map(|p| p.selection.selected.len()).sum();
+    if windowed < fit::MIN_FEATURES {
+        // Too distorted for the window: a first model from the k nearest neighbours.
+        passes = passes
+            .into_iter()
+            .zip(inputs.iter().filter(|i| !i.features.is_empty()))
+            .map(|(previous, input)| {
+                let points_px: Vec<[f64; 2]> =
+                    input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+                let selected = select_nearest(&points_px, geometry, input.mask, lattice)?;
+                let nearest = NeighbourSelection {
+                    selected,
+                    exclusions: ExclusionCounts::default(),
+                    ..previous.selection.clone()
+                };
+                let mut pass = measure_pass(
+                    input,
+                    previous.pass,
+                    previous.selection,
+                    Some(nearest),
+                    geometry,
+                    lattice,
+                    method,
+                );
+                pass.neighbour_source = NeighbourSource::RawNearest;
+                Ok(pass)
+            })
+            .collect::<Result<_, DistortionError>>()?;
+    }
     let mut model = fit_pooled(&passes, geometry, options)?;
     for _ in 0..2 {
         let mut refined = Vec::with_capacity(passes.len());
@@ -182,7 +229,11 @@ pub fn analyse(
         {
             let selection = select_in_sample_frame(input, &model, geometry, lattice, options)?;
             let before = previous.used_selection().selected.len();
-            if selection.selected.len() as f64 > REFINE_GAIN * before as f64 {
+            // The k-nearest bootstrap is always replaced by the windowed selection.
+            let bootstrap = previous.neighbour_source == NeighbourSource::RawNearest;
+            if (bootstrap && !selection.selected.is_empty())
+                || selection.selected.len() as f64 > REFINE_GAIN * before as f64
+            {
                 gained = true;
             }
             refined.push(selection);
@@ -195,7 +246,7 @@ pub fn analyse(
             .zip(inputs.iter().filter(|i| !i.features.is_empty()))
             .zip(refined)
             .map(|((previous, input), selection)| {
-                measure_pass(
+                let mut pass = measure_pass(
                     input,
                     previous.pass,
                     previous.selection,
@@ -203,7 +254,9 @@ pub fn analyse(
                     geometry,
                     lattice,
                     method,
-                )
+                );
+                pass.neighbour_source = NeighbourSource::CorrectedFrame;
+                pass
             })
             .collect();
         model = fit_pooled(&passes, geometry, options)?;
@@ -242,6 +295,7 @@ fn measure_pass(
         pass,
         selection,
         refined_selection: refined,
+        neighbour_source: NeighbourSource::RawWindow,
         lattice_angle_rad: angle,
         local,
     }

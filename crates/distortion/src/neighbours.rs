@@ -349,6 +349,69 @@ pub fn select_features(
     })
 }
 
+/// Fallback for raw positions too distorted for the NN window of [`select_features`] (a
+/// drift of more than ~30 % of the slow-scan speed): each feature's `k` nearest features
+/// are its neighbours (`k` = the lattice's NN count), without a distance window. A feature
+/// is kept if its `k`-th neighbour is at most `1.6 ×` as far as its nearest (vacancies and
+/// borders give a second-shell neighbour) and it is farther than twice that from the image
+/// border. Good enough to fit a first model, whose corrected frame then gives the windowed
+/// selection (see [`crate::analyse`]).
+pub fn select_nearest(
+    points_px: &[[f64; 2]],
+    geometry: &ScanGeometry,
+    mask: Option<&Array2<bool>>,
+    lattice: &dyn Lattice,
+) -> Result<Vec<SelectedFeature>, DistortionError> {
+    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+    let inside = inside_mask(points_px, mask);
+    let used: Vec<usize> = (0..points_px.len()).filter(|&i| inside[i]).collect();
+    let k = lattice.nearest_neighbours(0).len();
+    if used.len() <= k {
+        return Ok(Vec::new());
+    }
+    let points_m: Vec<[f64; 2]> = used
+        .iter()
+        .map(|&i| [points_px[i][0] * px, points_px[i][1] * py])
+        .collect();
+    let (width, height) = (
+        (geometry.columns() as f64 - 1.0) * px,
+        (geometry.rows() as f64 - 1.0) * py,
+    );
+    let tree = tree_of(&points_m)?;
+    let k_with_self = std::num::NonZeroUsize::new(k + 1).expect("k + 1 > 0");
+    let mut selected = Vec::new();
+    for (i, p) in points_m.iter().enumerate() {
+        let nearest = tree
+            .query(p)
+            .nearest_n::<SquaredEuclidean<f64>>(k_with_self)
+            .execute();
+        let mut neighbours: Vec<(f64, usize)> = nearest
+            .iter()
+            .filter(|n| n.item as usize != i)
+            .map(|n| (n.distance.sqrt(), n.item as usize))
+            .collect();
+        neighbours.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if neighbours.len() != k {
+            continue;
+        }
+        let (first, last) = (neighbours[0].0, neighbours[k - 1].0);
+        let margin = 2.0 * last;
+        if !(first > 0.0 && last <= 1.6 * first)
+            || p[0] < margin
+            || p[1] < margin
+            || p[0] > width - margin
+            || p[1] > height - margin
+        {
+            continue;
+        }
+        selected.push(SelectedFeature {
+            index: used[i],
+            neighbours: neighbours.iter().map(|&(_, j)| used[j]).collect(),
+        });
+    }
+    Ok(selected)
+}
+
 /// Statistics of the angles between angularly adjacent nearest neighbours.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AngleStats {

@@ -137,8 +137,9 @@ pub fn run(
             let expected_nn_m = lattice.nearest_neighbour_distance();
             let ratio = median_nn_m / expected_nn_m;
             let suggestion = if (0.8..1.25).contains(&ratio) {
-                ": the spacing matches, so check the mask, the lattice type (neighbour count) \
-                 and the image quality"
+                ": the spacing matches, so check the mask, the lattice type (neighbour count), \
+                 the image quality, and whether the drift is near half the slow-scan speed or \
+                 more (the raw lattice is then squeezed beyond recognition)"
                     .to_string()
             } else {
                 format!(

@@ -150,8 +150,8 @@ pub fn residuals(run: &Run, margin_px: f64) -> Residuals {
         }
         affine_sse += affine_rms(&from, &to).powi(2) * from.len() as f64;
         total += from.len();
-        // NN distances among selected features, corrected and not.
-        let points_px: Vec<[f64; 2]> = set.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+        // NN distances among features selected in the corrected frame, corrected and not.
+        let points_px: Vec<[f64; 2]> = corrected.iter().map(|c| [c.x_px, c.y_px]).collect();
         let selection = select_features(
             &points_px,
             geometry,
