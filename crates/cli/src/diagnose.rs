@@ -405,8 +405,10 @@ pub fn run_validation(seeds: Option<usize>, output: Option<&Path>, json: bool) -
     let mut options = ValidationOptions::default();
     if let Some(n) = seeds {
         options.tuned_seeds.truncate(n);
+        options.development_seeds.truncate(n);
         options.held_out_seeds.truncate(n);
         options.tuned_null_seeds.truncate(2 * n);
+        options.development_null_seeds.truncate(2 * n);
         options.held_out_null_seeds.truncate(2 * n);
         options.mixture_seeds.truncate(n);
     }

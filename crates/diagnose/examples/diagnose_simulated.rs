@@ -6,7 +6,7 @@
 //! ```
 //! (effect: any candidate name, or `none`; seed; `images` = render and find features).
 
-use dhct_diagnose::synth::{ValidationCase, simulate_images, simulate_positions};
+use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
 use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -15,8 +15,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
     let images = args.get(3).is_some_and(|s| s == "images");
     let case = match Candidate::ALL.iter().find(|c| c.name() == effect) {
-        Some(&c) => ValidationCase::single(c, seed, false),
-        None => ValidationCase::effect_free(seed, false),
+        Some(&c) => ValidationCase::single(c, seed, ValidationSet::Tuned),
+        None => ValidationCase::effect_free(seed, ValidationSet::Tuned),
     };
     println!(
         "case {}: {:?}\n{:?}",

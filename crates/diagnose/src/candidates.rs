@@ -65,6 +65,19 @@ impl Candidate {
         Candidate::LocalStrain,
     ];
 
+    /// Whether the effect is confined to part of the frame (after an onset, decaying or
+    /// stepping once) rather than acting throughout it; decides how it is cross-validated
+    /// ([`crate::CvScheme`]).
+    pub fn is_transient(self) -> bool {
+        matches!(
+            self,
+            Candidate::ExponentialCreep
+                | Candidate::SecondCreep
+                | Candidate::SlowHysteresis
+                | Candidate::TipChange
+        )
+    }
+
     /// Kebab-case name.
     pub fn name(self) -> &'static str {
         match self {
@@ -119,6 +132,10 @@ pub(crate) struct Proposal {
     pub build: Builder,
     /// Parameters chosen on a grid or free in the refit beyond the columns (for BIC).
     pub extra_parameters: usize,
+    /// How many independent shapes the search behind this proposal compared, when that is
+    /// more than the candidate's own proposals (a periodogram's frequencies); for the
+    /// look-elsewhere penalty.
+    pub searched: Option<usize>,
 }
 
 /// What the proposals need to know.
@@ -210,6 +227,7 @@ fn term_proposal(
         columns,
         build,
         extra_parameters,
+        searched: None,
     })
 }
 
@@ -329,7 +347,7 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
             }
         }
         Candidate::SlowHysteresis => {
-            for tau in log_grid(2.0 * g.line_period(), 0.3 * t_max, 8) {
+            for tau in log_grid(2.0 * g.line_period(), 0.3 * t_max, 16) {
                 if let Some(e) = sim(EffectConfig::SlowHysteresis(SlowScanHysteresis {
                     law: HysteresisLaw::Exponential {
                         amplitude: 0.0,
@@ -349,8 +367,10 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
             }
         }
         Candidate::Vibration => {
-            for f in periodogram_peaks(ctx.observations, ctx.residuals, 5) {
-                push(vibration_proposal(ctx, f));
+            let (peaks, searched) =
+                periodogram_peaks(ctx.observations, ctx.residuals, 5, MIN_VIBRATION_CYCLES);
+            for f in peaks {
+                push(vibration_proposal(ctx, f, searched));
             }
         }
         Candidate::TipChange => {
@@ -434,6 +454,44 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
     out
 }
 
+/// The shortest time constant a fitted exponential creep may keep: a relaxation faster
+/// than the slow scan takes to cross half an atom (`½·NN / v_slow`, at least four line
+/// pairs) cannot be told from a jump (a tip change), since every feature is fitted over
+/// about one NN distance of lines: on rendered images the features cut by a jump look like
+/// such a fast relaxation. (The search grid starts lower, at two line periods, so that a
+/// refit can move up from there.)
+pub(crate) fn min_creep_time_constant(geometry: &ScanGeometry, nn_distance_m: f64) -> f64 {
+    (0.5 * nn_distance_m / geometry.slow_speed()).max(8.0 * geometry.line_period())
+}
+
+/// Whether the effect `candidate` added as the last term of `model` is still within the
+/// candidate's domain after a free refit (an exponential creep may not relax faster than
+/// [`min_creep_time_constant`]).
+pub(crate) fn within_domain(
+    candidate: Candidate,
+    model: &GlobalModel,
+    geometry: &ScanGeometry,
+    nn_distance_m: f64,
+) -> bool {
+    let tau_min = min_creep_time_constant(geometry, nn_distance_m);
+    match candidate {
+        Candidate::ExponentialCreep => model
+            .terms
+            .iter()
+            .rev()
+            .find(|t| t.label == candidate.name())
+            .is_none_or(|t| {
+                t.effect
+                    .parameter_names()
+                    .iter()
+                    .zip(t.effect.parameters())
+                    .filter(|(name, _)| name.ends_with("time_constant_s"))
+                    .all(|(_, tau)| tau >= 0.999 * tau_min)
+            }),
+        _ => true,
+    }
+}
+
 /// A tip change at `t` (s since frame start): jump free, time fixed.
 pub(crate) fn tip_proposal(ctx: &Context, t: f64) -> Option<Proposal> {
     let e = sim_term(&EffectConfig::TipChange(TipChange {
@@ -454,9 +512,14 @@ pub(crate) fn tip_proposal(ctx: &Context, t: f64) -> Option<Proposal> {
     )
 }
 
-/// Vibration at `f` Hz: the screening columns are `sin`, `cos` per axis; the refit frees the
-/// frequency, amplitudes and phases.
-fn vibration_proposal(ctx: &Context, f: f64) -> Option<Proposal> {
+/// A "vibration" with fewer periods than this in the frame is a smooth drift residue, which
+/// the drift and creep terms and the other candidates describe: it is not searched for.
+pub(crate) const MIN_VIBRATION_CYCLES: f64 = 4.0;
+
+/// Vibration at `f` Hz, found among `searched` independent periodogram frequencies: the
+/// screening columns are `sin`, `cos` per axis; the refit frees the frequency, amplitudes
+/// and phases.
+fn vibration_proposal(ctx: &Context, f: f64, searched: usize) -> Option<Proposal> {
     let n = ctx.observations.len();
     let mut columns = DMatrix::zeros(2 * n, 4);
     let w = std::f64::consts::TAU * f;
@@ -487,5 +550,6 @@ fn vibration_proposal(ctx: &Context, f: f64) -> Option<Proposal> {
         columns,
         build,
         extra_parameters: 1,
+        searched: Some(searched),
     })
 }

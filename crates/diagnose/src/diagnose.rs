@@ -18,7 +18,7 @@ use crate::noise::{estimate, robust_sigma};
 use crate::report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
-use crate::select::{Current, SelectionOptions, folds, round};
+use crate::select::{Current, CvScheme, Folds, SelectionOptions, round};
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -30,7 +30,9 @@ pub struct DiagnoseOptions {
     pub candidates: Vec<Candidate>,
     /// Acceptance thresholds and limits of the greedy selection.
     pub selection: SelectionOptions,
-    /// Time blocks for cross-validation (folds hold out blocks `k`, `k + folds`, …).
+    /// How features are assigned to cross-validation folds.
+    pub cv_scheme: CvScheme,
+    /// Time blocks for [`CvScheme::TimeBlocks`] (folds hold out blocks `k`, `k + folds`, …).
     pub cv_blocks: usize,
     /// Cross-validation folds.
     pub cv_folds: usize,
@@ -53,6 +55,7 @@ impl Default for DiagnoseOptions {
             dhct: DhctOptions::default(),
             candidates: Candidate::ALL.to_vec(),
             selection: SelectionOptions::default(),
+            cv_scheme: CvScheme::PerCandidate,
             cv_blocks: 10,
             cv_folds: 5,
             outlier_sigma: 6.0,
@@ -211,7 +214,13 @@ pub fn diagnose(
     let location = options
         .locate
         .then(|| locate(&observations, &base.residuals, sigma, geometry));
-    let fold = folds(&observations, options.cv_blocks, options.cv_folds);
+    let folds = Folds::new(
+        &observations,
+        geometry,
+        options.cv_scheme,
+        options.cv_blocks,
+        options.cv_folds,
+    );
 
     // Greedy selection.
     let mut current = base.clone();
@@ -230,8 +239,8 @@ pub fn diagnose(
                 geometry,
                 observations: &observations,
                 sigma,
-                fold: &fold,
-                folds: options.cv_folds,
+                folds: &folds,
+                nn_distance_m: lattice.nearest_neighbour_distance(),
             },
             &remaining,
             &options.selection,

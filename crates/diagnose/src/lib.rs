@@ -41,7 +41,11 @@
 //! use dhct_lattice::Hexagonal;
 //!
 //! // A simulated scan with a tip change the base model does not know about.
-//! let case = synth::ValidationCase::single(dhct_diagnose::Candidate::TipChange, 1, false);
+//! let case = synth::ValidationCase::single(
+//!     dhct_diagnose::Candidate::TipChange,
+//!     1,
+//!     synth::ValidationSet::Tuned,
+//! );
 //! let scan = synth::simulate_positions(&case.config, 2e-12, 7).unwrap();
 //! let report = diagnose(&scan.inputs(), &scan.geometry,
 //!                       &Hexagonal::graphite(), &DiagnoseOptions::default()).unwrap();
@@ -74,6 +78,6 @@ pub use noise::NoiseFloor;
 pub use report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
-pub use select::{CandidateScore, SelectionOptions};
+pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
 pub use validate::{CaseResult, ValidationOptions, ValidationReport, validate};

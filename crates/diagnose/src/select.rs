@@ -5,12 +5,15 @@
 //! jointly with a re-adjustment of every current parameter (`B` projected off `J`). The best
 //! shape of each candidate is then scored by
 //!
-//! * **cross-validation over time blocks**: the frame is cut into 10 time blocks; fold `k`
-//!   holds out blocks `k` and `k + 5`; the model is re-fitted (one Gauss–Newton step from
-//!   the full-data solution, exact for parameters that enter linearly) on the rest and
-//!   predicts the held-out residuals. Score: held-out mean square with the effect ÷ without;
+//! * **cross-validation** ([`CvScheme`]): a persistent effect over 10 time blocks (fold `k`
+//!   holds out blocks `k` and `k + 5`), a transient one over interleaved line pairs (fold
+//!   `k` holds out every fifth line pair; time blocks cannot test an effect confined to one
+//!   block); the model is re-fitted (one Gauss–Newton step from the full-data solution,
+//!   exact for parameters that enter linearly) on the rest and predicts the held-out
+//!   residuals. Score: held-out mean square with the effect ÷ without;
 //! * **BIC/AIC** with the noise variance profiled out: `n·ln(χ²/n) + k·ln n` (`2k`),
-//!   counting the grid-searched shape parameters in `k`.
+//!   counting the grid-searched shape parameters in `k`, each at least at the
+//!   look-elsewhere price `2 ln M` of the `M` shapes searched (a periodogram's frequencies).
 //!
 //! The best few by BIC are re-fitted in full (all parameters, shapes free where smooth) and
 //! re-scored. An effect is accepted only if its CV ratio is below `1 − min_cv_gain` and its
@@ -22,7 +25,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::candidates::{Candidate, Context, Proposal, proposals, tip_proposal};
+use crate::candidates::{Candidate, Context, Proposal, proposals, tip_proposal, within_domain};
 use crate::data::Observation;
 use crate::fit::{Fitted, fit, pinv_sym, pinv_sym_cut, weighted};
 
@@ -72,7 +75,7 @@ impl Default for SelectionOptions {
     fn default() -> Self {
         SelectionOptions {
             max_effects: 3,
-            min_cv_gain: 0.02,
+            min_cv_gain: 0.05,
             min_delta_bic: 20.0,
             refit_top: 3,
             max_iterations: 300,
@@ -80,21 +83,107 @@ impl Default for SelectionOptions {
     }
 }
 
-/// Time-block fold of every observation.
-pub(crate) fn folds(observations: &[Observation], blocks: usize, folds: usize) -> Vec<usize> {
-    let (lo, hi) = observations
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| {
-            (a.min(o.time_s), b.max(o.time_s))
-        });
-    let span = (hi - lo).max(1e-12);
-    observations
-        .iter()
-        .map(|o| {
-            let b = (((o.time_s - lo) / span * blocks as f64) as usize).min(blocks - 1);
-            b % folds
-        })
-        .collect()
+/// How observations are assigned to cross-validation folds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CvScheme {
+    /// Each candidate on the data it has to predict: a persistent effect (vibration, line
+    /// drift, couplings, higher-order drift, …) on [`CvScheme::TimeBlocks`], since it must
+    /// carry over to parts of the frame it was not fitted on; a transient one (tip change,
+    /// slow-scan hysteresis, a second or exponential creep from its onset) on
+    /// [`CvScheme::InterleavedLines`], since a transient lives inside one time block, which
+    /// time blocks could never test.
+    #[default]
+    PerCandidate,
+    /// Line pairs (trace + retrace of one line) in turn: fold `k` holds out every
+    /// `folds`-th line pair, so every held-out line has fitted lines on both sides.
+    InterleavedLines,
+    /// Contiguous time blocks: fold `k` holds out blocks `k`, `k + folds`, ….
+    TimeBlocks,
+}
+
+impl CvScheme {
+    /// The scheme `candidate` is tested with.
+    pub fn for_candidate(self, candidate: Candidate) -> CvScheme {
+        match self {
+            CvScheme::PerCandidate if candidate.is_transient() => CvScheme::InterleavedLines,
+            CvScheme::PerCandidate => CvScheme::TimeBlocks,
+            fixed => fixed,
+        }
+    }
+}
+
+/// Fold assignments of every observation under both concrete schemes.
+pub(crate) struct Folds {
+    pub scheme: CvScheme,
+    pub interleaved: Vec<usize>,
+    pub blocks: Vec<usize>,
+    pub count: usize,
+}
+
+impl Folds {
+    pub(crate) fn new(
+        observations: &[Observation],
+        geometry: &ScanGeometry,
+        scheme: CvScheme,
+        blocks: usize,
+        count: usize,
+    ) -> Folds {
+        Folds {
+            scheme,
+            interleaved: folds(
+                observations,
+                geometry,
+                CvScheme::InterleavedLines,
+                blocks,
+                count,
+            ),
+            blocks: folds(observations, geometry, CvScheme::TimeBlocks, blocks, count),
+            count,
+        }
+    }
+
+    /// The folds `candidate` is tested with.
+    pub(crate) fn of(&self, candidate: Candidate) -> &[usize] {
+        match self.scheme.for_candidate(candidate) {
+            CvScheme::InterleavedLines => &self.interleaved,
+            _ => &self.blocks,
+        }
+    }
+}
+
+/// The fold of every observation under `scheme` (`PerCandidate` counts as time blocks).
+pub(crate) fn folds(
+    observations: &[Observation],
+    geometry: &ScanGeometry,
+    scheme: CvScheme,
+    blocks: usize,
+    folds: usize,
+) -> Vec<usize> {
+    match scheme {
+        CvScheme::InterleavedLines => {
+            let pair = 2.0 * geometry.line_period();
+            observations
+                .iter()
+                .map(|o| ((o.time_s / pair).floor().max(0.0) as usize) % folds)
+                .collect()
+        }
+        CvScheme::TimeBlocks | CvScheme::PerCandidate => {
+            let (lo, hi) = observations
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| {
+                    (a.min(o.time_s), b.max(o.time_s))
+                });
+            let span = (hi - lo).max(1e-12);
+            observations
+                .iter()
+                .map(|o| {
+                    let b = (((o.time_s - lo) / span * blocks as f64) as usize).min(blocks - 1);
+                    b % folds
+                })
+                .collect()
+        }
+    }
 }
 
 /// Held-out mean square of the linearised refit of design `a` (rows `[x0, y0, …]`).
@@ -146,8 +235,9 @@ pub(crate) struct Current<'a> {
     pub geometry: &'a ScanGeometry,
     pub observations: &'a [Observation],
     pub sigma: [f64; 2],
-    pub fold: &'a [usize],
-    pub folds: usize,
+    pub folds: &'a Folds,
+    /// The lattice's nearest-neighbour distance, metres.
+    pub nn_distance_m: f64,
 }
 
 /// A scored candidate with its refitted model, if refitted.
@@ -156,9 +246,49 @@ pub(crate) struct Scored {
     pub fitted: Option<Fitted>,
 }
 
-fn criteria(n: f64, chi2_0: f64, chi2_1: f64, k: usize) -> (f64, f64) {
+/// The parameter count of a proposal for the information criteria.
+#[derive(Debug, Clone, Copy)]
+struct Complexity {
+    /// Parameters entering through the screening columns.
+    columns: usize,
+    /// Shape parameters chosen by a search (grid or periodogram).
+    shape: usize,
+    /// Independent shapes that search compared.
+    searched: usize,
+}
+
+impl Complexity {
+    fn parameters(self) -> usize {
+        self.columns + self.shape
+    }
+
+    /// `(ΔBIC, ΔAIC)` penalties. A searched shape costs what a fitted parameter costs, or
+    /// `2 ln M` for a search over `M` independent shapes if that is more (look-elsewhere:
+    /// under noise alone the best of `M` shapes gains about `2 ln M` in χ²). Only the
+    /// periodogram's thousands of frequencies exceed the BIC price of its one parameter.
+    fn penalties(self, n: f64) -> (f64, f64) {
+        let search = 2.0 * (self.searched.max(1) as f64).ln();
+        let shape_bic = if self.shape == 0 {
+            0.0
+        } else {
+            (self.shape as f64 * n.ln()).max(search)
+        };
+        let shape_aic = if self.shape == 0 {
+            0.0
+        } else {
+            (2.0 * self.shape as f64).max(search)
+        };
+        (
+            self.columns as f64 * n.ln() + shape_bic,
+            2.0 * self.columns as f64 + shape_aic,
+        )
+    }
+}
+
+fn criteria(n: f64, chi2_0: f64, chi2_1: f64, complexity: Complexity) -> (f64, f64) {
     let d = n * (chi2_1.max(1e-300) / chi2_0.max(1e-300)).ln();
-    (d + k as f64 * n.ln(), d + 2.0 * k as f64)
+    let (bic, aic) = complexity.penalties(n);
+    (d + bic, d + aic)
 }
 
 /// Scores every candidate in `candidates` on top of `current`; sorted best first.
@@ -173,7 +303,16 @@ pub(crate) fn round(
     let q = j.clone().qr().q();
     let n = r.len() as f64;
     let chi2_0 = r.norm_squared();
-    let cv0 = cv_mean_square(j, &r, current.fold, current.folds);
+    let cv0_interleaved = cv_mean_square(j, &r, &current.folds.interleaved, current.folds.count);
+    let cv0_blocks = cv_mean_square(j, &r, &current.folds.blocks, current.folds.count);
+    let cv0 = |c: Candidate| {
+        if std::ptr::eq(current.folds.of(c), current.folds.interleaved.as_slice()) {
+            cv0_interleaved
+        } else {
+            cv0_blocks
+        }
+    };
+
     let r_slice: Vec<f64> = r.iter().copied().collect();
     let ctx = Context {
         model: &fitted.model,
@@ -182,11 +321,13 @@ pub(crate) fn round(
         sigma: current.sigma,
         residuals: &r_slice,
     };
-    let screened: Vec<(Proposal, f64, Vec<f64>)> = candidates
+    let screened: Vec<(Proposal, f64, Vec<f64>, usize)> = candidates
         .par_iter()
         .filter_map(|&c| {
             let mut best: Option<(Proposal, f64, Vec<f64>)> = None;
-            for p in proposals(c, &ctx) {
+            let all = proposals(c, &ctx);
+            let mut searched = all.len();
+            for p in all {
                 let (gain, beta) = screen(&q, &r, &p.columns);
                 if best.as_ref().is_none_or(|b| gain > b.1) {
                     best = Some((p, gain, beta));
@@ -209,6 +350,7 @@ pub(crate) fn round(
                     .collect();
                 times.sort_by(f64::total_cmp);
                 times.dedup();
+                searched += times.len();
                 for tt in times {
                     if let Some(p) = tip_proposal(&ctx, tt + 1e-9) {
                         let (gain, beta) = screen(&q, &r, &p.columns);
@@ -218,16 +360,26 @@ pub(crate) fn round(
                     }
                 }
             }
-            best
+            best.map(|(p, gain, beta)| (p, gain, beta, searched))
         })
         .collect();
-    let mut scored: Vec<(Scored, Option<Proposal>, Vec<f64>)> = screened
+    let mut scored: Vec<(Scored, Option<Proposal>, Vec<f64>, Complexity)> = screened
         .into_iter()
-        .map(|(p, gain, beta)| {
-            let k = p.columns.ncols() + p.extra_parameters;
+        .map(|(p, gain, beta, searched)| {
+            let complexity = Complexity {
+                columns: p.columns.ncols(),
+                shape: p.extra_parameters,
+                searched: p.searched.unwrap_or(searched),
+            };
+            let k = complexity.parameters();
             let chi2 = chi2_0 - gain;
-            let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, k);
-            let cv = cv_mean_square(&hcat(j, &p.columns), &r, current.fold, current.folds);
+            let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, complexity);
+            let cv = cv_mean_square(
+                &hcat(j, &p.columns),
+                &r,
+                current.folds.of(p.candidate),
+                current.folds.count,
+            );
             let score = CandidateScore {
                 candidate: p.candidate,
                 shape: p.shape.clone(),
@@ -236,7 +388,7 @@ pub(crate) fn round(
                 delta_chi2: gain,
                 delta_bic,
                 delta_aic,
-                cv_ratio: cv / cv0,
+                cv_ratio: cv / cv0(p.candidate),
                 refitted: false,
                 passes: false,
             };
@@ -247,6 +399,7 @@ pub(crate) fn round(
                 },
                 Some(p),
                 beta,
+                complexity,
             )
         })
         .collect();
@@ -255,7 +408,7 @@ pub(crate) fn round(
     let top = options.refit_top.min(scored.len());
     let refits: Vec<Option<Fitted>> = scored[..top]
         .par_iter()
-        .map(|(_, p, beta)| {
+        .map(|(_, p, beta, _)| {
             let p = p.as_ref()?;
             let model = (p.build)(beta)?;
             let r = fit(
@@ -270,10 +423,18 @@ pub(crate) fn round(
             {
                 eprintln!("refit failed: {e}");
             }
-            r.ok()
+            // A refit that left the candidate's domain describes another effect.
+            r.ok().filter(|f| {
+                within_domain(
+                    p.candidate,
+                    &f.model,
+                    current.geometry,
+                    current.nn_distance_m,
+                )
+            })
         })
         .collect();
-    for ((s, _, _), refit) in scored.iter_mut().zip(refits) {
+    for ((s, _, _, complexity), refit) in scored.iter_mut().zip(refits) {
         let Some(f) = refit else { continue };
         let rf = weighted(&f.residuals, current.sigma);
         let chi2 = rf.norm_squared();
@@ -283,19 +444,24 @@ pub(crate) fn round(
                 s.score.candidate, s.score.chi2
             );
         }
-        let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, s.score.added_parameters);
-        let cv = cv_mean_square(&f.jacobian, &rf, current.fold, current.folds);
+        let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, *complexity);
+        let cv = cv_mean_square(
+            &f.jacobian,
+            &rf,
+            current.folds.of(s.score.candidate),
+            current.folds.count,
+        );
         s.score.chi2 = chi2;
         s.score.delta_chi2 = chi2_0 - chi2;
         s.score.delta_bic = delta_bic;
         s.score.delta_aic = delta_aic;
-        s.score.cv_ratio = cv / cv0;
+        s.score.cv_ratio = cv / cv0(s.score.candidate);
         s.score.refitted = true;
         s.fitted = Some(f);
     }
     let mut out: Vec<Scored> = scored
         .into_iter()
-        .map(|(mut s, _, _)| {
+        .map(|(mut s, _, _, _)| {
             s.score.passes = s.score.cv_ratio < 1.0 - options.min_cv_gain
                 && s.score.delta_bic < -options.min_delta_bic;
             s

@@ -123,17 +123,29 @@ fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     idx
 }
 
-/// Frequencies (Hz) of the `count` highest periodogram peaks.
+/// Frequencies (Hz) of the `count` highest periodogram peaks with at least `min_cycles`
+/// periods in the time span, and the number of independent frequencies searched (half the
+/// ×2-oversampled grid at or above that frequency).
 pub(crate) fn periodogram_peaks(
     observations: &[Observation],
     weighted: &[f64],
     count: usize,
-) -> Vec<f64> {
+    min_cycles: f64,
+) -> (Vec<f64>, usize) {
     let p = periodogram(observations, weighted);
-    local_maxima(&p, count)
+    let (lo, hi) = observations
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| {
+            (a.min(o.time_s), b.max(o.time_s))
+        });
+    let f_min = min_cycles / (hi - lo).max(1e-12);
+    let kept: Vec<(f64, f64)> = p.into_iter().filter(|(f, _)| *f >= f_min).collect();
+    let searched = kept.len().div_ceil(2).max(1);
+    let peaks = local_maxima(&kept, count)
         .into_iter()
-        .map(|k| p[k].0)
-        .collect()
+        .map(|k| kept[k].0)
+        .collect();
+    (peaks, searched)
 }
 
 /// The report's spectrum.

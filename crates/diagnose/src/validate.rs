@@ -1,13 +1,33 @@
 //! Validation on withheld effects: simulated scans with base distortion + one effect (or
 //! none, or two), diagnosed with the effect withheld from the base model; identification,
-//! false alarms and shrink, tabulated for a tuned and a held-out set.
+//! false alarms and shrink, tabulated per [`ValidationSet`].
+//!
+//! # Protocol
+//! * **Tuned** (seeds 1–3, effect-free 100–119): the method was developed on these.
+//! * **Development** (seeds 3001–3002, effect-free 4001–4020, other magnitudes and a
+//!   higher vibration band): the first held-out set. The method missed its targets there
+//!   (top-1 14/16, false alarms 2/20: slow-scan hysteresis taken for a second creep, a
+//!   small "vibration" in effect-free scans), and its cases were then looked at to
+//!   understand why; what changed was argued from principle, not fitted to them (time-block
+//!   cross-validation cannot test a transient, so transients are cross-validated over
+//!   interleaved lines; a periodogram search pays its look-elsewhere price; an effect must
+//!   cut the out-of-sample error by 5 %; the slow-hysteresis time-constant grid is twice as
+//!   fine). These cases are reported but are no longer evidence.
+//! * **Held-out** (seeds 5001–5003, effect-free 6001–6040, magnitudes and a vibration band
+//!   of its own): fixed in this file before it was first run, and run once with the method
+//!   final. Its numbers are the evidence for the acceptance targets. Measured (2026-11-22):
+//!   top-1 19/24 (79 %), false alarms 0/40, gap/noise after ≤ 1.2 in 19/19 — the top-1
+//!   target is missed: all three exponential creeps and two of three slow-scan hystereses
+//!   were taken for a second creep (with a second creep and an exponential creep as one
+//!   family, as the issue lists them, 22/24; that grouping was added after the run and is
+//!   reported, not claimed). The method was not changed after this run.
 
 use std::fmt;
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::synth::{ValidationCase, simulate_images, simulate_positions};
+use crate::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
 use crate::{Candidate, DiagnoseOptions, diagnose};
 
 /// Options of [`validate`].
@@ -18,15 +38,20 @@ pub struct ValidationOptions {
     pub effects: Vec<Candidate>,
     /// Seeds of the tuned set (each effect, each seed).
     pub tuned_seeds: Vec<u64>,
+    /// Seeds of the development set (the first held-out set; see [`ValidationSet`]).
+    pub development_seeds: Vec<u64>,
     /// Seeds of the held-out set (other magnitudes, frequencies; never tuned on).
     pub held_out_seeds: Vec<u64>,
     /// Effect-free seeds, tuned set.
     pub tuned_null_seeds: Vec<u64>,
+    /// Effect-free seeds, development set.
+    pub development_null_seeds: Vec<u64>,
     /// Effect-free seeds, held-out set.
     pub held_out_null_seeds: Vec<u64>,
     /// Two-effect mixtures.
     pub mixtures: Vec<[Candidate; 2]>,
-    /// Seeds of the mixtures (tuned); the held-out set uses `seed + 7000`.
+    /// Seeds of the mixtures (tuned); the development set uses `seed + 7000`, the held-out
+    /// set `seed + 9000`.
     pub mixture_seeds: Vec<u64>,
     /// Also run the first tuned seed of every effect through rendered images and the
     /// feature finder (slower).
@@ -56,9 +81,11 @@ impl Default for ValidationOptions {
         ValidationOptions {
             effects: VALIDATED_EFFECTS.to_vec(),
             tuned_seeds: vec![1, 2, 3],
-            held_out_seeds: vec![3001, 3002],
+            development_seeds: vec![3001, 3002],
+            held_out_seeds: vec![5001, 5002, 5003],
             tuned_null_seeds: (100..120).collect(),
-            held_out_null_seeds: (4001..4021).collect(),
+            development_null_seeds: (4001..4021).collect(),
+            held_out_null_seeds: (6001..6041).collect(),
             mixtures: vec![
                 [Candidate::TipChange, Candidate::Vibration],
                 [Candidate::LineDrift, Candidate::SlowHysteresis],
@@ -98,8 +125,8 @@ pub struct CaseResult {
     pub kind: CaseKind,
     /// Withheld effects.
     pub truth: Vec<Candidate>,
-    /// Held-out set?
-    pub held_out: bool,
+    /// Its set.
+    pub set: ValidationSet,
     /// `"positions"` or `"images"`.
     pub path: String,
     /// Effects the diagnosis added, in order.
@@ -128,6 +155,9 @@ pub struct SetSummary {
     pub effect_cases: usize,
     /// Of which top-1 correct.
     pub top1_correct: usize,
+    /// Of which top-1 correct when a second creep and an exponential creep count as one
+    /// family (the issue lists them as one item: both model a creep event after an onset).
+    pub top1_family_correct: usize,
     /// Effect-free cases.
     pub null_cases: usize,
     /// Of which with any effect added.
@@ -144,6 +174,14 @@ pub struct SetSummary {
     pub mean_gap_before: f64,
     /// Mean gap/noise after, over correct single cases.
     pub mean_gap_after: f64,
+}
+
+/// `candidate`, with a second creep counted as an exponential creep.
+fn creep_family(candidate: Candidate) -> Candidate {
+    match candidate {
+        Candidate::SecondCreep => Candidate::ExponentialCreep,
+        other => other,
+    }
 }
 
 impl SetSummary {
@@ -171,6 +209,14 @@ impl SetSummary {
         SetSummary {
             effect_cases: single.len(),
             top1_correct: correct.len(),
+            top1_family_correct: single
+                .iter()
+                .filter(|c| {
+                    c.error.is_none()
+                        && c.identified.first().map(|&i| creep_family(i))
+                            == c.truth.first().map(|&t| creep_family(t))
+                })
+                .count(),
             null_cases: null.len(),
             false_alarms: null.iter().filter(|c| !c.correct).count(),
             mixture_cases: mix.len(),
@@ -207,6 +253,8 @@ pub struct ValidationReport {
     pub cases: Vec<CaseResult>,
     /// Tuned set.
     pub tuned: SetSummary,
+    /// Development set (the first held-out set; reported, not evidence).
+    pub development: SetSummary,
     /// Held-out set.
     pub held_out: SetSummary,
 }
@@ -241,7 +289,7 @@ fn run_case(
         name: case.name.clone(),
         kind,
         truth: case.truth.clone(),
-        held_out: case.held_out,
+        set: case.set,
         path: if images { "images" } else { "positions" }.into(),
         identified: Vec::new(),
         correct: false,
@@ -284,55 +332,69 @@ fn run_case(
 /// Runs the validation sweep (cases in parallel).
 pub fn validate(options: &ValidationOptions) -> ValidationReport {
     let mut jobs: Vec<(ValidationCase, bool, u64)> = Vec::new();
-    for (seeds, held_out) in [
-        (&options.tuned_seeds, false),
-        (&options.held_out_seeds, true),
-    ] {
+    let sets = [
+        (
+            ValidationSet::Tuned,
+            &options.tuned_seeds,
+            &options.tuned_null_seeds,
+            0,
+        ),
+        (
+            ValidationSet::Development,
+            &options.development_seeds,
+            &options.development_null_seeds,
+            7000,
+        ),
+        (
+            ValidationSet::HeldOut,
+            &options.held_out_seeds,
+            &options.held_out_null_seeds,
+            9000,
+        ),
+    ];
+    for (set, seeds, _, _) in sets {
         for &c in &options.effects {
             for &s in seeds.iter() {
-                jobs.push((ValidationCase::single(c, s, held_out), false, s));
+                jobs.push((ValidationCase::single(c, s, set), false, s));
             }
         }
     }
-    for (seeds, held_out) in [
-        (&options.tuned_null_seeds, false),
-        (&options.held_out_null_seeds, true),
-    ] {
-        for &s in seeds.iter() {
-            jobs.push((ValidationCase::effect_free(s, held_out), false, s));
+    for (set, _, null_seeds, _) in sets {
+        for &s in null_seeds.iter() {
+            jobs.push((ValidationCase::effect_free(s, set), false, s));
         }
     }
     for &s in &options.mixture_seeds {
         for pair in &options.mixtures {
-            jobs.push((ValidationCase::with_effects(pair, s, false), false, s));
-            jobs.push((
-                ValidationCase::with_effects(pair, s + 7000, true),
-                false,
-                s + 7000,
-            ));
+            for (set, _, _, offset) in sets {
+                let seed = s + offset;
+                jobs.push((ValidationCase::with_effects(pair, seed, set), false, seed));
+            }
         }
     }
     if options.image_path
         && let Some(&s) = options.tuned_seeds.first()
     {
         for &c in &options.effects {
-            jobs.push((ValidationCase::single(c, s, false), true, s));
+            jobs.push((ValidationCase::single(c, s, ValidationSet::Tuned), true, s));
         }
-        jobs.push((ValidationCase::effect_free(s + 500, false), true, s + 500));
+        jobs.push((
+            ValidationCase::effect_free(s + 500, ValidationSet::Tuned),
+            true,
+            s + 500,
+        ));
     }
     let cases: Vec<CaseResult> = jobs
         .par_iter()
         .map(|(case, images, seed)| run_case(case, *images, options, *seed))
         .collect();
-    let pick = |held: bool| {
-        cases
-            .iter()
-            .filter(|c| c.held_out == held)
-            .collect::<Vec<_>>()
+    let pick = |set: ValidationSet| {
+        SetSummary::of(&cases.iter().filter(|c| c.set == set).collect::<Vec<_>>())
     };
     ValidationReport {
-        tuned: SetSummary::of(&pick(false)),
-        held_out: SetSummary::of(&pick(true)),
+        tuned: pick(ValidationSet::Tuned),
+        development: pick(ValidationSet::Development),
+        held_out: pick(ValidationSet::HeldOut),
         cases,
     }
 }
@@ -344,11 +406,11 @@ fn label(c: Option<&Candidate>) -> &'static str {
 impl ValidationReport {
     /// Confusion matrix (rows: withheld effect of single/degenerate/effect-free cases;
     /// columns: top identified) of one set, as text.
-    pub fn confusion_matrix(&self, held_out: bool) -> String {
+    pub fn confusion_matrix(&self, set: ValidationSet) -> String {
         let cases: Vec<&CaseResult> = self
             .cases
             .iter()
-            .filter(|c| c.held_out == held_out && c.kind != CaseKind::Mixture)
+            .filter(|c| c.set == set && c.kind != CaseKind::Mixture)
             .collect();
         let mut names: Vec<&'static str> = Vec::new();
         for c in &cases {
@@ -396,10 +458,12 @@ impl fmt::Display for SetSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "top-1 {}/{} ({:.0} %), false alarms {}/{} ({:.0} %), mixtures {}/{}, gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
+            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
             self.top1_correct,
             self.effect_cases,
             100.0 * self.top1_rate(),
+            self.top1_family_correct,
+            self.effect_cases,
             self.false_alarms,
             self.null_cases,
             100.0 * self.false_alarm_rate(),
@@ -442,7 +506,7 @@ impl fmt::Display for ValidationReport {
                 f,
                 "{:<44} {:<9} {:<6} {:<34} {:>6.2} {:>6} {:>6.2} {}",
                 c.name,
-                if c.held_out { "held-out" } else { "tuned" },
+                c.set.name(),
                 c.path,
                 ids,
                 c.gap_before,
@@ -451,17 +515,20 @@ impl fmt::Display for ValidationReport {
                 if c.correct { "yes" } else { "NO" }
             )?;
         }
-        writeln!(
-            f,
-            "\nconfusion matrix, tuned set:\n{}",
-            self.confusion_matrix(false)
-        )?;
-        writeln!(
-            f,
-            "confusion matrix, held-out set:\n{}",
-            self.confusion_matrix(true)
-        )?;
+        for set in ValidationSet::ALL {
+            writeln!(
+                f,
+                "\nconfusion matrix, {} set:\n{}",
+                set.name(),
+                self.confusion_matrix(set)
+            )?;
+        }
         writeln!(f, "tuned:    {}", self.tuned)?;
+        writeln!(
+            f,
+            "dev:      {} (development data, not evidence)",
+            self.development
+        )?;
         writeln!(f, "held-out: {}", self.held_out)
     }
 }
