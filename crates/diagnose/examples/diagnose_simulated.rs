@@ -2,9 +2,10 @@
 //! diagnoses it, and prints the report.
 //!
 //! ```text
-//! cargo run --release -p dhct-diagnose --example diagnose_simulated -- tip-change 1 [images]
+//! cargo run --release -p dhct-diagnose --example diagnose_simulated -- tip-change 1 [images] [held-out]
 //! ```
-//! (effect: any candidate name, or `none`; seed; `images` = render and find features).
+//! (effect: any candidate name, or `none`; seed; `images` = render and find features; the
+//! validation set whose magnitudes are drawn: `tuned` (default), `dev` or `held-out`).
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
 use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
@@ -13,10 +14,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let effect = args.get(1).map_or("tip-change", |s| s.as_str());
     let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
-    let images = args.get(3).is_some_and(|s| s == "images");
+    let rest = args.get(3..).unwrap_or_default();
+    let images = rest.iter().any(|s| s == "images");
+    let set = ValidationSet::ALL
+        .into_iter()
+        .find(|set| rest.iter().any(|s| s == set.name()))
+        .unwrap_or(ValidationSet::Tuned);
     let case = match Candidate::ALL.iter().find(|c| c.name() == effect) {
-        Some(&c) => ValidationCase::single(c, seed, ValidationSet::Tuned),
-        None => ValidationCase::effect_free(seed, ValidationSet::Tuned),
+        Some(&c) => ValidationCase::single(c, seed, set),
+        None => ValidationCase::effect_free(seed, set),
     };
     println!(
         "case {}: {:?}\n{:?}",

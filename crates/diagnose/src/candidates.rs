@@ -14,9 +14,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::data::Observation;
-use crate::model::{
-    GlobalModel, ModelTerm, Term, Transform, sim_term, term_displacements, transform_of,
-};
+use crate::model::{GlobalModel, ModelTerm, Term, Transform, sim_term, term_displacements};
 use crate::spectrum::periodogram_peaks;
 use crate::terms::{CubicDrift, QuadraticField};
 
@@ -119,8 +117,10 @@ impl std::fmt::Display for Candidate {
     }
 }
 
-/// Builds the refit's start model from the screened coefficients of the new columns.
-pub(crate) type Builder = Box<dyn Fn(&[f64]) -> Option<GlobalModel> + Send + Sync>;
+/// Builds the refit's start model on top of a base (the current model, possibly with its
+/// parameters re-adjusted for the new term) from the screened coefficients of the new
+/// columns.
+pub(crate) type Builder = Box<dyn Fn(&GlobalModel, &[f64]) -> Option<GlobalModel> + Send + Sync>;
 
 /// One starting point of a candidate.
 pub(crate) struct Proposal {
@@ -136,6 +136,9 @@ pub(crate) struct Proposal {
     /// more than the candidate's own proposals (a periodogram's frequencies); for the
     /// look-elsewhere penalty.
     pub searched: Option<usize>,
+    /// `(time constant, onset)` of a creep candidate's grid point, seconds, for the
+    /// refinement around the best one.
+    pub onset: Option<(f64, f64)>,
 }
 
 /// What the proposals need to know.
@@ -148,28 +151,27 @@ pub(crate) struct Context<'a> {
     pub residuals: &'a [f64],
 }
 
-/// Weighted columns `∂(d/σ)/∂p_j` of a term's parameters in `mask`.
+/// Weighted columns `∂(d/σ)/∂u_j` of a term's parameters in `mask` (fit space of its
+/// `transforms`; a linear parameter is stepped by its typical size).
 pub(crate) fn term_columns(
     term: &dyn ModelTerm,
+    transforms: &[Transform],
     mask: &[bool],
     ctx: &Context,
 ) -> Option<DMatrix<f64>> {
     let n = ctx.observations.len();
-    let names = term.parameter_names();
     let p0 = term.parameters();
     let base = term_displacements(term, ctx.geometry, ctx.observations);
     let selected: Vec<usize> = (0..p0.len()).filter(|&j| mask[j]).collect();
     let mut out = DMatrix::zeros(2 * n, selected.len());
     for (c, &j) in selected.iter().enumerate() {
-        let (value, h) = match transform_of(names[j]) {
-            Transform::Log => (p0[j] * 1e-5f64.exp(), 1e-5),
-            Transform::Linear { typical } => {
-                let h = typical;
-                (p0[j] + h, h)
-            }
+        let t = transforms[j];
+        let h = match t {
+            Transform::Linear { typical } => typical,
+            _ => t.step(p0[j]),
         };
         let mut p = p0.clone();
-        p[j] = value;
+        p[j] = t.parameter_of(t.fit_value_of(p0[j]) + h);
         let moved = term.with_parameters(&p)?;
         let d = term_displacements(moved.as_ref(), ctx.geometry, ctx.observations);
         for i in 0..n {
@@ -191,30 +193,30 @@ fn term_proposal(
     replace: Option<usize>,
     extra_parameters: usize,
 ) -> Option<Proposal> {
-    let columns = term_columns(term.effect.as_ref(), &new_mask, ctx)?;
-    let mut model = ctx.model.clone();
-    let index = match replace {
-        Some(k) => {
-            model.terms[k] = term;
-            k
-        }
-        None => {
-            model.terms.push(term);
-            model.terms.len() - 1
-        }
-    };
-    let build: Builder = Box::new(move |coef: &[f64]| {
-        let mut m = model.clone();
+    let columns = term_columns(term.effect.as_ref(), &term.transforms, &new_mask, ctx)?;
+    let build: Builder = Box::new(move |base: &GlobalModel, coef: &[f64]| {
+        let mut m = base.clone();
+        let index = match replace {
+            Some(k) => {
+                m.terms[k] = term.clone();
+                k
+            }
+            None => {
+                m.terms.push(term.clone());
+                m.terms.len() - 1
+            }
+        };
         let t = &mut m.terms[index];
-        let names = t.effect.parameter_names();
         let mut p = t.effect.parameters();
         let mut k = 0;
         for j in 0..p.len() {
             if new_mask[j] {
-                p[j] = match transform_of(names[j]) {
-                    Transform::Log => p[j] * coef[k].clamp(-5.0, 5.0).exp(),
-                    Transform::Linear { .. } => p[j] + coef[k],
+                let tr = t.transforms[j];
+                let step = match tr {
+                    Transform::Linear { .. } => coef[k],
+                    _ => coef[k].clamp(-5.0, 5.0),
                 };
+                p[j] = tr.parameter_of(tr.fit_value_of(p[j]) + step);
                 k += 1;
             }
         }
@@ -228,6 +230,7 @@ fn term_proposal(
         build,
         extra_parameters,
         searched: None,
+        onset: None,
     })
 }
 
@@ -270,53 +273,9 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
                 ));
             }
         }
-        Candidate::ExponentialCreep => {
-            let taus = log_grid(2.0 * g.line_period(), 0.5 * t_max, 10);
-            for &tau in &taus {
-                for k in 0..24 {
-                    let start = t_max * k as f64 / 24.0;
-                    if start + tau > t_max {
-                        continue;
-                    }
-                    if let Some(e) = sim(EffectConfig::ExponentialCreep(ExponentialCreep {
-                        amplitude_m: [0.0, 0.0],
-                        time_constant_s: tau,
-                        start_s: start,
-                    })) {
-                        push(term_proposal(
-                            candidate,
-                            format!("τ = {tau:.3} s, start = {start:.2} s"),
-                            ctx,
-                            Term::new(e, vec![true, true, true, true], candidate.name()),
-                            vec![true, true, false, false],
-                            None,
-                            2,
-                        ));
-                    }
-                }
-            }
-        }
-        Candidate::SecondCreep => {
-            let t0s = log_grid(g.line_period(), 0.2 * t_max, 8);
-            for &t0 in &t0s {
-                for k in 1..24 {
-                    let start = t_max * k as f64 / 24.0;
-                    if let Some(e) = sim(EffectConfig::Creep(LogCreep {
-                        coefficient_m: [0.0, 0.0],
-                        t0_s: t0,
-                        start_s: start,
-                    })) {
-                        push(term_proposal(
-                            candidate,
-                            format!("t0 = {t0:.3} s, start = {start:.2} s"),
-                            ctx,
-                            Term::new(e, vec![true, true, true, true], candidate.name()),
-                            vec![true, true, false, false],
-                            None,
-                            2,
-                        ));
-                    }
-                }
+        Candidate::ExponentialCreep | Candidate::SecondCreep => {
+            for (time_constant, start) in onset_grid(candidate, ctx) {
+                push(onset_proposal(candidate, time_constant, start, ctx));
             }
         }
         Candidate::AsymmetricHysteresis => {
@@ -454,6 +413,19 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
     out
 }
 
+/// The range the base creep's `t0` is profiled over ([`crate::fit::fit_profiled`]): from one
+/// line period (a faster creep is not sampled by the slow axis) to ten frame durations (a
+/// slower one is a polynomial over the frame: the drift's velocity and acceleration, then
+/// the higher-order drift candidate), seconds.
+pub(crate) fn creep_t0_bounds(geometry: &ScanGeometry, observations: &[Observation]) -> (f64, f64) {
+    let span = observations
+        .iter()
+        .map(|o| o.time_s)
+        .fold(geometry.frame_duration(), f64::max);
+    let lo = geometry.line_period();
+    (lo, (10.0 * span).max(10.0 * lo))
+}
+
 /// The shortest time constant a fitted exponential creep may keep: a relaxation faster
 /// than the slow scan takes to cross half an atom (`½·NN / v_slow`, at least four line
 /// pairs) cannot be told from a jump (a tip change), since every feature is fitted over
@@ -490,6 +462,117 @@ pub(crate) fn within_domain(
             }),
         _ => true,
     }
+}
+
+/// Onsets searched per frame by the creep candidates' coarse grid.
+const ONSET_GRID: usize = 24;
+
+/// The largest observation time (at least one line period), seconds.
+fn frame_end(ctx: &Context) -> f64 {
+    ctx.observations
+        .iter()
+        .map(|o| o.time_s)
+        .fold(0.0, f64::max)
+        .max(ctx.geometry.line_period())
+}
+
+/// The time constants of a creep candidate's coarse grid: an exponential creep's `τ` from
+/// two line periods to half the frame (10 values), a second creep's `t0` from one line
+/// period to a fifth of it (8 values; log-spaced).
+fn time_constant_grid(candidate: Candidate, ctx: &Context) -> Vec<f64> {
+    let (lp, t_max) = (ctx.geometry.line_period(), frame_end(ctx));
+    match candidate {
+        Candidate::ExponentialCreep => log_grid(2.0 * lp, 0.5 * t_max, 10),
+        _ => log_grid(lp, 0.2 * t_max, 8),
+    }
+}
+
+/// The coarse `(time constant, onset)` grid of a creep candidate (an exponential creep may
+/// start with the frame, a second creep not: that is the base creep).
+fn onset_grid(candidate: Candidate, ctx: &Context) -> Vec<(f64, f64)> {
+    let t_max = frame_end(ctx);
+    let first = usize::from(candidate == Candidate::SecondCreep);
+    let mut out = Vec::new();
+    for tau in time_constant_grid(candidate, ctx) {
+        for k in first..ONSET_GRID {
+            let start = t_max * k as f64 / ONSET_GRID as f64;
+            // An exponential creep must relax within the frame to be told from a drift.
+            if candidate == Candidate::ExponentialCreep && start + tau > t_max {
+                continue;
+            }
+            out.push((tau, start));
+        }
+    }
+    out
+}
+
+/// Finer `(time constant, onset)` points around a coarse grid point: onsets within one
+/// coarse step at an eighth of it, time constants at the grid point and half a grid step
+/// either side. The coarse onset step (a 24th of the frame) is comparable to the time
+/// constants themselves, and a refit started more than a few time constants from the true
+/// onset stays in a neighbouring minimum.
+pub(crate) fn onset_refinement(
+    candidate: Candidate,
+    time_constant: f64,
+    start: f64,
+    ctx: &Context,
+) -> Vec<(f64, f64)> {
+    let t_max = frame_end(ctx);
+    let step = t_max / ONSET_GRID as f64;
+    let grid = time_constant_grid(candidate, ctx);
+    let ratio = (grid[1] / grid[0]).sqrt().max(1.0);
+    let mut out = Vec::new();
+    for tau in [time_constant / ratio, time_constant, time_constant * ratio] {
+        for k in -8..=8 {
+            let s = start + step * k as f64 / 8.0;
+            if k == 0 && tau == time_constant || s < 0.0 || s >= t_max {
+                continue;
+            }
+            out.push((tau, s));
+        }
+    }
+    out
+}
+
+/// A creep candidate with time constant `time_constant` (exponential `τ` or logarithmic
+/// `t0`) from `start` (s since frame start): amplitudes screened, both shapes free in the
+/// refit.
+pub(crate) fn onset_proposal(
+    candidate: Candidate,
+    time_constant: f64,
+    start: f64,
+    ctx: &Context,
+) -> Option<Proposal> {
+    let config = match candidate {
+        Candidate::ExponentialCreep => EffectConfig::ExponentialCreep(ExponentialCreep {
+            amplitude_m: [0.0, 0.0],
+            time_constant_s: time_constant,
+            start_s: start,
+        }),
+        Candidate::SecondCreep => EffectConfig::Creep(LogCreep {
+            coefficient_m: [0.0, 0.0],
+            t0_s: time_constant,
+            start_s: start,
+        }),
+        _ => return None,
+    };
+    let shape = match candidate {
+        Candidate::ExponentialCreep => format!("τ = {time_constant:.3} s, start = {start:.2} s"),
+        _ => format!("t0 = {time_constant:.3} s, start = {start:.2} s"),
+    };
+    term_proposal(
+        candidate,
+        shape,
+        ctx,
+        Term::new(sim_term(&config)?, vec![true; 4], candidate.name()),
+        vec![true, true, false, false],
+        None,
+        2,
+    )
+    .map(|p| Proposal {
+        onset: Some((time_constant, start)),
+        ..p
+    })
 }
 
 /// A tip change at `t` (s since frame start): jump free, time fixed.
@@ -530,8 +613,7 @@ fn vibration_proposal(ctx: &Context, f: f64, searched: usize) -> Option<Proposal
         columns[(2 * i + 1, 2)] = s * 1e-11 / ctx.sigma[1];
         columns[(2 * i + 1, 3)] = c * 1e-11 / ctx.sigma[1];
     }
-    let model = ctx.model.clone();
-    let build: Builder = Box::new(move |coef: &[f64]| {
+    let build: Builder = Box::new(move |base: &GlobalModel, coef: &[f64]| {
         let amp = |a: f64, b: f64| (1e-11 * a.hypot(b), b.atan2(a));
         let (ax, px) = amp(coef[0], coef[1]);
         let (ay, py) = amp(coef[2], coef[3]);
@@ -540,7 +622,7 @@ fn vibration_proposal(ctx: &Context, f: f64, searched: usize) -> Option<Proposal
             amplitude_m: [ax, ay],
             phase_rad: [px, py],
         }))?;
-        let mut m = model.clone();
+        let mut m = base.clone();
         m.terms.push(Term::all_free(e, Candidate::Vibration.name()));
         Some(m)
     });
@@ -551,5 +633,6 @@ fn vibration_proposal(ctx: &Context, f: f64, searched: usize) -> Option<Proposal
         build,
         extra_parameters: 1,
         searched: Some(searched),
+        onset: None,
     })
 }

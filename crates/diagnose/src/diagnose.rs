@@ -9,9 +9,9 @@ use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
-use crate::candidates::Candidate;
+use crate::candidates::{Candidate, creep_t0_bounds};
 use crate::data::{MIN_FEATURES, Observation, prepare};
-use crate::fit::{Fitted, fit};
+use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::location::locate;
 use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
 use crate::noise::{estimate, robust_sigma};
@@ -145,7 +145,8 @@ pub fn diagnose(
         terms.push(Term::all_free(e, "thermal-drift"));
     }
     if let Some(e) = sim_term(&creep) {
-        terms.push(Term::new(e, vec![true, true, true, false], "creep"));
+        // t0 is profiled ([`fit_profiled`]), not fitted.
+        terms.push(Term::new(e, vec![true, true, false, false], BASE_CREEP));
     }
     if d.hysteresis != dhct_scan::HysteresisLaw::none()
         && let Some(e) = sim_term(&EffectConfig::FastHysteresis(FastScanHysteresis {
@@ -171,7 +172,8 @@ pub fn diagnose(
     let iterations = options.selection.max_iterations;
     // Noise floor: first from the DHCT gap, then from the base fit's residuals.
     let mut sigma = estimate(&all, &prepared.dhct_gap, geometry).sigma_m;
-    let first = fit(start.clone(), geometry, &all, sigma, iterations)?;
+    let t0_bounds = creep_t0_bounds(geometry, &all);
+    let first = fit_profiled(start.clone(), geometry, &all, sigma, iterations, t0_bounds)?;
     sigma = estimate(&all, &first.residuals, geometry).sigma_m;
     // Outliers relative to the residuals' own robust spread (not the noise floor), so that
     // a large unmodelled effect is not thrown away as outliers.
@@ -209,7 +211,14 @@ pub fn diagnose(
     )?;
     let noise = estimate(&observations, &base.residuals, geometry);
     sigma = noise.sigma_m;
-    base = fit(base.model, geometry, &observations, sigma, 2 * iterations)?;
+    base = fit_profiled(
+        base.model,
+        geometry,
+        &observations,
+        sigma,
+        2 * iterations,
+        t0_bounds,
+    )?;
     let base_summary = summary(&base, sigma);
     let location = options
         .locate
@@ -241,6 +250,7 @@ pub fn diagnose(
                 sigma,
                 folds: &folds,
                 nn_distance_m: lattice.nearest_neighbour_distance(),
+                t0_bounds,
             },
             &remaining,
             &options.selection,
@@ -280,7 +290,14 @@ pub fn diagnose(
                 parameters,
                 gap_after: GapSummary::of(&f.residuals, sigma, f.model.free_count()),
             });
-            current = fit(f.model, geometry, &observations, sigma, 2 * iterations)?;
+            current = fit_profiled(
+                f.model,
+                geometry,
+                &observations,
+                sigma,
+                2 * iterations,
+                t0_bounds,
+            )?;
             remaining.retain(|c| *c != w.score.candidate);
         }
         rounds.push(GreedyRound {

@@ -5,11 +5,12 @@
 
 use dhct_scan::ScanGeometry;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
 use crate::data::Observation;
-use crate::model::{GlobalModel, Transform, term_displacements, transform_of};
+use crate::model::{GlobalModel, Transform, term_displacements};
 
 /// A fitted model with what the ranking needs.
 #[derive(Debug, Clone)]
@@ -57,30 +58,21 @@ pub(crate) fn jacobian(
     let mut j = DMatrix::zeros(2 * n, p);
     let mut column = 0;
     for term in &model.terms {
-        let names = term.effect.parameter_names();
         let base_p = term.effect.parameters();
         let base_d = term_displacements(term.effect.as_ref(), geometry, observations);
-        for (k, name) in names.iter().enumerate() {
+        for (k, t) in term.transforms.iter().enumerate() {
             if !term.free[k] {
                 continue;
             }
-            let (forward, h) = match transform_of(name) {
-                Transform::Log => (base_p[k] * 1e-5f64.exp(), 1e-5),
-                Transform::Linear { typical } => {
-                    let h = 1e-5 * base_p[k].abs().max(typical);
-                    (base_p[k] + h, h)
-                }
-            };
+            let u = t.fit_value_of(base_p[k]);
+            let h = t.step(base_p[k]);
             let mut trial = base_p.clone();
-            trial[k] = forward;
+            trial[k] = t.parameter_of(u + h);
             let (effect, h) = match term.effect.with_parameters(&trial) {
                 Some(e) => (e, h),
                 None => {
                     // At a bound: step the other way.
-                    trial[k] = match transform_of(name) {
-                        Transform::Log => base_p[k] * (-1e-5f64).exp(),
-                        Transform::Linear { .. } => 2.0 * base_p[k] - forward,
-                    };
+                    trial[k] = t.parameter_of(u - h);
                     match term.effect.with_parameters(&trial) {
                         Some(e) => (e, -h),
                         None => {
@@ -231,6 +223,179 @@ pub(crate) fn fit(
     })
 }
 
+/// The label of the base model's creep term, whose `t0` [`fit_profiled`] profiles.
+pub(crate) const BASE_CREEP: &str = "creep";
+
+/// Fits `model` with the base creep's `t0` (term [`BASE_CREEP`], held fixed inside each
+/// fit) chosen by profiling: a log-spaced grid over `t0_bounds` (seconds) plus the current
+/// value, each fitted in parallel, then a parabola through the best and its neighbours in
+/// `ln t0`. Freeing `t0` in the fit itself does not converge: with drift velocity and
+/// acceleration free, `C·ln(1 + t/t0)` has a valley towards large `t0` (coefficient and
+/// `t0` growing together) along which Levenberg–Marquardt crawls for hundreds of
+/// iterations and stops anywhere on it. Without such a term, a plain [`fit`].
+pub(crate) fn fit_profiled(
+    model: GlobalModel,
+    geometry: &ScanGeometry,
+    observations: &[Observation],
+    sigma: [f64; 2],
+    max_iterations: usize,
+    t0_bounds: (f64, f64),
+) -> Result<Fitted, DiagnoseError> {
+    let Some(slot) = creep_t0_slot(&model) else {
+        return fit(model, geometry, observations, sigma, max_iterations);
+    };
+    let (lo, hi) = (t0_bounds.0.ln(), t0_bounds.1.ln());
+    const GRID: usize = 10;
+    let current = model.terms[slot.0].effect.parameters()[slot.1];
+    let mut grid: Vec<f64> = (0..GRID)
+        .map(|k| lo + (hi - lo) * k as f64 / (GRID - 1) as f64)
+        .collect();
+    if current.is_finite() && current > 0.0 {
+        grid.push(current.ln().clamp(lo, hi));
+    }
+    // Inside the profile, the shapes (onsets, time constants, phases) of terms beyond the
+    // base model are held: with the base creep changed under them a free shape can escape
+    // to where its term does nothing (an onset after the frame end) and stay there.
+    let held = hold_shapes(&model);
+    let run = |ln_t0: f64| -> Option<(f64, Fitted)> {
+        let m = with_t0(&held, slot, ln_t0.exp(), geometry, observations)?;
+        let f = fit(m, geometry, observations, sigma, max_iterations).ok()?;
+        let chi2 = weighted(&f.residuals, sigma).norm_squared();
+        chi2.is_finite().then_some((chi2, f))
+    };
+    let fits: Vec<(f64, Option<(f64, Fitted)>)> = grid.par_iter().map(|&g| (g, run(g))).collect();
+    let mut points: Vec<(f64, f64)> = fits
+        .iter()
+        .filter_map(|(g, r)| r.as_ref().map(|(c, _)| (*g, *c)))
+        .collect();
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let Some((_, best)) = fits
+        .into_iter()
+        .filter_map(|(_, r)| r)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+    else {
+        // Every grid point failed: report the plain fit's error.
+        return fit(model, geometry, observations, sigma, max_iterations);
+    };
+    let mut best = (weighted(&best.residuals, sigma).norm_squared(), best);
+    // Parabola through the best grid point and its neighbours.
+    if let Some(i) = points.iter().position(|p| p.1 == best.0)
+        && i > 0
+        && i + 1 < points.len()
+    {
+        let [(x0, y0), (x1, y1), (x2, y2)] = [points[i - 1], points[i], points[i + 1]];
+        let denom = (x0 - x1) * (x0 - x2) * (x1 - x2);
+        let a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / denom;
+        let b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / denom;
+        if a > 0.0 {
+            let vertex = (-b / (2.0 * a)).clamp(x0, x2);
+            if let Some(r) = run(vertex)
+                && r.0 < best.0
+            {
+                best = r;
+            }
+        }
+    }
+    if !same_free(&held, &model) {
+        let mut m = best.1.model;
+        for (term, original) in m.terms.iter_mut().zip(&model.terms) {
+            term.free.clone_from(&original.free);
+        }
+        return fit(m, geometry, observations, sigma, max_iterations);
+    }
+    Ok(best.1)
+}
+
+/// Labels of the base model's terms (their parameters stay free while `t0` is profiled).
+const BASE_TERMS: [&str; 3] = ["thermal-drift", BASE_CREEP, "fast-hysteresis"];
+
+/// `model` with every parameter of a term beyond the base fixed unless it enters the
+/// displacement as an amplitude (a linear parameter whose name is no time, phase or
+/// frequency).
+fn hold_shapes(model: &GlobalModel) -> GlobalModel {
+    let mut m = model.clone();
+    for term in m.terms.iter_mut() {
+        if BASE_TERMS.contains(&term.label.as_str()) {
+            continue;
+        }
+        let names = term.effect.parameter_names();
+        for (k, name) in names.iter().enumerate() {
+            let shape = !matches!(term.transforms[k], Transform::Linear { .. })
+                || name.ends_with("_s")
+                || name.ends_with("_rad")
+                || name.ends_with("_hz");
+            if shape {
+                term.free[k] = false;
+            }
+        }
+    }
+    m
+}
+
+fn same_free(a: &GlobalModel, b: &GlobalModel) -> bool {
+    a.terms.iter().zip(&b.terms).all(|(x, y)| x.free == y.free)
+}
+
+/// `(term, parameter)` index of the base creep's `t0`.
+fn creep_t0_slot(model: &GlobalModel) -> Option<(usize, usize)> {
+    let term = model.terms.iter().position(|t| t.label == BASE_CREEP)?;
+    let k = model.terms[term]
+        .effect
+        .parameter_names()
+        .iter()
+        .position(|n| *n == "t0_s")?;
+    Some((term, k))
+}
+
+/// `model` with the base creep's `t0` set to `t0` and its coefficients (the parameters
+/// named `coefficient_*`, entering linearly) re-solved per axis by least squares with
+/// everything else held: the previous coefficients belong to the previous `t0`, and with
+/// them a refit can start far off and stall.
+fn with_t0(
+    model: &GlobalModel,
+    slot: (usize, usize),
+    t0: f64,
+    geometry: &ScanGeometry,
+    observations: &[Observation],
+) -> Option<GlobalModel> {
+    let mut m = model.clone();
+    let names = m.terms[slot.0].effect.parameter_names();
+    let coefficients: Vec<usize> = (0..names.len())
+        .filter(|&k| names[k].starts_with("coefficient"))
+        .collect();
+    let mut p = m.terms[slot.0].effect.parameters();
+    p[slot.1] = t0;
+    for &k in &coefficients {
+        p[k] = 0.0;
+    }
+    m.terms[slot.0].effect = m.terms[slot.0].effect.with_parameters(&p)?;
+    if coefficients.len() == 2 {
+        let without = m.residuals(geometry, observations);
+        let mut unit = p.clone();
+        for &k in &coefficients {
+            unit[k] = 1e-10;
+        }
+        let shape = term_displacements(
+            m.terms[slot.0].effect.with_parameters(&unit)?.as_ref(),
+            geometry,
+            observations,
+        );
+        for (axis, &k) in coefficients.iter().enumerate() {
+            let (num, den) = without
+                .iter()
+                .zip(&shape)
+                .fold((0.0, 0.0), |(n, d), (r, f)| {
+                    (n + r[axis] * f[axis], d + f[axis] * f[axis])
+                });
+            if den > 0.0 {
+                p[k] = -1e-10 * num / den;
+            }
+        }
+        m.terms[slot.0].effect = m.terms[slot.0].effect.with_parameters(&p)?;
+    }
+    Some(m)
+}
+
 impl Fitted {
     /// The free effect parameters with uncertainties (SI), skipping terms before `from`.
     pub fn parameters(&self, from: usize) -> Vec<FittedParameter> {
@@ -242,10 +407,7 @@ impl Fitted {
                 let sigma = if term.free[j] {
                     let su = self.covariance[(k, k)].max(0.0).sqrt();
                     k += 1;
-                    Some(match transform_of(name) {
-                        Transform::Log => value * su,
-                        Transform::Linear { .. } => su,
-                    })
+                    Some(term.transforms[j].slope(value) * su)
                 } else {
                     None
                 };

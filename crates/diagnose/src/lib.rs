@@ -80,4 +80,6 @@ pub use report::{
 };
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
-pub use validate::{CaseResult, ValidationOptions, ValidationReport, validate};
+pub use validate::{
+    CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport, validate,
+};

@@ -74,13 +74,47 @@ pub(crate) fn sim_term(config: &EffectConfig) -> Option<Box<dyn ModelTerm>> {
         .map(|e| Box::new(SimEffect(e)) as Box<dyn ModelTerm>)
 }
 
-/// How a parameter is varied by the fit.
+/// How a parameter is varied by the fit (fit space `u` ↔ parameter `p`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Transform {
     /// `u = p`; `typical` sets the finite-difference step.
     Linear { typical: f64 },
     /// `u = ln p` for strictly positive parameters.
     Log,
+}
+
+impl Transform {
+    /// Fit-space value of parameter `p`.
+    pub fn fit_value_of(self, p: f64) -> f64 {
+        match self {
+            Transform::Linear { .. } => p,
+            Transform::Log => p.max(1e-300).ln(),
+        }
+    }
+
+    /// Parameter of fit-space value `u`.
+    pub fn parameter_of(self, u: f64) -> f64 {
+        match self {
+            Transform::Linear { .. } => u,
+            Transform::Log => u.exp(),
+        }
+    }
+
+    /// `|dp/du|` at parameter `p` (turns a fit-space σ into the parameter's).
+    pub fn slope(self, p: f64) -> f64 {
+        match self {
+            Transform::Linear { .. } => 1.0,
+            Transform::Log => p.abs(),
+        }
+    }
+
+    /// Finite-difference step in fit space at parameter `p`.
+    pub fn step(self, p: f64) -> f64 {
+        match self {
+            Transform::Linear { typical } => 1e-5 * p.abs().max(typical),
+            Transform::Log => 1e-5,
+        }
+    }
 }
 
 /// Transform of a parameter, from its (simulator) name.
@@ -116,6 +150,8 @@ pub(crate) fn transform_of(name: &str) -> Transform {
 pub(crate) struct Term {
     pub effect: Box<dyn ModelTerm>,
     pub free: Vec<bool>,
+    /// How the fit varies each parameter (from its name unless bounded).
+    pub transforms: Vec<Transform>,
     /// Short label for reports.
     pub label: String,
 }
@@ -129,6 +165,7 @@ impl Clone for Term {
         Term {
             effect,
             free: self.free.clone(),
+            transforms: self.transforms.clone(),
             label: self.label.clone(),
         }
     }
@@ -136,9 +173,15 @@ impl Clone for Term {
 
 impl Term {
     pub fn new(effect: Box<dyn ModelTerm>, free: Vec<bool>, label: impl Into<String>) -> Term {
+        let transforms = effect
+            .parameter_names()
+            .iter()
+            .map(|n| transform_of(n))
+            .collect();
         Term {
             effect,
             free,
+            transforms,
             label: label.into(),
         }
     }
@@ -244,13 +287,15 @@ impl GlobalModel {
     pub fn free_vector(&self) -> Vec<f64> {
         let mut u = Vec::new();
         for term in &self.terms {
-            let names = term.effect.parameter_names();
-            for ((p, name), free) in term.effect.parameters().iter().zip(&names).zip(&term.free) {
+            for ((p, t), free) in term
+                .effect
+                .parameters()
+                .iter()
+                .zip(&term.transforms)
+                .zip(&term.free)
+            {
                 if *free {
-                    u.push(match transform_of(name) {
-                        Transform::Log => p.max(1e-300).ln(),
-                        Transform::Linear { .. } => *p,
-                    });
+                    u.push(t.fit_value_of(*p));
                 }
             }
         }
@@ -270,14 +315,10 @@ impl GlobalModel {
         let mut k = 0;
         let mut terms = Vec::with_capacity(self.terms.len());
         for term in &self.terms {
-            let names = term.effect.parameter_names();
             let mut p = term.effect.parameters();
-            for (j, name) in names.iter().enumerate() {
+            for (j, t) in term.transforms.iter().enumerate() {
                 if term.free[j] {
-                    p[j] = match transform_of(name) {
-                        Transform::Log => u[k].exp(),
-                        Transform::Linear { .. } => u[k],
-                    };
+                    p[j] = t.parameter_of(u[k]);
                     k += 1;
                 }
             }
@@ -285,6 +326,7 @@ impl GlobalModel {
             terms.push(Term {
                 effect,
                 free: term.free.clone(),
+                transforms: term.transforms.clone(),
                 label: term.label.clone(),
             });
         }

@@ -25,9 +25,13 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::candidates::{Candidate, Context, Proposal, proposals, tip_proposal, within_domain};
+use crate::candidates::{
+    Candidate, Context, Proposal, onset_proposal, onset_refinement, proposals, tip_proposal,
+    within_domain,
+};
 use crate::data::Observation;
-use crate::fit::{Fitted, fit, pinv_sym, pinv_sym_cut, weighted};
+use crate::fit::{Fitted, fit_profiled, pinv_sym, pinv_sym_cut, weighted};
+use crate::model::GlobalModel;
 
 /// Score of one candidate in one greedy round.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -238,6 +242,8 @@ pub(crate) struct Current<'a> {
     pub folds: &'a Folds,
     /// The lattice's nearest-neighbour distance, metres.
     pub nn_distance_m: f64,
+    /// Range of the base creep's `t0`, seconds (profiled in every refit).
+    pub t0_bounds: (f64, f64),
 }
 
 /// A scored candidate with its refitted model, if refitted.
@@ -289,6 +295,55 @@ fn criteria(n: f64, chi2_0: f64, chi2_1: f64, complexity: Complexity) -> (f64, f
     let d = n * (chi2_1.max(1e-300) / chi2_0.max(1e-300)).ln();
     let (bic, aic) = complexity.penalties(n);
     (d + bic, d + aic)
+}
+
+/// The start model of a candidate's full refit: the new term at a fraction `α` of its
+/// screened coefficients `beta`, on the current model either as it is or moved by the same
+/// fraction of the linearised re-adjustment the screening assumed (`δu = −(JᵀJ)⁺Jᵀ·Bβ`);
+/// of `α ∈ {0, …, 1}` on both paths, the start with the lowest χ². A term correlated with
+/// the current ones (an exponential creep with drift and creep) makes both full steps land
+/// far above the screened χ² (the re-adjustment moves the base's non-linear parameters far
+/// beyond where it is linear), and a refit from there can stall above the base model
+/// itself; `α = 0` (the new term at zero, the base's χ²) bounds the start.
+fn refit_start(
+    current: &Current,
+    proposal: &Proposal,
+    beta: &[f64],
+    j: &DMatrix<f64>,
+    jtj_pinv: &DMatrix<f64>,
+) -> Option<GlobalModel> {
+    let base = &current.fitted.model;
+    let added = &proposal.columns * DVector::from_column_slice(beta);
+    let shift = -(jtj_pinv * (j.transpose() * &added));
+    let u0 = base.free_vector();
+    let chi2 = |m: &GlobalModel| {
+        weighted(
+            &m.residuals(current.geometry, current.observations),
+            current.sigma,
+        )
+        .norm_squared()
+    };
+    let mut best: Option<(f64, GlobalModel)> = None;
+    for alpha in [0.0, 0.01, 0.03, 0.1, 0.3, 1.0] {
+        let coef: Vec<f64> = beta.iter().map(|b| alpha * b).collect();
+        let moved: Vec<f64> = u0
+            .iter()
+            .zip(shift.iter())
+            .map(|(u, d)| u + alpha * d)
+            .collect();
+        let starts = [
+            (proposal.build)(base, &coef),
+            base.with_free_vector(&moved)
+                .and_then(|b| (proposal.build)(&b, &coef)),
+        ];
+        for m in starts.into_iter().flatten() {
+            let c = chi2(&m);
+            if c.is_finite() && best.as_ref().is_none_or(|(b, _)| c < *b) {
+                best = Some((c, m));
+            }
+        }
+    }
+    best.map(|(_, m)| m)
 }
 
 /// Scores every candidate in `candidates` on top of `current`; sorted best first.
@@ -360,6 +415,21 @@ pub(crate) fn round(
                     }
                 }
             }
+            // A creep onset is refined around the best coarse grid point.
+            if let Some((p, _, _)) = &best
+                && let Some((tau, start)) = p.onset
+            {
+                let finer = onset_refinement(c, tau, start, &ctx);
+                searched += finer.len();
+                for (tau, start) in finer {
+                    if let Some(p) = onset_proposal(c, tau, start, &ctx) {
+                        let (gain, beta) = screen(&q, &r, &p.columns);
+                        if best.as_ref().is_none_or(|b| gain > b.1) {
+                            best = Some((p, gain, beta));
+                        }
+                    }
+                }
+            }
             best.map(|(p, gain, beta)| (p, gain, beta, searched))
         })
         .collect();
@@ -406,17 +476,19 @@ pub(crate) fn round(
     scored.sort_by(|a, b| a.0.score.delta_bic.total_cmp(&b.0.score.delta_bic));
     // Full refits of the best few.
     let top = options.refit_top.min(scored.len());
+    let jtj_pinv = pinv_sym(&(j.transpose() * j));
     let refits: Vec<Option<Fitted>> = scored[..top]
         .par_iter()
         .map(|(_, p, beta, _)| {
             let p = p.as_ref()?;
-            let model = (p.build)(beta)?;
-            let r = fit(
+            let model = refit_start(current, p, beta, j, &jtj_pinv)?;
+            let r = fit_profiled(
                 model,
                 current.geometry,
                 current.observations,
                 current.sigma,
                 options.max_iterations,
+                current.t0_bounds,
             );
             if let Err(e) = &r
                 && std::env::var_os("DHCT_DEBUG").is_some()

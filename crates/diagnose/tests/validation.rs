@@ -16,26 +16,20 @@ fn withheld_effects_are_identified_and_the_gap_closes() {
     for c in &report.cases {
         assert!(c.error.is_none(), "{}: {:?}", c.name, c.error);
     }
-    assert!(report.tuned.effect_cases >= 24 && report.held_out.effect_cases >= 24);
-    assert!(report.tuned.null_cases >= 20 && report.held_out.null_cases >= 40);
-    // The issue's acceptance criteria, on the set the method was developed on.
-    let s = &report.tuned;
-    assert!(s.top1_rate() >= 0.9, "tuned: {s}");
-    assert!(s.false_alarm_rate() <= 0.05, "tuned: {s}");
-    assert_eq!(s.gap_ok, s.top1_correct, "tuned: {s}");
-    // The development set (the first held-out set, looked at since; see the module docs
-    // of `validate`): measured 16/16, false alarms 0/20.
-    let d = &report.development;
-    assert!(d.top1_rate() >= 0.9, "dev: {d}");
-    assert!(d.false_alarm_rate() <= 0.05, "dev: {d}");
-    // The fresh held-out set, run once with the method final. Measured: top-1 19/24
-    // (79 %: exponential creep and slow-scan hysteresis taken for a second creep), false
-    // alarms 0/40, gap ≤ 1.2 in 19/19 — the false-alarm and gap targets hold, the top-1
-    // target does not (issue 8 stays open); these bounds guard against regressions.
-    let h = &report.held_out;
-    assert!(h.top1_rate() >= 0.75, "held-out: {h}");
-    assert!(h.false_alarm_rate() <= 0.05, "held-out: {h}");
-    assert_eq!(h.gap_ok, h.top1_correct, "held-out: {h}");
+    let set = |s: ValidationSet| *report.summary(s).expect("every set is run");
+    let (tuned, held_out) = (set(ValidationSet::Tuned), set(ValidationSet::HeldOut));
+    assert!(tuned.effect_cases >= 24 && held_out.effect_cases >= 32);
+    assert!(tuned.null_cases >= 20 && held_out.null_cases >= 40);
+    // The issue's acceptance criteria, on the set the method was developed on and on the
+    // fresh held-out set (see the module docs of `validate` for the protocol).
+    assert!(tuned.accepted(), "tuned: {tuned}");
+    assert!(held_out.accepted(), "held-out: {held_out}");
+    // The development sets (earlier held-out sets, looked at since): regression guards.
+    for dev in [ValidationSet::Development, ValidationSet::SecondDevelopment] {
+        let d = set(dev);
+        assert!(d.top1_rate() >= 0.9, "{}: {d}", dev.name());
+        assert!(d.false_alarm_rate() <= 0.05, "{}: {d}", dev.name());
+    }
 }
 
 #[test]
