@@ -2,10 +2,10 @@
 //! diagnoses it, and prints the report.
 //!
 //! ```text
-//! cargo run --release -p dhct-diagnose --example diagnose_simulated -- tip-change 1 [images] [held-out]
+//! cargo run --release -p dhct-diagnose --example diagnose_simulated -- tip-change 1 [images] [dev-2]
 //! ```
 //! (effect: any candidate name, or `none`; seed; `images` = render and find features; the
-//! validation set whose magnitudes are drawn: `tuned` (default), `dev` or `held-out`).
+//! validation set whose magnitudes are drawn: `tuned` (default), `dev`, `dev-2`, `dev-3` or `held-out`).
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
 use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};

@@ -437,31 +437,38 @@ pub(crate) fn min_creep_time_constant(geometry: &ScanGeometry, nn_distance_m: f6
 }
 
 /// Whether the effect `candidate` added as the last term of `model` is still within the
-/// candidate's domain after a free refit (an exponential creep may not relax faster than
-/// [`min_creep_time_constant`]).
+/// candidate's domain after a free refit: an exponential creep may not relax faster than
+/// [`min_creep_time_constant`], and a second creep's `t0` may not be shorter than one line
+/// period (the grid's floor and the base creep's: a faster creep is not sampled by the
+/// slow axis, and such a `t0` makes `C·ln(1 + t/t0)` a step with a tail — on rendered
+/// images the smeared jump of a tip change).
 pub(crate) fn within_domain(
     candidate: Candidate,
     model: &GlobalModel,
     geometry: &ScanGeometry,
     nn_distance_m: f64,
 ) -> bool {
-    let tau_min = min_creep_time_constant(geometry, nn_distance_m);
-    match candidate {
-        Candidate::ExponentialCreep => model
-            .terms
-            .iter()
-            .rev()
-            .find(|t| t.label == candidate.name())
-            .is_none_or(|t| {
-                t.effect
-                    .parameter_names()
-                    .iter()
-                    .zip(t.effect.parameters())
-                    .filter(|(name, _)| name.ends_with("time_constant_s"))
-                    .all(|(_, tau)| tau >= 0.999 * tau_min)
-            }),
-        _ => true,
-    }
+    let (parameter, minimum) = match candidate {
+        Candidate::ExponentialCreep => (
+            "time_constant_s",
+            min_creep_time_constant(geometry, nn_distance_m),
+        ),
+        Candidate::SecondCreep => ("t0_s", geometry.line_period()),
+        _ => return true,
+    };
+    model
+        .terms
+        .iter()
+        .rev()
+        .find(|t| t.label == candidate.name())
+        .is_none_or(|t| {
+            t.effect
+                .parameter_names()
+                .iter()
+                .zip(t.effect.parameters())
+                .filter(|(name, _)| name.ends_with(parameter))
+                .all(|(_, value)| value >= 0.999 * minimum)
+        })
 }
 
 /// Onsets searched per frame by the creep candidates' coarse grid.

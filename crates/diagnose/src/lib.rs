@@ -11,7 +11,10 @@
 //! 2. **Position-level base fit**: drift, acceleration, creep `C`, `t0`, the hysteresis
 //!    law and the lattice origin and angle fitted together to all feature positions,
 //!    minimising `|to_sample(measured, t) − ideal site|²` (see `model`'s docs). The
-//!    simulator's own effects ([`dhct_simulate::Effect`]) are the model terms.
+//!    simulator's own effects ([`dhct_simulate::Effect`]) are the model terms. The creep's
+//!    `t0` is profiled (a grid from one line period to ten frames, every other parameter
+//!    fitted at each point): fitted freely it does not converge, since with drift and
+//!    acceleration free `C·ln(1 + t/t0)` has a long valley towards large `t0`.
 //! 3. **Noise floor** ([`NoiseFloor`]), independent of the model: trace/retrace pairs of the
 //!    same site (for one pass, successive differences of neighbouring features within a
 //!    line), cross-checked by the feature fits' own uncertainties. Gap/noise and χ²/dof
@@ -19,8 +22,10 @@
 //! 4. **Where** ([`GapLocation`]): residuals binned by frame time, fast phase, position,
 //!    pass and feature height; a Lomb–Scargle spectrum; change points.
 //! 5. **Which effect** ([`Candidate`]): every candidate is screened on a grid of its shape
-//!    parameters, scored by cross-validation over time blocks and by BIC/AIC, the best
-//!    refitted in full; greedily combined; "no effect needed" when none passes.
+//!    parameters (a creep's onset then refined around the best grid point), scored by
+//!    cross-validation (time blocks for persistent effects, interleaved lines for
+//!    transients) and by BIC/AIC, the best refitted in full (base `t0` profiled again);
+//!    greedily combined; "no effect needed" when none passes.
 //! 6. **Shrink** ([`Shrink`]): gap/noise before, after the top effect, after the set,
 //!    with the added effects' parameters and uncertainties.
 //!

@@ -23,8 +23,15 @@
 //!   grid (a 24th of the frame) was coarser than their time constants. Since then `t0` is
 //!   profiled, refits start from the best point along the screened step, and the best
 //!   creep onset is refined. Reported, no longer evidence.
-//! * **Held-out** (seeds 8001–8004, effect-free 8101–8140, mixtures seed + 11000;
-//!   magnitudes 0.65–0.8 or 1.2–1.4 ×, vibration 0.1–0.2 Hz, a band no other set has):
+//! * **Third development** (seeds 8001–8004, effect-free 8101–8140, mixtures seed +
+//!   11000): the third held-out set, run once with the method above: top-1 29/32 (91 %),
+//!   false alarms 1/40, mixtures 3/3, gap/noise 1.64 → 0.87 (≤ 1.2 in 29/29), i.e. the
+//!   targets held. Then the rendered-image path (a tuned case) showed a tip change taken
+//!   for a second creep whose `t0` had gone below one line period, and a second creep's
+//!   `t0` is now kept at one line period or more (as the base creep's and the grid's);
+//!   after that change this set is development data.
+//! * **Held-out** (seeds 12001–12004, effect-free 12101–12140, mixtures seed + 13000;
+//!   magnitudes 0.7–0.8 or 1.2–1.35 ×, vibration 0.07–0.1 Hz, a band no other set has):
 //!   fixed in this file before it was first run, and run once with the method final. Its
 //!   numbers are the evidence for the acceptance targets.
 
@@ -120,10 +127,16 @@ impl Default for ValidationOptions {
                     mixture_offset: 9000,
                 },
                 SetSeeds {
-                    set: ValidationSet::HeldOut,
+                    set: ValidationSet::ThirdDevelopment,
                     seeds: vec![8001, 8002, 8003, 8004],
                     null_seeds: (8101..8141).collect(),
                     mixture_offset: 11000,
+                },
+                SetSeeds {
+                    set: ValidationSet::HeldOut,
+                    seeds: vec![12001, 12002, 12003, 12004],
+                    null_seeds: (12101..12141).collect(),
+                    mixture_offset: 13000,
                 },
             ],
             mixtures: vec![
