@@ -33,7 +33,13 @@
 //! * **Held-out** (seeds 12001–12004, effect-free 12101–12140, mixtures seed + 13000;
 //!   magnitudes 0.7–0.8 or 1.2–1.35 ×, vibration 0.07–0.1 Hz, a band no other set has):
 //!   fixed in this file before it was first run, and run once with the method final. Its
-//!   numbers are the evidence for the acceptance targets.
+//!   numbers are the evidence for the acceptance targets. Measured (2026-11-22): top-1
+//!   29/32 (91 %), false alarms 0/40, gap/noise 1.76 → 0.85 (≤ 1.2 in 29/29) — accepted;
+//!   mixtures 1/3. The misses: two exponential creeps taken for a second creep (the two
+//!   creep shapes are close: 31/32 with them as one family), and one slow-scan hysteresis
+//!   with no gap to explain (0.97 × noise: a converged base creep with a short `t0` absorbs
+//!   most of a slow-scan hysteresis at the frame start, as in the tuned set's two misses).
+//!   The method was not changed after this run.
 
 use std::fmt;
 
