@@ -211,14 +211,18 @@ pub fn diagnose(
     )?;
     let noise = estimate(&observations, &base.residuals, geometry);
     sigma = noise.sigma_m;
-    base = fit_profiled(
-        base.model,
-        geometry,
-        &observations,
-        sigma,
-        2 * iterations,
-        t0_bounds,
-    )?;
+    // The base model and every accepted extension, fitted in full at the final noise floor.
+    let refit = |model: GlobalModel| {
+        fit_profiled(
+            model,
+            geometry,
+            &observations,
+            sigma,
+            2 * iterations,
+            t0_bounds,
+        )
+    };
+    base = refit(base.model)?;
     let base_summary = summary(&base, sigma);
     let location = options
         .locate
@@ -290,14 +294,7 @@ pub fn diagnose(
                 parameters,
                 gap_after: GapSummary::of(&f.residuals, sigma, f.model.free_count()),
             });
-            current = fit_profiled(
-                f.model,
-                geometry,
-                &observations,
-                sigma,
-                2 * iterations,
-                t0_bounds,
-            )?;
+            current = refit(f.model)?;
             remaining.retain(|c| *c != w.score.candidate);
         }
         rounds.push(GreedyRound {
