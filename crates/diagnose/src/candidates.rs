@@ -152,16 +152,16 @@ pub(crate) struct Context<'a> {
 }
 
 /// Weighted columns `∂(d/σ)/∂u_j` of a term's parameters in `mask` (fit space of its
-/// `transforms`; a linear parameter is stepped by its typical size).
+/// transforms; a linear parameter is stepped by its typical size).
 pub(crate) fn term_columns(
     term: &dyn ModelTerm,
-    transforms: &[Transform],
     mask: &[bool],
     ctx: &Context,
 ) -> Option<DMatrix<f64>> {
     let n = ctx.observations.len();
     let p0 = term.parameters();
     let base = term_displacements(term, ctx.geometry, ctx.observations);
+    let transforms = term.transforms();
     let selected: Vec<usize> = (0..p0.len()).filter(|&j| mask[j]).collect();
     let mut out = DMatrix::zeros(2 * n, selected.len());
     for (c, &j) in selected.iter().enumerate() {
@@ -193,7 +193,7 @@ fn term_proposal(
     replace: Option<usize>,
     extra_parameters: usize,
 ) -> Option<Proposal> {
-    let columns = term_columns(term.effect.as_ref(), &term.transforms, &new_mask, ctx)?;
+    let columns = term_columns(term.effect.as_ref(), &new_mask, ctx)?;
     let build: Builder = Box::new(move |base: &GlobalModel, coef: &[f64]| {
         let mut m = base.clone();
         let index = match replace {
@@ -208,10 +208,11 @@ fn term_proposal(
         };
         let t = &mut m.terms[index];
         let mut p = t.effect.parameters();
+        let transforms = t.effect.transforms();
         let mut k = 0;
         for j in 0..p.len() {
             if new_mask[j] {
-                let tr = t.transforms[j];
+                let tr = transforms[j];
                 let step = match tr {
                     Transform::Linear { .. } => coef[k],
                     _ => coef[k].clamp(-5.0, 5.0),
@@ -244,12 +245,7 @@ fn log_grid(lo: f64, hi: f64, count: usize) -> Vec<f64> {
 /// Every proposal of `candidate` on top of the current model (empty if not applicable).
 pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
     let g = ctx.geometry;
-    let t_max = ctx
-        .observations
-        .iter()
-        .map(|o| o.time_s)
-        .fold(0.0, f64::max)
-        .max(g.line_period());
+    let t_max = frame_end(ctx);
     let sim = |c: EffectConfig| sim_term(&c);
     let mut out = Vec::new();
     let mut push = |p: Option<Proposal>| {

@@ -60,7 +60,7 @@ pub(crate) fn jacobian(
     for term in &model.terms {
         let base_p = term.effect.parameters();
         let base_d = term_displacements(term.effect.as_ref(), geometry, observations);
-        for (k, t) in term.transforms.iter().enumerate() {
+        for (k, t) in term.effect.transforms().iter().enumerate() {
             if !term.free[k] {
                 continue;
             }
@@ -269,7 +269,7 @@ pub(crate) fn fit_profiled(
         .filter_map(|(g, r)| r.as_ref().map(|(c, _)| (*g, *c)))
         .collect();
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let Some((_, best)) = fits
+    let Some(mut best) = fits
         .into_iter()
         .filter_map(|(_, r)| r)
         .min_by(|a, b| a.0.total_cmp(&b.0))
@@ -277,7 +277,6 @@ pub(crate) fn fit_profiled(
         // Every grid point failed: report the plain fit's error.
         return fit(model, geometry, observations, sigma, max_iterations);
     };
-    let mut best = (weighted(&best.residuals, sigma).norm_squared(), best);
     // Parabola through the best grid point and its neighbours.
     if let Some(i) = points.iter().position(|p| p.1 == best.0)
         && i > 0
@@ -319,8 +318,9 @@ fn hold_shapes(model: &GlobalModel) -> GlobalModel {
             continue;
         }
         let names = term.effect.parameter_names();
+        let transforms = term.effect.transforms();
         for (k, name) in names.iter().enumerate() {
-            let shape = !matches!(term.transforms[k], Transform::Linear { .. })
+            let shape = !matches!(transforms[k], Transform::Linear { .. })
                 || name.ends_with("_s")
                 || name.ends_with("_rad")
                 || name.ends_with("_hz");
@@ -403,11 +403,12 @@ impl Fitted {
         let mut k = 0;
         for (index, term) in self.model.terms.iter().enumerate() {
             let names = term.effect.parameter_names();
+            let transforms = term.effect.transforms();
             for (j, (name, value)) in names.iter().zip(term.effect.parameters()).enumerate() {
                 let sigma = if term.free[j] {
                     let su = self.covariance[(k, k)].max(0.0).sqrt();
                     k += 1;
-                    Some(term.transforms[j].slope(value) * su)
+                    Some(transforms[j].slope(value) * su)
                 } else {
                     None
                 };

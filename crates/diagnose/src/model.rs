@@ -36,6 +36,13 @@ pub(crate) trait ModelTerm: Send + Sync + Debug {
     fn with_parameters(&self, p: &[f64]) -> Option<Box<dyn ModelTerm>>;
     /// The simulator config entry, for terms that are simulator effects.
     fn config(&self) -> Option<EffectConfig>;
+    /// How the fit varies each parameter ([`transform_of`] its name).
+    fn transforms(&self) -> Vec<Transform> {
+        self.parameter_names()
+            .iter()
+            .map(|n| transform_of(n))
+            .collect()
+    }
 }
 
 /// A simulator effect used as a model term.
@@ -150,8 +157,6 @@ pub(crate) fn transform_of(name: &str) -> Transform {
 pub(crate) struct Term {
     pub effect: Box<dyn ModelTerm>,
     pub free: Vec<bool>,
-    /// How the fit varies each parameter (from its name unless bounded).
-    pub transforms: Vec<Transform>,
     /// Short label for reports.
     pub label: String,
 }
@@ -165,7 +170,6 @@ impl Clone for Term {
         Term {
             effect,
             free: self.free.clone(),
-            transforms: self.transforms.clone(),
             label: self.label.clone(),
         }
     }
@@ -173,15 +177,9 @@ impl Clone for Term {
 
 impl Term {
     pub fn new(effect: Box<dyn ModelTerm>, free: Vec<bool>, label: impl Into<String>) -> Term {
-        let transforms = effect
-            .parameter_names()
-            .iter()
-            .map(|n| transform_of(n))
-            .collect();
         Term {
             effect,
             free,
-            transforms,
             label: label.into(),
         }
     }
@@ -291,7 +289,7 @@ impl GlobalModel {
                 .effect
                 .parameters()
                 .iter()
-                .zip(&term.transforms)
+                .zip(term.effect.transforms())
                 .zip(&term.free)
             {
                 if *free {
@@ -316,7 +314,7 @@ impl GlobalModel {
         let mut terms = Vec::with_capacity(self.terms.len());
         for term in &self.terms {
             let mut p = term.effect.parameters();
-            for (j, t) in term.transforms.iter().enumerate() {
+            for (j, t) in term.effect.transforms().iter().enumerate() {
                 if term.free[j] {
                     p[j] = t.parameter_of(u[k]);
                     k += 1;
@@ -326,7 +324,6 @@ impl GlobalModel {
             terms.push(Term {
                 effect,
                 free: term.free.clone(),
-                transforms: term.transforms.clone(),
                 label: term.label.clone(),
             });
         }

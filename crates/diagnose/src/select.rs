@@ -382,11 +382,15 @@ pub(crate) fn round(
             let mut best: Option<(Proposal, f64, Vec<f64>)> = None;
             let all = proposals(c, &ctx);
             let mut searched = all.len();
-            for p in all {
+            // Screens `p` and keeps it if it gains the most so far.
+            let keep_best = |best: &mut Option<(Proposal, f64, Vec<f64>)>, p: Proposal| {
                 let (gain, beta) = screen(&q, &r, &p.columns);
                 if best.as_ref().is_none_or(|b| gain > b.1) {
-                    best = Some((p, gain, beta));
+                    *best = Some((p, gain, beta));
                 }
+            };
+            for p in all {
+                keep_best(&mut best, p);
             }
             // A tip change is refined to the feature times near the best line start.
             if c == Candidate::TipChange
@@ -408,10 +412,7 @@ pub(crate) fn round(
                 searched += times.len();
                 for tt in times {
                     if let Some(p) = tip_proposal(&ctx, tt + 1e-9) {
-                        let (gain, beta) = screen(&q, &r, &p.columns);
-                        if best.as_ref().is_none_or(|b| gain > b.1) {
-                            best = Some((p, gain, beta));
-                        }
+                        keep_best(&mut best, p);
                     }
                 }
             }
@@ -423,10 +424,7 @@ pub(crate) fn round(
                 searched += finer.len();
                 for (tau, start) in finer {
                     if let Some(p) = onset_proposal(c, tau, start, &ctx) {
-                        let (gain, beta) = screen(&q, &r, &p.columns);
-                        if best.as_ref().is_none_or(|b| gain > b.1) {
-                            best = Some((p, gain, beta));
-                        }
+                        keep_best(&mut best, p);
                     }
                 }
             }
