@@ -172,8 +172,10 @@ pub fn analyse(
     let method = options
         .method
         .unwrap_or_else(|| lattice.local_distortion_method());
+    // Passes without features are skipped; `inputs[k]` belongs to `passes[k]` from here.
+    let inputs: Vec<&PassInput> = inputs.iter().filter(|i| !i.features.is_empty()).collect();
     let mut passes = Vec::new();
-    for input in inputs {
+    for input in &inputs {
         let Some(pass) = input.features.first().map(|f| f.pass) else {
             continue;
         };
@@ -194,7 +196,7 @@ pub fn analyse(
         // Too distorted for the window: a first model from the k nearest neighbours.
         passes = passes
             .into_iter()
-            .zip(inputs.iter().filter(|i| !i.features.is_empty()))
+            .zip(&inputs)
             .map(|(previous, input)| {
                 let points_px: Vec<[f64; 2]> =
                     input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
@@ -204,17 +206,15 @@ pub fn analyse(
                     exclusions: ExclusionCounts::default(),
                     ..previous.selection.clone()
                 };
-                let mut pass = measure_pass(
+                Ok(measure_pass(
                     input,
                     previous.pass,
                     previous.selection,
-                    Some(nearest),
+                    Some((nearest, NeighbourSource::RawNearest)),
                     geometry,
                     lattice,
                     method,
-                );
-                pass.neighbour_source = NeighbourSource::RawNearest;
-                Ok(pass)
+                ))
             })
             .collect::<Result<_, DistortionError>>()?;
     }
@@ -222,11 +222,7 @@ pub fn analyse(
     for _ in 0..2 {
         let mut refined = Vec::with_capacity(passes.len());
         let mut gained = false;
-        for (input, previous) in inputs
-            .iter()
-            .filter(|i| !i.features.is_empty())
-            .zip(&passes)
-        {
+        for (input, previous) in inputs.iter().zip(&passes) {
             let selection = select_in_sample_frame(input, &model, geometry, lattice, options)?;
             let before = previous.used_selection().selected.len();
             // The k-nearest bootstrap is always replaced by the windowed selection.
@@ -243,20 +239,18 @@ pub fn analyse(
         }
         passes = passes
             .into_iter()
-            .zip(inputs.iter().filter(|i| !i.features.is_empty()))
+            .zip(&inputs)
             .zip(refined)
             .map(|((previous, input), selection)| {
-                let mut pass = measure_pass(
+                measure_pass(
                     input,
                     previous.pass,
                     previous.selection,
-                    Some(selection),
+                    Some((selection, NeighbourSource::CorrectedFrame)),
                     geometry,
                     lattice,
                     method,
-                );
-                pass.neighbour_source = NeighbourSource::CorrectedFrame;
-                pass
+                )
             })
             .collect();
         model = fit_pooled(&passes, geometry, options)?;
@@ -264,12 +258,13 @@ pub fn analyse(
     Ok(DhctResult { model, passes })
 }
 
-/// Local distortions of one pass with the neighbours of `refined` (else `selection`).
+/// Local distortions of one pass with the neighbours of `refined` and where they came from
+/// (else `selection`'s, the raw window).
 fn measure_pass(
     input: &PassInput,
     pass: ScanPass,
     selection: NeighbourSelection,
-    refined: Option<NeighbourSelection>,
+    refined: Option<(NeighbourSelection, NeighbourSource)>,
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
     method: LocalDistortionMethod,
@@ -279,6 +274,10 @@ fn measure_pass(
         .iter()
         .map(|f| [f.x_px * geometry.pitch_x(), f.y_px * geometry.pitch_y()])
         .collect();
+    let (refined, neighbour_source) = match refined {
+        Some((r, source)) => (Some(r), source),
+        None => (None, NeighbourSource::RawWindow),
+    };
     let used = refined.as_ref().unwrap_or(&selection);
     let angle = estimate_lattice_angle(&points_m, &used.selected, lattice);
     let local = local_distortions(
@@ -295,7 +294,7 @@ fn measure_pass(
         pass,
         selection,
         refined_selection: refined,
-        neighbour_source: NeighbourSource::RawWindow,
+        neighbour_source,
         lattice_angle_rad: angle,
         local,
     }
