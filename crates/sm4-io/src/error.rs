@@ -8,6 +8,39 @@ use thiserror::Error;
 pub enum ReadError {
     #[error("cannot read the file")]
     Io(#[source] std::io::Error),
+    #[error("cannot open {path}", path = .path.display())]
+    Open {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(
+        "{path} is {kind}, not a regular file: dhct reads only regular files",
+        path = .path.display()
+    )]
+    NotRegularFile { path: PathBuf, kind: &'static str },
+    #[error(
+        "{}{bytes} bytes exceed the read limit of {limit} bytes (raise ReadLimits::max_bytes for a truly huge file)",
+        .path.as_ref().map(|p| format!("{} holds ", p.display())).unwrap_or_else(|| "the file's ".into())
+    )]
+    FileTooLarge {
+        path: Option<PathBuf>,
+        bytes: u64,
+        limit: u64,
+    },
+    #[error(
+        "{format} file: {what} need {needed} {unit}, more than the read limit of {limit} {unit} \
+         (raise ReadLimits for a truly huge scan)",
+        format = .format.name(),
+        needed = .needed.map(|n| n.to_string()).unwrap_or_else(|| "more than 2^64".into())
+    )]
+    OverBudget {
+        format: FileFormat,
+        what: String,
+        needed: Option<u64>,
+        limit: u64,
+        unit: &'static str,
+    },
     #[error(
         "{format} file is truncated: {what} needs bytes {offset}..{end} but the file has only {len} bytes",
         format = .format.name(), end = .offset.saturating_add(*.needed)
@@ -31,6 +64,8 @@ pub enum ReadError {
         "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF content"
     )]
     UnknownFormat,
+    #[error("invalid scan geometry option: {0}")]
+    BadOverride(#[from] crate::overrides::OverrideRangeError),
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]
     Geometry {
         format: FileFormat,

@@ -28,11 +28,17 @@
 //! A GSF file without them (e.g. written by Gwyddion) gets the placeholder pixel period
 //! [`ASSUMED_PIXEL_PERIOD`], fast direction right, slow direction down, timing
 //! [`ValueSource::Assumed`]. Its scale is [`ValueSource::Stated`] when `XReal`/`YReal` are
-//! given in a length unit (or without `XYUnits`), otherwise [`ASSUMED_PITCH`], assumed.
+//! given in a length unit (or without `XYUnits`); when both are missing or `XYUnits` is not
+//! a length it is [`ASSUMED_PITCH`], assumed, with the reason under
+//! [`crate::ASSUMED_SCALE_KEY`]. An `XReal`/`YReal` that is present but not a number, not
+//! finite, zero, or gives a pitch outside [`crate::PLAUSIBLE_PITCH_M`], or only one of the
+//! two, is an error: a corrupt size never silently becomes 1 Å per pixel. `DHCT_*` numbers
+//! outside their plausible ranges (`PLAUSIBLE_*` in the crate root) are errors too.
 //! Unit prefixes (`XYUnits = nm`, `ZUnits = pA`) are folded into the values.
 
 use std::collections::BTreeMap;
 use std::io::Write;
+use std::ops::RangeInclusive;
 
 use dhct_scan::{
     FileFormat, ImageChannel, ScanDirection, ScanGeometry, ScanPair, ScanPass, ValueSource,
@@ -42,7 +48,11 @@ use crate::bytes::checked_data_len;
 use crate::iso28600::{parse_number, parse_unit};
 use crate::{ReadError, ScanFile, WriteError};
 
-use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::limits::{Budget, ReadLimits};
+use crate::placeholders::{
+    ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_PITCH_M,
+    PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD, PLAUSIBLE_TURNAROUND_S, note, plausible,
+};
 
 const FORMAT: FileFormat = FileFormat::Gsf;
 const MAGIC: &[u8] = b"Gwyddion Simple Field 1.0\n";
@@ -52,6 +62,12 @@ pub const DEFAULT_TITLE: &str = "GSF image";
 
 /// Reads a GSF file as one image (see the module docs for the geometry rules).
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]).
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let mut budget = Budget::new(limits, bytes.len())?;
     let start = if bytes.starts_with(b"\xEF\xBB\xBF") {
         3
     } else {
@@ -133,6 +149,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
         }
     };
     let (x_res, y_res) = (resolution("XRes")?, resolution("YRes")?);
+    budget.charge_images(FORMAT, x_res, y_res, 1, 0)?;
     let data_len = checked_data_len(FORMAT, y_res, x_res, 4)?;
     let data = bytes
         .get(data_start..)
@@ -172,7 +189,8 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     let channel = ImageChannel::from_row_major(name, z_unit, rows, columns, values)
         .map_err(|source| ReadError::geometry(FORMAT, source))?;
 
-    let geometry = build_geometry(&get, columns, rows)?;
+    let mut metadata = BTreeMap::new();
+    let geometry = build_geometry(&get, columns, rows, &mut metadata)?;
     let pass = match get("DHCT_Pass") {
         None => ScanPass::Trace,
         Some(p) if p.eq_ignore_ascii_case("trace") => ScanPass::Trace,
@@ -190,7 +208,6 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     }
     .map_err(|source| ReadError::geometry(FORMAT, source))?;
 
-    let mut metadata = BTreeMap::new();
     for (name, value) in &fields {
         let known = matches!(
             name.as_str(),
@@ -207,30 +224,16 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     })
 }
 
+/// The scan geometry from the header fields (`get`); assumptions are noted in `metadata`.
 fn build_geometry<'a>(
     get: &impl Fn(&str) -> Option<&'a str>,
     columns: usize,
     rows: usize,
+    metadata: &mut BTreeMap<String, String>,
 ) -> Result<ScanGeometry, ReadError> {
     let geometry_error = |source| ReadError::geometry(FORMAT, source);
-    let (xy_unit, xy_factor) = parse_unit(get("XYUnits").unwrap_or("m"));
-    let real = |name: &str| {
-        get(name)
-            .and_then(parse_number)
-            .map(|v| v.abs() * xy_factor)
-            .filter(|v| v.is_finite() && *v > 0.0)
-    };
-    let (pitch_x, pitch_y, mut scale_source) = match (real("XReal"), real("YReal")) {
-        (Some(w), Some(h)) if xy_unit == "m" => {
-            let (px, py) = (w / columns as f64, h / rows as f64);
-            if px > 0.0 && py > 0.0 && px.is_finite() && py.is_finite() {
-                (px, py, ValueSource::Stated)
-            } else {
-                (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed)
-            }
-        }
-        _ => (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed),
-    };
+    let (pitch_x, pitch_y, scale_source) = pitches(get, columns, rows, metadata)?;
+    let mut scale_source = scale_source;
     let dhct_number = |name: &str| -> Result<Option<f64>, ReadError> {
         match get(name) {
             None => Ok(None),
@@ -270,10 +273,30 @@ fn build_geometry<'a>(
         )),
     };
 
-    let pixel_period = dhct_number("DHCT_PixelPeriod")?;
+    let in_range =
+        |name: &str, value: Option<f64>, range: &RangeInclusive<f64>, unit: &str| match value {
+            Some(v) if !plausible(v, range) => Err(ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "{name} = {v} {unit} lies outside {:e}..={:e} {unit}",
+                    range.start(),
+                    range.end()
+                ),
+            )),
+            other => Ok(other),
+        };
+    let pixel_period = in_range(
+        "DHCT_PixelPeriod",
+        dhct_number("DHCT_PixelPeriod")?,
+        &PLAUSIBLE_PIXEL_PERIOD_S,
+        "s",
+    )?;
     let (pixel_period, mut timing_source) = match pixel_period {
         Some(p) => (p, ValueSource::Stated),
-        None => (ASSUMED_PIXEL_PERIOD, ValueSource::Assumed),
+        None => {
+            note(metadata, ASSUMED_TIMING_KEY, "GSF carries no scan timing");
+            (ASSUMED_PIXEL_PERIOD, ValueSource::Assumed)
+        }
     };
     timing_source = dhct_source("DHCT_TimingSource", timing_source)?;
     if scale_source == ValueSource::Stated {
@@ -291,12 +314,19 @@ fn build_geometry<'a>(
         slow,
     )
     .map_err(geometry_error)?;
-    if let Some(turnaround) = dhct_number("DHCT_TurnaroundTime")? {
+    let turnaround = dhct_number("DHCT_TurnaroundTime")?;
+    if let Some(turnaround) = in_range(
+        "DHCT_TurnaroundTime",
+        turnaround,
+        &PLAUSIBLE_TURNAROUND_S,
+        "s",
+    )? {
         geometry = geometry
             .with_turnaround(turnaround)
             .map_err(geometry_error)?;
     }
-    if let Some(angle) = dhct_number("DHCT_ScanAngle")? {
+    let angle = dhct_number("DHCT_ScanAngle")?;
+    if let Some(angle) = in_range("DHCT_ScanAngle", angle, &PLAUSIBLE_SCAN_ANGLE_RAD, "rad")? {
         geometry = geometry.with_scan_angle(angle).map_err(geometry_error)?;
     }
     let offset_x = dhct_number("DHCT_OffsetX")?;
@@ -309,6 +339,54 @@ fn build_geometry<'a>(
     Ok(geometry
         .with_scale_source(scale_source)
         .with_timing_source(timing_source))
+}
+
+/// The pixel pitches from `XReal`/`YReal` (in `XYUnits`). Both missing, or a non-length
+/// `XYUnits`: [`ASSUMED_PITCH`], assumed, noted in `metadata`. Present but not a number,
+/// not finite, zero, negative-and-zero or giving a pitch outside [`PLAUSIBLE_PITCH_M`]: an
+/// error naming the field (a corrupt size must not silently become 1 Å per pixel).
+fn pitches<'a>(
+    get: &impl Fn(&str) -> Option<&'a str>,
+    columns: usize,
+    rows: usize,
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<(f64, f64, ValueSource), ReadError> {
+    let (xy_unit, xy_factor) = parse_unit(get("XYUnits").unwrap_or("m"));
+    let real = |name: &str, n: usize| -> Result<Option<f64>, ReadError> {
+        let Some(text) = get(name) else {
+            return Ok(None);
+        };
+        let pitch = parse_number(text).map(|v| v.abs() * xy_factor / n as f64);
+        match pitch {
+            Some(p) if xy_unit != "m" || plausible(p, &PLAUSIBLE_PITCH_M) => Ok(Some(p)),
+            _ => Err(ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "{name} = \"{}\" is not a size giving a pixel pitch in {:e}..={:e} m",
+                    shorten(text),
+                    PLAUSIBLE_PITCH_M.start(),
+                    PLAUSIBLE_PITCH_M.end()
+                ),
+            )),
+        }
+    };
+    let (x, y) = (real("XReal", columns)?, real("YReal", rows)?);
+    let assumed = |metadata: &mut BTreeMap<String, String>, why: String| {
+        note(metadata, ASSUMED_SCALE_KEY, why);
+        Ok((ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed))
+    };
+    match (x, y) {
+        (Some(px), Some(py)) if xy_unit == "m" => Ok((px, py, ValueSource::Stated)),
+        (Some(_), Some(_)) => assumed(
+            metadata,
+            format!("XYUnits \"{}\" is not a length", shorten(&xy_unit)),
+        ),
+        (None, None) => assumed(metadata, "no XReal/YReal in the header".into()),
+        _ => Err(ReadError::corrupt(
+            FORMAT,
+            "the header gives only one of XReal and YReal",
+        )),
+    }
 }
 
 /// Writes `channel` as the trace image of `geometry` (see [`write_pass`]).

@@ -64,7 +64,11 @@ use dhct_scan::{
 
 use crate::{ReadError, ScanFile};
 
-use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::limits::{Budget, ReadLimits};
+use crate::placeholders::{
+    ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_PITCH_M,
+    PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD, note, plausible,
+};
 
 const FORMAT: FileFormat = FileFormat::Iso28600;
 
@@ -94,6 +98,12 @@ const FIXED_LABELS: [(usize, &str); 11] = [
 
 /// Reads an ISO 28600 regular map: one trace image per channel (see the module docs).
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]).
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let mut budget = Budget::new(limits, bytes.len())?;
     let body = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let mut lines = body
         .split(|&b| b == b'\n')
@@ -197,9 +207,11 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
         channels.push((name, unit, factor));
     }
 
+    budget.charge_images(FORMAT, columns as u64, rows as u64, channel_count as u64, 0)?;
     let values = read_data(bytes, &mut lines, columns, rows, channel_count, &channels)?;
 
-    let geometry = build_geometry(&h, columns, rows)?;
+    let mut metadata = metadata(&h);
+    let geometry = build_geometry(&h, columns, rows, &mut metadata)?;
     let mut pairs = Vec::with_capacity(channel_count);
     for ((name, unit, _), z) in channels.into_iter().zip(values) {
         let channel = ImageChannel::from_row_major(name, unit, rows, columns, z)
@@ -212,7 +224,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     Ok(ScanFile {
         format: FORMAT,
         pairs,
-        metadata: metadata(&h),
+        metadata,
     })
 }
 
@@ -358,7 +370,14 @@ fn read_data<'a>(
     }
 }
 
-fn build_geometry(h: &Header, columns: usize, rows: usize) -> Result<ScanGeometry, ReadError> {
+/// The scan geometry; what had to be assumed is noted in `metadata` (see
+/// [`crate::ASSUMED_SCALE_KEY`]).
+fn build_geometry(
+    h: &Header,
+    columns: usize,
+    rows: usize,
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<ScanGeometry, ReadError> {
     let geometry_error = |source| ReadError::geometry(FORMAT, source);
 
     // Scale.
@@ -366,11 +385,25 @@ fn build_geometry(h: &Header, columns: usize, rows: usize) -> Result<ScanGeometr
         let (unit, factor) = parse_unit(h.line(unit_line));
         let fov = h.real(fov_line)?;
         let pitch = fov.abs() * factor / n as f64;
-        (unit == "m" && pitch.is_finite() && pitch > 0.0).then_some(pitch)
+        (unit == "m" && plausible(pitch, &PLAUSIBLE_PITCH_M)).then_some(pitch)
     };
     let (pitch_x, pitch_y, scale_source) = match (pitch(26, 28, columns), pitch(27, 29, rows)) {
         (Some(px), Some(py)) => (px, py, ValueSource::Stated),
-        _ => (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed),
+        _ => {
+            note(
+                metadata,
+                ASSUMED_SCALE_KEY,
+                format!(
+                    "the field of view (lines 26-29: \"{}\" \"{}\" x \"{}\" \"{}\") is \
+                     not a plausible length",
+                    h.line(28),
+                    h.line(26),
+                    h.line(29),
+                    h.line(27)
+                ),
+            );
+            (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed)
+        }
     };
 
     // Directions.
@@ -396,10 +429,23 @@ fn build_geometry(h: &Header, columns: usize, rows: usize) -> Result<ScanGeometr
             .filter(|v| unit == "m/s" && *v > 0.0)
     };
     let (pixel_period, timing_source) = match speed {
-        Some(speed) if !post_treated && !bogus && scale_source == ValueSource::Stated => {
+        Some(speed)
+            if !post_treated
+                && !bogus
+                && scale_source == ValueSource::Stated
+                && plausible(fast_pitch / speed, &PLAUSIBLE_PIXEL_PERIOD_S) =>
+        {
             (fast_pitch / speed, ValueSource::Stated)
         }
-        _ => (ASSUMED_PIXEL_PERIOD, ValueSource::Assumed),
+        _ => {
+            let why = if post_treated || bogus {
+                "the data are post-treated or the parameters marked bogus"
+            } else {
+                "no plausible tip speed (lines 35-36) with a stated scale"
+            };
+            note(metadata, ASSUMED_TIMING_KEY, why);
+            (ASSUMED_PIXEL_PERIOD, ValueSource::Assumed)
+        }
     };
 
     let mut geometry = ScanGeometry::new(
@@ -413,6 +459,12 @@ fn build_geometry(h: &Header, columns: usize, rows: usize) -> Result<ScanGeometr
     )
     .map_err(geometry_error)?;
     if let Some(angle) = h.real(34) {
+        if !plausible(angle.to_radians(), &PLAUSIBLE_SCAN_ANGLE_RAD) {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                format!("the scan angle (line 34) {angle} degrees lies beyond a full turn"),
+            ));
+        }
         geometry = geometry
             .with_scan_angle(angle.to_radians())
             .map_err(geometry_error)?;

@@ -14,6 +14,10 @@
 //! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
 //! the whole file as a byte slice and checks every length against it before allocating, so
 //! truncated, foreign or hostile files give a typed [`ReadError`], never a panic.
+//! [`read_path`] opens only regular files (a FIFO, device or directory is refused before it
+//! is opened, so nothing blocks) and reads under [`ReadLimits`]: the file size is checked
+//! before reading, and the pixels and decoded bytes every header implies are checked before
+//! anything is allocated (see [`limits`]).
 //! Every image comes back in display orientation (row 0 at the top) with its
 //! [`dhct_scan::ScanGeometry`]; values the format lacks are marked
 //! [`dhct_scan::ValueSource::Assumed`] and can be supplied with [`GeometryOverrides`].
@@ -30,6 +34,7 @@ mod detect;
 mod error;
 pub mod gsf;
 pub mod iso28600;
+pub mod limits;
 pub mod npy;
 mod overrides;
 mod placeholders;
@@ -44,40 +49,74 @@ pub use atomic::write_atomically;
 pub use detect::detect_format;
 pub use dhct_scan::{FileFormat, ScanFile};
 pub use error::{ReadError, WriteError};
-pub use overrides::GeometryOverrides;
-pub use placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+pub use limits::{MAX_TEXT_FILE_BYTES, ReadLimits, check_regular_file, read_regular_text};
+pub use overrides::{GeometryOverrides, OverrideRangeError};
+pub use placeholders::{
+    ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY,
+    PLAUSIBLE_LINE_TIME_S, PLAUSIBLE_PITCH_M, PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD,
+    PLAUSIBLE_TURNAROUND_S, assumption_warnings,
+};
 
-/// Reads a file of any supported format, detected from its content.
-/// Errors do not repeat the path; callers add it as context.
+/// Reads a file of any supported format, detected from its content, under the default
+/// [`ReadLimits`]. Only regular files are read (see [`limits::open_regular_file`]).
+/// Errors about the content do not repeat the path; callers add it as context.
 pub fn read_path(path: &Path) -> Result<ScanFile, ReadError> {
-    let bytes = std::fs::read(path).map_err(ReadError::Io)?;
-    read_bytes(&bytes)
+    read_path_limited(path, &ReadLimits::default())
+}
+
+/// [`read_path`] under `limits`.
+pub fn read_path_limited(path: &Path, limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let bytes = limits::read_regular_file(path, limits.max_bytes)?;
+    read_bytes_limited(&bytes, limits)
 }
 
 /// Reads a file and then applies `overrides` to every channel's geometry.
 pub fn read_path_with(path: &Path, overrides: &GeometryOverrides) -> Result<ScanFile, ReadError> {
-    let file = read_path(path)?;
+    read_path_with_limits(path, overrides, &ReadLimits::default())
+}
+
+/// [`read_path_with`] under `limits`.
+pub fn read_path_with_limits(
+    path: &Path,
+    overrides: &GeometryOverrides,
+    limits: &ReadLimits,
+) -> Result<ScanFile, ReadError> {
+    let file = read_path_limited(path, limits)?;
     overrides.apply_to_file(file)
 }
 
 /// Reads an in-memory file of any supported format, detected from its content.
 pub fn read_bytes(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_bytes_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read_bytes`] under `limits`.
+pub fn read_bytes_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     match detect_format(bytes) {
-        Some(format) => read_as(format, bytes),
+        Some(format) => read_as_limited(format, bytes, limits),
         None => Err(ReadError::UnknownFormat),
     }
 }
 
 /// Reads `bytes` as the given format.
 pub fn read_as(format: FileFormat, bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_as_limited(format, bytes, &ReadLimits::default())
+}
+
+/// [`read_as`] under `limits`.
+pub fn read_as_limited(
+    format: FileFormat,
+    bytes: &[u8],
+    limits: &ReadLimits,
+) -> Result<ScanFile, ReadError> {
     match format {
-        FileFormat::RhkSm4 => sm4::read(bytes),
-        FileFormat::RhkSm3 => sm4::sm3::read(bytes),
-        FileFormat::NanonisSxm => sxm::read(bytes),
-        FileFormat::Iso28600 => iso28600::read(bytes),
-        FileFormat::Gsf => gsf::read(bytes),
-        FileFormat::Npy => npy::read(bytes),
-        FileFormat::Tiff => tiff_file::read(bytes),
+        FileFormat::RhkSm4 => sm4::read_limited(bytes, limits),
+        FileFormat::RhkSm3 => sm4::sm3::read_limited(bytes, limits),
+        FileFormat::NanonisSxm => sxm::read_limited(bytes, limits),
+        FileFormat::Iso28600 => iso28600::read_limited(bytes, limits),
+        FileFormat::Gsf => gsf::read_limited(bytes, limits),
+        FileFormat::Npy => npy::read_limited(bytes, limits),
+        FileFormat::Tiff => tiff_file::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \

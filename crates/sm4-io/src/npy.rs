@@ -14,8 +14,8 @@
 //!
 //! # What dhct reads
 //!
-//! Two-dimensional arrays of `f4`, `f8`, `i1`…`i8` or `u1`…`u8` in either byte order and either
-//! memory order. Other shapes, structured or object dtypes and half floats are rejected with a
+//! Two-dimensional arrays of `f4`, `f8`, `i1`…`i8`, `u1`…`u8` or `b1` (bool, read as 0 and 1)
+//! in either byte order and either memory order. Other shapes, structured or object dtypes and half floats are rejected with a
 //! typed error. Row 0 of the array is taken as the top row of the image (the NumPy/matplotlib
 //! `imshow` convention).
 //!
@@ -37,12 +37,15 @@ use dhct_scan::{FileFormat, ImageChannel, ScanDirection, ScanGeometry, ScanPair,
 use ndarray::{Array2, ShapeBuilder};
 
 use crate::bytes::{ByteReader, checked_data_len};
+use crate::limits::{Budget, ReadLimits};
 use crate::{ReadError, ScanFile, WriteError};
 
 const FORMAT: FileFormat = FileFormat::Npy;
 const MAGIC: &[u8] = b"\x93NUMPY";
 
-use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::placeholders::{
+    ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY,
+};
 
 /// Name given to the single channel of an `.npy` file.
 pub const CHANNEL_NAME: &str = "array";
@@ -53,6 +56,13 @@ pub const MAX_HEADER_LEN: u64 = 65_536;
 
 /// Reads a 2-D `.npy` array as one trace image with an assumed geometry (see the module docs).
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]): a `u1` array of 1 GiB would become
+/// 8 GiB of `f64`, so the decoded size is charged before anything is allocated.
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let mut budget = Budget::new(limits, bytes.len())?;
     let mut reader = ByteReader::new(bytes, FORMAT);
     let magic = reader.take(MAGIC.len() as u64, "magic string")?;
     if magic != MAGIC {
@@ -109,6 +119,9 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
         });
     }
     let data_len = checked_data_len(FORMAT, rows, columns, header.dtype.size)?;
+    // The values, then their standard-layout copy for Fortran-order arrays.
+    let copies = if header.fortran_order { 2 } else { 1 };
+    budget.charge_images(FORMAT, columns, rows, copies, 0)?;
     let data = reader.take(data_len, "array data")?;
     let (rows, columns) = match (usize::try_from(rows), usize::try_from(columns)) {
         (Ok(r), Ok(c)) => (r, c),
@@ -138,6 +151,11 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
         if header.fortran_order { "Fortran" } else { "C" }.to_string(),
     );
     metadata.insert("npy version".to_string(), format!("{major}.{minor}"));
+    metadata.insert(ASSUMED_SCALE_KEY.to_string(), "NPY carries no scale".into());
+    metadata.insert(
+        ASSUMED_TIMING_KEY.to_string(),
+        "NPY carries no timing".into(),
+    );
     Ok(ScanFile {
         format: FORMAT,
         pairs: vec![pair],
@@ -221,6 +239,8 @@ enum Kind {
     Float,
     Signed,
     Unsigned,
+    /// NumPy's `bool` (`|b1`): 0 is false, anything else true (read as 1).
+    Bool,
 }
 
 impl Dtype {
@@ -229,7 +249,7 @@ impl Dtype {
         let unsupported = || {
             ReadError::unsupported(
                 FORMAT,
-                format!("element type '{descr}' (dhct reads f4, f8, i1-i8, u1-u8)"),
+                format!("element type '{descr}' (dhct reads f4, f8, i1-i8, u1-u8, b1)"),
             )
         };
         let mut chars = descr.chars();
@@ -242,12 +262,14 @@ impl Dtype {
             Some('f') => Kind::Float,
             Some('i') => Kind::Signed,
             Some('u') => Kind::Unsigned,
+            Some('b') => Kind::Bool,
             _ => return Err(unsupported()),
         };
         let size: u64 = rest_chars.as_str().parse().map_err(|_| unsupported())?;
         let valid = match kind {
             Kind::Float => matches!(size, 4 | 8),
             Kind::Signed | Kind::Unsigned => matches!(size, 1 | 2 | 4 | 8),
+            Kind::Bool => size == 1,
         };
         if !valid {
             return Err(unsupported());
@@ -294,6 +316,7 @@ impl Dtype {
             (Kind::Unsigned, 2) => f64::from(u16::from_le_bytes(array(chunk, le))),
             (Kind::Unsigned, 4) => f64::from(u32::from_le_bytes(array(chunk, le))),
             (Kind::Unsigned, _) => u64::from_le_bytes(array(chunk, le)) as f64,
+            (Kind::Bool, _) => f64::from(u8::from(chunk.iter().any(|&b| b != 0))),
         }
     }
 }

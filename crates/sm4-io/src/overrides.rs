@@ -2,6 +2,26 @@ use dhct_scan::{GeometryError, ScanDirection, ScanFile, ScanGeometry, ScanPair, 
 use serde::{Deserialize, Serialize};
 
 use crate::ReadError;
+use crate::placeholders::{
+    ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_LINE_TIME_S, PLAUSIBLE_PITCH_M,
+    PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_TURNAROUND_S, plausible,
+};
+
+/// An override outside its plausible range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{key} = {value} {unit} is outside the accepted range {low:e}..={high:e} {unit}")]
+pub struct OverrideRangeError {
+    /// The option's name (`pitch_x`, `pixel_period`, ...).
+    pub key: &'static str,
+    /// The value given.
+    pub value: f64,
+    /// Its unit.
+    pub unit: &'static str,
+    /// Smallest accepted value.
+    pub low: f64,
+    /// Largest accepted value.
+    pub high: f64,
+}
 
 /// Geometry values given by the user (command line, config or API) that replace or supply
 /// what a file says. Unset fields keep the file's values.
@@ -30,9 +50,52 @@ impl GeometryOverrides {
         *self == GeometryOverrides::default()
     }
 
+    /// Checks every given value against its plausible range (the `PLAUSIBLE_*` constants of
+    /// this crate: pitch 1 fm–1 mm, pixel period 1 ns–100 s, line time 1 µs–10^5 s,
+    /// turnaround 0–100 s); NaN, infinities and e.g. `--pixel-period 1e30` are refused.
+    pub fn validate(&self) -> Result<(), OverrideRangeError> {
+        let checks = [
+            ("pitch_x", self.pitch_x, &PLAUSIBLE_PITCH_M, "m"),
+            ("pitch_y", self.pitch_y, &PLAUSIBLE_PITCH_M, "m"),
+            (
+                "pixel_period",
+                self.pixel_period,
+                &PLAUSIBLE_PIXEL_PERIOD_S,
+                "s",
+            ),
+            ("line_time", self.line_time, &PLAUSIBLE_LINE_TIME_S, "s"),
+            (
+                "turnaround_time",
+                self.turnaround_time,
+                &PLAUSIBLE_TURNAROUND_S,
+                "s",
+            ),
+        ];
+        for (key, value, range, unit) in checks {
+            if let Some(value) = value
+                && !plausible(value, range)
+            {
+                return Err(OverrideRangeError {
+                    key,
+                    value,
+                    unit,
+                    low: *range.start(),
+                    high: *range.end(),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// `geometry` with the overridden values replaced. Overridden scale or timing become
-    /// [`ValueSource::Stated`].
+    /// [`ValueSource::Stated`]. Values outside their plausible range (see
+    /// [`GeometryOverrides::validate`]) are refused as [`GeometryError::Conflicting`].
     pub fn apply(&self, geometry: &ScanGeometry) -> Result<ScanGeometry, GeometryError> {
+        if self.validate().is_err() {
+            return Err(GeometryError::Conflicting(
+                "a geometry override lies outside its plausible range (see GeometryOverrides::validate)",
+            ));
+        }
         if self.pixel_period.is_some() && self.line_time.is_some() {
             return Err(GeometryError::Conflicting(
                 "pixel period and line time were both given; give one",
@@ -77,12 +140,23 @@ impl GeometryOverrides {
             }))
     }
 
-    /// Applies [`GeometryOverrides::apply`] to every channel of `file`.
+    /// Applies [`GeometryOverrides::apply`] to every channel of `file`; the notes of what the
+    /// reader assumed are dropped for the values now given.
     pub fn apply_to_file(&self, file: ScanFile) -> Result<ScanFile, ReadError> {
         if self.is_empty() {
             return Ok(file);
         }
+        if let Err(error) = self.validate() {
+            return Err(ReadError::BadOverride(error));
+        }
         let format = file.format;
+        let mut metadata = file.metadata;
+        if self.pitch_x.is_some() && self.pitch_y.is_some() {
+            metadata.remove(ASSUMED_SCALE_KEY);
+        }
+        if self.pixel_period.is_some() || self.line_time.is_some() {
+            metadata.remove(ASSUMED_TIMING_KEY);
+        }
         let pairs = file
             .pairs
             .into_iter()
@@ -93,6 +167,10 @@ impl GeometryOverrides {
             })
             .collect::<Result<Vec<_>, _>>()
             .map_err(|source| ReadError::geometry(format, source))?;
-        Ok(ScanFile { pairs, ..file })
+        Ok(ScanFile {
+            format,
+            pairs,
+            metadata,
+        })
     }
 }

@@ -50,7 +50,11 @@ use crate::bytes::checked_data_len;
 use crate::iso28600::parse_number;
 use crate::{ReadError, ScanFile};
 
-use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
+use crate::limits::{Budget, ReadLimits};
+use crate::placeholders::{
+    ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_PITCH_M,
+    PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD, note, plausible,
+};
 
 const FORMAT: FileFormat = FileFormat::NanonisSxm;
 const MAGIC: &[u8] = b":NANONIS_VERSION:";
@@ -76,6 +80,12 @@ struct ChannelInfo {
 
 /// Reads a Nanonis SXM file: one [`ScanPair`] per `DATA_INFO` row (see the module docs).
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]).
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let mut budget = Budget::new(limits, bytes.len())?;
     let body_start = if bytes.starts_with(b"\xEF\xBB\xBF") {
         3
     } else {
@@ -174,6 +184,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
             format!("{image_count} images of {columns} x {rows} px are too large"),
         )
     })?;
+    budget.charge_images(FORMAT, columns as u64, rows as u64, image_count, 0)?;
     let available = bytes.len().saturating_sub(data_start) as u64;
     if total > available {
         return Err(ReadError::Truncated {
@@ -206,6 +217,21 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
         })
     };
     let mut pairs = Vec::with_capacity(channels.len());
+    let mut metadata = metadata(&header);
+    if geometry.scale_source() == ValueSource::Assumed {
+        note(
+            &mut metadata,
+            ASSUMED_SCALE_KEY,
+            "no SCAN_RANGE in the header",
+        );
+    }
+    if geometry.timing_source() == ValueSource::Assumed {
+        note(
+            &mut metadata,
+            ASSUMED_TIMING_KEY,
+            "no SCAN_TIME in the header",
+        );
+    }
     for channel in &channels {
         let forward = match channel.directions {
             Directions::Forward | Directions::Both => Some(decode_image(
@@ -240,7 +266,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     Ok(ScanFile {
         format: FORMAT,
         pairs,
-        metadata: metadata(&header),
+        metadata,
     })
 }
 
@@ -300,11 +326,14 @@ fn build_geometry(
         Some(range) => {
             let (x, y) = parse_real_pair("SCAN_RANGE", range)?;
             let (px, py) = (x.abs() / columns as f64, y.abs() / rows as f64);
-            if !(px.is_finite() && px > 0.0 && py.is_finite() && py > 0.0) {
+            if !(plausible(px, &PLAUSIBLE_PITCH_M) && plausible(py, &PLAUSIBLE_PITCH_M)) {
                 return Err(ReadError::corrupt(
                     FORMAT,
                     format!(
-                        "SCAN_RANGE must be two non-zero lengths, got \"{}\"",
+                        "SCAN_RANGE must be two lengths giving a pixel pitch in {:e}..{:e} m, \
+                         got \"{}\"",
+                        PLAUSIBLE_PITCH_M.start(),
+                        PLAUSIBLE_PITCH_M.end(),
                         range.trim()
                     ),
                 ));
@@ -324,12 +353,15 @@ fn build_geometry(
                 .split_whitespace()
                 .next()
                 .and_then(parse_number)
-                .filter(|t| t.is_finite() && *t > 0.0)
+                .filter(|t| plausible(*t / columns as f64, &PLAUSIBLE_PIXEL_PERIOD_S))
                 .ok_or_else(|| {
                     ReadError::corrupt(
                         FORMAT,
                         format!(
-                            "SCAN_TIME must start with a positive time per line, got \"{}\"",
+                            "SCAN_TIME must start with a time per line giving a pixel period \
+                             in {:e}..{:e} s, got \"{}\"",
+                            PLAUSIBLE_PIXEL_PERIOD_S.start(),
+                            PLAUSIBLE_PIXEL_PERIOD_S.end(),
                             times.trim()
                         ),
                     )
@@ -349,6 +381,12 @@ fn build_geometry(
     )
     .map_err(geometry_error)?;
     if let Some(angle) = header.get("SCAN_ANGLE").and_then(parse_number) {
+        if !plausible(angle.to_radians(), &PLAUSIBLE_SCAN_ANGLE_RAD) {
+            return Err(ReadError::corrupt(
+                FORMAT,
+                format!("SCAN_ANGLE {angle} degrees lies beyond a full turn"),
+            ));
+        }
         geometry = geometry
             .with_scan_angle(angle.to_radians())
             .map_err(geometry_error)?;

@@ -22,7 +22,8 @@
 //!
 //! Decoder limits are set from the file length (a hostile header cannot make the decoder
 //! allocate more than [`DECODE_BUDGET_PER_BYTE`] bytes per file byte, at least 1 MiB and at
-//! most 1 GiB).
+//! most 1 GiB) and from the [`ReadLimits`] budget, which also counts the 8× larger `f64`
+//! copy of the samples: a 16 MB deflate bomb is refused before it is decoded.
 
 use std::collections::BTreeMap;
 use std::io::{Cursor, Write};
@@ -34,6 +35,8 @@ use ::tiff::encoder::{TiffEncoder, colortype};
 use ::tiff::tags::Tag;
 use dhct_scan::{FileFormat, ImageChannel, ScanPair};
 
+use crate::limits::{Budget, ReadLimits};
+use crate::placeholders::{ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY};
 use crate::{ReadError, ScanFile, WriteError};
 
 const FORMAT: FileFormat = FileFormat::Tiff;
@@ -149,6 +152,28 @@ pub fn write_u16<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<U16Scale
 
 /// Reads the first image of a grey-scale TIFF (see the module docs).
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// The decoder's explicit limits for a file of `len` bytes when `available` bytes of the
+/// read budget are left: the decoded buffer may be at most [`DECODE_BUDGET_PER_BYTE`] bytes
+/// per file byte (at least 1 MiB, at most 1 GiB) and never more than the budget.
+fn decoder_limits(len: usize, available: u64) -> Limits {
+    let budget = len
+        .saturating_mul(DECODE_BUDGET_PER_BYTE)
+        .clamp(1 << 20, 1 << 30)
+        .min(usize::try_from(available).unwrap_or(usize::MAX));
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = budget;
+    limits.intermediate_buffer_size = budget;
+    limits.ifd_value_size = len.clamp(1 << 10, 1 << 20);
+    limits
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]): the decoder gets explicit
+/// [`Limits`] and the image is charged to the budget twice, as the decoded samples and as
+/// their `f64` copy (8 bytes per pixel), before it is decoded.
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     if !(bytes.starts_with(b"II*\0")
         || bytes.starts_with(b"MM\0*")
         || bytes.starts_with(b"II+\0")
@@ -156,17 +181,12 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     {
         return Err(ReadError::wrong_format(FORMAT, "no TIFF byte-order mark"));
     }
-    let budget = bytes
-        .len()
-        .saturating_mul(DECODE_BUDGET_PER_BYTE)
-        .clamp(1 << 20, 1 << 30);
-    let mut limits = Limits::default();
-    limits.decoding_buffer_size = budget;
-    limits.intermediate_buffer_size = budget;
-    limits.ifd_value_size = bytes.len().clamp(1 << 10, 1 << 20);
+    let mut read_budget = Budget::new(limits, bytes.len())?;
+    let decoder_limits = decoder_limits(bytes.len(), read_budget.bytes_left());
+    let budget = decoder_limits.decoding_buffer_size;
     let mut decoder = Decoder::new(Cursor::new(bytes))
         .map_err(|e| read_error(e, bytes))?
-        .with_limits(limits);
+        .with_limits(decoder_limits);
     let (width, height) = decoder.dimensions().map_err(|e| read_error(e, bytes))?;
     if width == 0 || height == 0 {
         return Err(ReadError::NoImage {
@@ -201,6 +221,13 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
             ),
         ));
     }
+    read_budget.charge_images(
+        FORMAT,
+        u64::from(width),
+        u64::from(height),
+        1,
+        u64::from(bits / 8),
+    )?;
     let description = decoder
         .get_tag_ascii_string(Tag::ImageDescription)
         .ok()
@@ -255,6 +282,14 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
 
     let mut metadata = BTreeMap::new();
     metadata.insert("tiff sample bits".to_string(), bits.to_string());
+    metadata.insert(
+        ASSUMED_SCALE_KEY.to_string(),
+        "TIFF carries no scale".into(),
+    );
+    metadata.insert(
+        ASSUMED_TIMING_KEY.to_string(),
+        "TIFF carries no timing".into(),
+    );
     if more_pages {
         metadata.insert(
             "tiff pages".to_string(),

@@ -287,3 +287,50 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn corrupt_sizes_are_errors_and_missing_ones_reported_assumptions() {
+    // A present but corrupt XReal/YReal must not silently become 1 Å per pixel.
+    let base = "XRes = 2\nYRes = 1\n";
+    for (lines, key) in [
+        ("XReal = garbage\nYReal = 1e-9\n", "XReal"),
+        ("XReal = nan\nYReal = 1e-9\n", "XReal"),
+        ("XReal = 0\nYReal = 1e-9\n", "XReal"),
+        ("XReal = 1e300\nYReal = 1e-9\n", "XReal"),
+        ("XReal = 2e-9\nYReal = inf\n", "YReal"),
+        ("XReal = 2e-9\n", "XReal"),
+        (
+            "XReal = 2e-9\nYReal = 1e-9\nDHCT_PixelPeriod = 1e30\n",
+            "DHCT_PixelPeriod",
+        ),
+        (
+            "XReal = 2e-9\nYReal = 1e-9\nDHCT_ScanAngle = 1e300\n",
+            "DHCT_ScanAngle",
+        ),
+        (
+            "XReal = 2e-9\nYReal = 1e-9\nDHCT_TurnaroundTime = 1e9\n",
+            "DHCT_TurnaroundTime",
+        ),
+    ] {
+        let header = format!("{base}{lines}");
+        let file = gwyddion_file(&header, &[1.0, 2.0]);
+        let error = gsf::read(&file).expect_err(&header).to_string();
+        assert!(error.contains(key), "{header:?}: {error}");
+    }
+    // Missing sizes are assumed, and the assumption is recorded and reported.
+    let scan = gsf::read(&gwyddion_file("XRes = 2\nYRes = 1\n", &[1.0, 2.0])).unwrap();
+    let g = scan.pairs[0].geometry();
+    assert_eq!(g.scale_source(), ValueSource::Assumed);
+    assert!(scan.metadata[dhct_sm4_io::ASSUMED_SCALE_KEY].contains("XReal"));
+    let warnings = dhct_sm4_io::assumption_warnings(Some(&scan), g);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("pitch") && w.contains("XReal")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings.iter().any(|w| w.contains("timing")),
+        "{warnings:?}"
+    );
+}

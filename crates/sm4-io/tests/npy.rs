@@ -154,10 +154,15 @@ fn rejects_shapes_that_are_not_2d_and_unsupported_dtypes() {
             "shape {shape}"
         );
     }
-    for descr in ["<f2", "<c16", "|b1", "<U3", "|O", "<f16", "f"] {
+    for descr in ["<f2", "<c16", "<b2", "<U3", "|O", "<f16", "f"] {
         let file = npy_file(1, &dict(descr, false, "(2, 3)"), &[0u8; 96]);
         assert!(npy::read(&file).is_err(), "dtype {descr}");
     }
+    // NumPy bool arrays (e.g. masks) read as 0 and 1.
+    let file = npy_file(1, &dict("|b1", false, "(2, 3)"), &[0, 1, 2, 0, 0, 255]);
+    let scan = npy::read(&file).expect("bool array");
+    let z: Vec<f64> = scan.pairs[0].trace().unwrap().z.iter().copied().collect();
+    assert_eq!(z, [0.0, 1.0, 1.0, 0.0, 0.0, 1.0]);
     let structured =
         "{'descr': [('x', '<f8'), ('y', '<f8')], 'fortran_order': False, 'shape': (2, 3), }";
     assert!(matches!(

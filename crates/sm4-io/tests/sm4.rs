@@ -790,3 +790,77 @@ fn sm3_truncations_and_mutations_are_errors_not_panics() {
         let _ = sm4::sm3::read(&mutated);
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// Unusable or disagreeing pixel periods: reported, never silent, and the retrace is kept
+
+fn patch_f32(bytes: &mut [u8], at: usize, value: f32) {
+    bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+}
+
+/// A trace/retrace file whose two page headers state `trace` and `retrace` seconds per pixel.
+fn file_with_periods(trace: f32, retrace: f32) -> Vec<u8> {
+    let mut bytes = small_file();
+    let u32_at =
+        |bytes: &[u8], at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+    let first_header = u32_at(&bytes, 98 + 36) as usize;
+    let second_header = u32_at(&bytes, 98 + 56 + 36) as usize;
+    patch_f32(&mut bytes, first_header + 84, trace);
+    patch_f32(&mut bytes, second_header + 84, retrace);
+    bytes
+}
+
+#[test]
+fn unusable_or_disagreeing_periods_are_reported_and_keep_the_retrace() {
+    let good = 1.51e-3_f32;
+    let cases: [(f32, f32, f64); 7] = [
+        (f32::NAN, f32::NAN, dhct_sm4_io::ASSUMED_PIXEL_PERIOD),
+        (0.0, 0.0, dhct_sm4_io::ASSUMED_PIXEL_PERIOD),
+        (-1e-3, -1e-3, dhct_sm4_io::ASSUMED_PIXEL_PERIOD),
+        (1e30, 1e30, dhct_sm4_io::ASSUMED_PIXEL_PERIOD),
+        (good, f32::NAN, f64::from(good)),
+        (f32::NAN, good, f64::from(good)),
+        (good, 10.0 * good, f64::from(good)),
+    ];
+    for (trace, retrace, expected) in cases {
+        let file = sm4::read(&file_with_periods(trace, retrace)).expect("still readable");
+        assert_eq!(file.pairs.len(), 1, "{trace} / {retrace}: pages not paired");
+        let pair = &file.pairs[0];
+        assert!(
+            pair.retrace().is_some(),
+            "{trace} / {retrace}: retrace dropped"
+        );
+        let g = pair.geometry();
+        assert_eq!(
+            g.timing_source(),
+            ValueSource::Assumed,
+            "{trace} / {retrace}"
+        );
+        assert_close("period", g.pixel_period(), expected, 1e-6);
+        let note = &file.metadata[dhct_sm4_io::ASSUMED_TIMING_KEY];
+        assert!(note.contains("s per pixel"), "{note}");
+        let warnings = dhct_sm4_io::assumption_warnings(Some(&file), g);
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.contains("timing") && w.contains(note)),
+            "{warnings:?}"
+        );
+    }
+    // Agreeing, usable periods: stated, no warning.
+    let file = sm4::read(&file_with_periods(good, good)).unwrap();
+    let g = file.pairs[0].geometry();
+    assert_eq!(g.timing_source(), ValueSource::Stated);
+    assert!(dhct_sm4_io::assumption_warnings(Some(&file), g).is_empty());
+    // A user-given period replaces the assumption and its note.
+    let overrides = dhct_sm4_io::GeometryOverrides {
+        pixel_period: Some(2e-3),
+        ..Default::default()
+    };
+    let file = overrides
+        .apply_to_file(sm4::read(&file_with_periods(f32::NAN, f32::NAN)).unwrap())
+        .unwrap();
+    let g = file.pairs[0].geometry();
+    assert_eq!(g.timing_source(), ValueSource::Stated);
+    assert!(dhct_sm4_io::assumption_warnings(Some(&file), g).is_empty());
+}

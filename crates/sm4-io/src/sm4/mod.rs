@@ -56,15 +56,22 @@
 //!   stored in acquisition order, so it is `Down` for a negative y scale (stored line 0 at the
 //!   top) and `Up` for a positive one; for a vertical fast axis `Left`/`Right` from the sign of
 //!   the x scale.
-//! * Pairs: two image pages of one channel (label, unit, page type, size, scales, period)
+//! * Pairs: two image pages of one channel (label, unit, page type, size, scales)
 //!   with opposite scan directions form a [`dhct_scan::ScanPair`]; the earlier page is the
 //!   trace. A lone page is a trace if it runs Right or Down (RHK "forward"), else a retrace.
+//!   Pages whose periods differ (one NaN, or ten times the other) are still paired: the
+//!   usable period is taken (the trace's if both are), the timing is marked assumed and
+//!   both values are recorded under [`crate::ASSUMED_TIMING_KEY`].
 //! * Pixel pitch `|x scale|`, `|y scale|` (x/y units, normally "m"); pixel period = period;
 //!   scan angle = angle converted to radians (sign passed through as stored); offset = x/y
-//!   offset. Turnaround time is not in the file: 0. A zero or non-finite scale or period, or
-//!   non-length x/y units, give [`crate::ASSUMED_PITCH`] / [`crate::ASSUMED_PIXEL_PERIOD`] marked
-//!   [`dhct_scan::ValueSource::Assumed`]; an unknown scan direction code gives `Right` with
-//!   the timing marked assumed.
+//!   offset. Turnaround time is not in the file: 0. A scale or period that is zero,
+//!   negative, non-finite or outside [`crate::PLAUSIBLE_PITCH_M`] /
+//!   [`crate::PLAUSIBLE_PIXEL_PERIOD_S`], or non-length x/y units, give [`crate::ASSUMED_PITCH`] /
+//!   [`crate::ASSUMED_PIXEL_PERIOD`] marked [`dhct_scan::ValueSource::Assumed`], with the
+//!   reason in the metadata keys [`crate::ASSUMED_SCALE_KEY`] / [`crate::ASSUMED_TIMING_KEY`]
+//!   (`dhct info` shows them; `dhct correct` warns); an unknown scan direction code gives
+//!   `Right` with the timing marked assumed; a non-finite scan angle or one beyond a full
+//!   turn gives 0 (noted under `assumed scan angle`).
 //! * Metadata (from the first image page): `signature`, `date` (ISO), `time`, `bias` (V),
 //!   `current` (A), `system text`, `session text`, `user text`, `path`, `image pages`,
 //!   `skipped pages`.
@@ -94,7 +101,12 @@ use crate::{ReadError, ScanFile, WriteError};
 
 /// Reads an SM4 file from memory: one [`dhct_scan::ScanPair`] per image channel.
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
-    read::read(bytes)
+    read::read(bytes, &crate::ReadLimits::default())
+}
+
+/// [`read()`] under `limits` (see [`crate::limits`]).
+pub fn read_limited(bytes: &[u8], limits: &crate::ReadLimits) -> Result<ScanFile, ReadError> {
+    read::read(bytes, limits)
 }
 
 /// Writes `file` as SM4: per pair a trace page then a retrace page (whichever exist).

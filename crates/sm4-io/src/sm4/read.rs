@@ -14,10 +14,18 @@ use super::layout::{
 };
 use super::orientation::{Orientation, slow_direction};
 use super::units::{length_factor, si_unit};
-use crate::ReadError;
 use crate::bytes::{ByteReader, checked_data_len};
+use crate::limits::{Budget, ReadLimits};
+use crate::placeholders::{
+    ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_PITCH_M, PLAUSIBLE_PIXEL_PERIOD_S,
+    PLAUSIBLE_SCAN_ANGLE_RAD, note, plausible,
+};
+use crate::{GeometryOverrides, ReadError};
 
 const FORMAT: FileFormat = FileFormat::RhkSm4;
+
+/// Metadata key listing why a page's scan angle was replaced by 0.
+const ASSUMED_ANGLE_KEY: &str = "assumed scan angle";
 
 use crate::placeholders::{ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD};
 
@@ -42,13 +50,13 @@ fn find(objects: &[Object], kind: u32) -> Option<Object> {
 /// Bounds the total bytes the parser may visit to a small multiple of the file size, so a
 /// hostile file whose pages all point at the same large object cannot make us allocate or
 /// loop far beyond its own size.
-struct Budget {
+struct VisitBudget {
     remaining: u64,
 }
 
-impl Budget {
-    fn new(file_len: usize) -> Budget {
-        Budget {
+impl VisitBudget {
+    fn new(file_len: usize) -> VisitBudget {
+        VisitBudget {
             remaining: (file_len as u64).saturating_mul(2).saturating_add(1 << 20),
         }
     }
@@ -117,6 +125,8 @@ pub(super) struct ImagePage {
     key: PairKey,
     strings: Vec<String>,
     header: PageHeader,
+    /// Why values of this page were assumed: (metadata key, reason).
+    notes: Vec<(&'static str, String)>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
@@ -128,14 +138,15 @@ struct PairKey {
     y_size: u32,
     x_scale_bits: u32,
     y_scale_bits: u32,
-    period_bits: u32,
 }
 
 struct Parser<'a> {
     reader: ByteReader<'a>,
     /// Bytes per object list entry (the file header's "object field size", normally 12).
     stride: u64,
-    budget: Budget,
+    budget: VisitBudget,
+    /// Pixels and decoded bytes (see [`crate::limits`]).
+    images: crate::limits::Budget,
 }
 
 impl Parser<'_> {
@@ -309,7 +320,7 @@ impl Parser<'_> {
         let what = format!("page {number} data");
         let raw = self.reader.slice_at(data_object.offset, expected, &what)?;
         self.budget.spend(expected, &what)?;
-        decode_image(number, header, strings, raw)
+        decode_image(number, header, strings, raw, &mut self.images)
     }
 }
 
@@ -320,6 +331,7 @@ pub(super) fn decode_image(
     header: PageHeader,
     strings: Vec<String>,
     raw: &[u8],
+    images: &mut Budget,
 ) -> Result<ImagePage, ReadError> {
     let text = |k: usize| strings.get(k).map(|s| s.trim()).unwrap_or("");
     let (columns, rows) = (header.x_size, header.y_size);
@@ -332,6 +344,7 @@ pub(super) fn decode_image(
             raw.len()
         )));
     }
+    images.charge_images(FORMAT, u64::from(columns), u64::from(rows), 1, 0)?;
     let (z_factor, unit) = si_unit(text(string::Z_UNITS));
     let (columns, rows) = (columns as usize, rows as usize);
     let x_scale = f64::from(header.x_scale);
@@ -360,14 +373,24 @@ pub(super) fn decode_image(
         None => (ScanDirection::Right, false),
     };
     let slow = slow_direction(fast, x_scale, y_scale);
+    let mut notes = Vec::new();
+    if !direction_known {
+        notes.push((
+            ASSUMED_TIMING_KEY,
+            format!(
+                "page {number}: unknown scan direction code {}, Right assumed",
+                header.scan_dir
+            ),
+        ));
+    }
     let geometry = page_geometry(
+        number,
         &header,
         &strings,
-        columns,
-        rows,
-        fast,
-        slow,
+        (columns, rows),
+        (fast, slow),
         direction_known,
+        &mut notes,
     )?;
     blank_incomplete_lines(&mut z, &geometry, text(string::COMPLETED_LINE_COUNT));
 
@@ -383,7 +406,6 @@ pub(super) fn decode_image(
         y_size: header.y_size,
         x_scale_bits: header.x_scale.abs().to_bits(),
         y_scale_bits: header.y_scale.abs().to_bits(),
-        period_bits: header.period.to_bits(),
     };
     Ok(ImagePage {
         number,
@@ -393,43 +415,84 @@ pub(super) fn decode_image(
         key,
         strings,
         header,
+        notes,
     })
 }
 
 /// The scan geometry of one page (see the module docs for the conventions).
+///
+/// A scale or period that is not finite, not positive or outside the plausible ranges of
+/// `crate::PLAUSIBLE_*` becomes the placeholder, marked assumed, with the reason pushed
+/// to `notes`; so does a scan angle beyond one full turn (0 is used).
 fn page_geometry(
+    number: u32,
     header: &PageHeader,
     strings: &[String],
-    columns: usize,
-    rows: usize,
-    fast: ScanDirection,
-    slow: ScanDirection,
+    (columns, rows): (usize, usize),
+    (fast, slow): (ScanDirection, ScanDirection),
     direction_known: bool,
+    notes: &mut Vec<(&'static str, String)>,
 ) -> Result<ScanGeometry, ReadError> {
     let text = |k: usize| strings.get(k).map(|s| s.trim()).unwrap_or("");
     // Lateral units: metres normally; anything else leaves the pitch unknown.
     let x_factor = length_factor(text(string::X_UNITS));
     let y_factor = length_factor(text(string::Y_UNITS));
     let mut scale_stated = x_factor.is_some() && y_factor.is_some();
-    let mut pitch = |scale: f32, factor: Option<f64>| {
+    if !scale_stated {
+        notes.push((
+            ASSUMED_SCALE_KEY,
+            format!(
+                "page {number}: x/y units \"{}\"/\"{}\" are not lengths",
+                text(string::X_UNITS),
+                text(string::Y_UNITS)
+            ),
+        ));
+    }
+    let mut pitch = |axis: &str, scale: f32, factor: Option<f64>| {
         let value = f64::from(scale).abs() * factor.unwrap_or(1.0);
-        if value.is_finite() && value > 0.0 {
+        if plausible(value, &PLAUSIBLE_PITCH_M) {
             value
         } else {
             scale_stated = false;
+            notes.push((
+                ASSUMED_SCALE_KEY,
+                format!("page {number}: {axis} scale {scale} is not a usable pixel pitch"),
+            ));
             ASSUMED_PITCH
         }
     };
-    let pitch_x = pitch(header.x_scale, x_factor);
-    let pitch_y = pitch(header.y_scale, y_factor);
+    let pitch_x = pitch("x", header.x_scale, x_factor);
+    let pitch_y = pitch("y", header.y_scale, y_factor);
     let period = f64::from(header.period);
-    let (period, period_stated) = if period.is_finite() && period > 0.0 {
-        (period, true)
+    let period_stated = plausible(period, &PLAUSIBLE_PIXEL_PERIOD_S);
+    if !period_stated {
+        notes.push((
+            ASSUMED_TIMING_KEY,
+            format!(
+                "page {number}: period {period} s per pixel is unusable, \
+                 {ASSUMED_PIXEL_PERIOD} s assumed"
+            ),
+        ));
+    }
+    let period = if period_stated {
+        period
     } else {
-        (ASSUMED_PIXEL_PERIOD, false)
+        ASSUMED_PIXEL_PERIOD
     };
     let finite_or_zero = |v: f64| if v.is_finite() { v } else { 0.0 };
-    let angle = finite_or_zero(f64::from(header.angle).to_radians());
+    let angle = f64::from(header.angle).to_radians();
+    let angle = if plausible(angle, &PLAUSIBLE_SCAN_ANGLE_RAD) {
+        angle
+    } else {
+        notes.push((
+            ASSUMED_ANGLE_KEY,
+            format!(
+                "page {number}: scan angle {} degrees is unusable, 0 assumed",
+                header.angle
+            ),
+        ));
+        0.0
+    };
     let offset_x = finite_or_zero(f64::from(header.x_offset) * x_factor.unwrap_or(1.0));
     let offset_y = finite_or_zero(f64::from(header.y_offset) * y_factor.unwrap_or(1.0));
     let source = |stated: bool| {
@@ -487,7 +550,7 @@ pub(super) fn decode_utf16(bytes: &[u8]) -> String {
 }
 
 /// Reads a whole SM4 file. See [`crate::sm4`] for the layout and conventions.
-pub(crate) fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+pub(crate) fn read(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     if !super::looks_like_sm4(bytes) {
         return Err(ReadError::wrong_format(
             FORMAT,
@@ -518,7 +581,8 @@ pub(crate) fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     let mut parser = Parser {
         reader,
         stride: u64::from(object_field_size),
-        budget: Budget::new(bytes.len()),
+        budget: VisitBudget::new(bytes.len()),
+        images: Budget::new(limits, bytes.len())?,
     };
     let file_objects = parser.objects(
         2 + u64::from(header_size),
@@ -573,7 +637,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     if !skipped.is_empty() {
         metadata.insert("skipped pages".to_string(), skipped.join(", "));
     }
-    let pairs = pair_pages(pages)?;
+    let pairs = pair_pages(pages, &mut metadata)?;
     Ok(ScanFile {
         format: FORMAT,
         pairs,
@@ -582,10 +646,19 @@ pub(crate) fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
 }
 
 /// Groups pages into trace/retrace pairs: two pages of the same channel (label, unit, type,
-/// size, scales, period) with opposite fast directions. The earlier page in the file is the
+/// size, scales) with opposite fast directions. The earlier page in the file is the
 /// trace. A page without a partner is a trace if it runs Right or Down (RHK's "forward"),
-/// else a retrace.
-pub(super) fn pair_pages(pages: Vec<ImagePage>) -> Result<Vec<ScanPair>, ReadError> {
+/// else a retrace. Every page's assumptions are noted in `metadata`; so is a pair whose
+/// pages state different pixel periods (see [`reconcile_timing`]), which is still paired.
+pub(super) fn pair_pages(
+    pages: Vec<ImagePage>,
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<Vec<ScanPair>, ReadError> {
+    for page in &pages {
+        for (key, text) in &page.notes {
+            note(metadata, key, text.clone());
+        }
+    }
     let mut partner: Vec<Option<usize>> = vec![None; pages.len()];
     let mut is_retrace = vec![false; pages.len()];
     let mut waiting: HashMap<(PairKey, ScanDirection), VecDeque<usize>> = HashMap::new();
@@ -622,7 +695,10 @@ pub(super) fn pair_pages(pages: Vec<ImagePage>) -> Result<Vec<ScanPair>, ReadErr
             .flatten()
             .and_then(|j| slots.get_mut(j).and_then(Option::take));
         let pair = match second {
-            Some(retrace) => ScanPair::new(first.geometry, first.channel, Some(retrace.channel)),
+            Some(retrace) => {
+                let geometry = reconcile_timing(&first, &retrace, metadata)?;
+                ScanPair::new(geometry, first.channel, Some(retrace.channel))
+            }
             None if first.fast.is_increasing() => {
                 ScanPair::new(first.geometry, first.channel, None)
             }
@@ -631,6 +707,47 @@ pub(super) fn pair_pages(pages: Vec<ImagePage>) -> Result<Vec<ScanPair>, ReadErr
         pairs.push(pair.map_err(|e| ReadError::geometry(FORMAT, e))?);
     }
     Ok(pairs)
+}
+
+/// The geometry of a trace/retrace pair whose pages may state different pixel periods.
+/// Equal periods: the trace's geometry. Otherwise the usable one (the trace's when both
+/// are usable, e.g. one ×10 the other), with the timing marked assumed and both values
+/// noted in `metadata`, so the choice is reported (as a warning by
+/// [`crate::assumption_warnings`]) rather than silent.
+fn reconcile_timing(
+    trace: &ImagePage,
+    retrace: &ImagePage,
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<ScanGeometry, ReadError> {
+    let (a, b) = (trace.header.period, retrace.header.period);
+    if a.to_bits() == b.to_bits() {
+        return Ok(trace.geometry.clone());
+    }
+    let usable = |p: f32| plausible(f64::from(p), &PLAUSIBLE_PIXEL_PERIOD_S);
+    let use_retrace = !usable(a) && usable(b);
+    note(
+        metadata,
+        ASSUMED_TIMING_KEY,
+        format!(
+            "the trace page {} states {a} s per pixel but the retrace page {} states {b} s; \
+             the {}'s is used",
+            trace.number,
+            retrace.number,
+            if use_retrace { "retrace" } else { "trace" }
+        ),
+    );
+    let geometry = if use_retrace {
+        let overrides = GeometryOverrides {
+            pixel_period: Some(f64::from(b)),
+            ..GeometryOverrides::default()
+        };
+        overrides
+            .apply(&trace.geometry)
+            .map_err(|e| ReadError::geometry(FORMAT, e))?
+    } else {
+        trace.geometry.clone()
+    };
+    Ok(geometry.with_timing_source(ValueSource::Assumed))
 }
 
 /// A lone Left- or Up-running page: a retrace whose trace would have run the other way.

@@ -28,6 +28,7 @@ use super::layout::string;
 use super::read::{PageHeader, decode_image, decode_utf16, file_metadata, pair_pages};
 use crate::ReadError;
 use crate::bytes::{ByteReader, checked_data_len};
+use crate::limits::{Budget, ReadLimits};
 
 const FORMAT: FileFormat = FileFormat::RhkSm3;
 
@@ -60,6 +61,12 @@ fn corrupt(reason: impl Into<String>) -> ReadError {
 
 /// Reads an SM3 file: one [`dhct_scan::ScanPair`] per image channel; line pages are skipped.
 pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
+    read_limited(bytes, &ReadLimits::default())
+}
+
+/// [`read`] under `limits` (see [`crate::limits`]).
+pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
+    let mut images = Budget::new(limits, bytes.len())?;
     if !looks_like_sm3(bytes) {
         return Err(ReadError::wrong_format(
             FORMAT,
@@ -148,7 +155,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
                 angle,
                 objects: Vec::new(),
             };
-            pages.push(decode_image(number, header, strings, raw)?);
+            pages.push(decode_image(number, header, strings, raw, &mut images)?);
         } else {
             skipped.push(format!("{number} (data type {data_type})"));
         }
@@ -170,7 +177,7 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
     }
     Ok(ScanFile {
         format: FORMAT,
-        pairs: pair_pages(pages)?,
+        pairs: pair_pages(pages, &mut metadata)?,
         metadata,
     })
 }
