@@ -85,37 +85,12 @@ impl<T: FftNum + Float> Correlator<T> {
 
     /// 2-D spectrum of a zero-padded real array (rows first, then columns), column-major.
     fn forward(&self, source: ArrayView2<f64>) -> Vec<Complex<T>> {
-        let (ph, pw) = self.padded;
-        let spectrum_width = pw / 2 + 1;
-        let (rows, cols) = source.dim();
-        // Row spectra, row-major, then transposed so column transforms are contiguous.
-        let mut row_major = vec![Complex::new(T::zero(), T::zero()); rows * spectrum_width];
-        row_major
-            .par_chunks_mut(spectrum_width)
-            .enumerate()
-            .for_each_init(
-                || self.row_forward.make_input_vec(),
-                |input, (r, output)| {
-                    input.iter_mut().for_each(|v| *v = T::zero());
-                    for (c, value) in input.iter_mut().enumerate().take(cols) {
-                        *value = T::from_f64(source[[r, c]]).unwrap_or_else(T::nan);
-                    }
-                    self.row_forward
-                        .process(input, output)
-                        .expect("buffer sizes come from the plan");
-                },
-            );
-        let mut column_major = vec![Complex::new(T::zero(), T::zero()); ph * spectrum_width];
-        column_major
-            .par_chunks_mut(ph)
-            .enumerate()
-            .for_each(|(k, column)| {
-                for r in 0..rows {
-                    column[r] = row_major[r * spectrum_width + k];
-                }
-                self.column_forward.process(column);
-            });
-        column_major
+        forward_spectrum(
+            source,
+            self.padded,
+            self.row_forward.as_ref(),
+            self.column_forward.as_ref(),
+        )
     }
 
     /// Correlates an image of the planned size with the kernel.
@@ -170,6 +145,90 @@ impl<T: FftNum + Float> Correlator<T> {
         );
         Array2::from_shape_vec((self.height, self.width), values)
             .expect("the buffer has height x width values")
+    }
+}
+
+/// 2-D spectrum of `source` zero-padded to `padded = (ph, pw)`: real FFT along rows, complex
+/// FFT along columns; column-major (`pw/2+1` columns of `ph` values).
+fn forward_spectrum<T: FftNum + Float>(
+    source: ArrayView2<f64>,
+    padded: (usize, usize),
+    row_forward: &dyn RealToComplex<T>,
+    column_forward: &dyn Fft<T>,
+) -> Vec<Complex<T>> {
+    let (ph, pw) = padded;
+    let spectrum_width = pw / 2 + 1;
+    let (rows, cols) = source.dim();
+    // Row spectra, row-major, then transposed so column transforms are contiguous.
+    let mut row_major = vec![Complex::new(T::zero(), T::zero()); rows * spectrum_width];
+    row_major
+        .par_chunks_mut(spectrum_width)
+        .enumerate()
+        .for_each_init(
+            || row_forward.make_input_vec(),
+            |input, (r, output)| {
+                input.iter_mut().for_each(|v| *v = T::zero());
+                for (c, value) in input.iter_mut().enumerate().take(cols) {
+                    *value = T::from_f64(source[[r, c]]).unwrap_or_else(T::nan);
+                }
+                row_forward
+                    .process(input, output)
+                    .expect("buffer sizes come from the plan");
+            },
+        );
+    let mut column_major = vec![Complex::new(T::zero(), T::zero()); ph * spectrum_width];
+    column_major
+        .par_chunks_mut(ph)
+        .enumerate()
+        .for_each(|(k, column)| {
+            for r in 0..rows {
+                column[r] = row_major[r * spectrum_width + k];
+            }
+            column_forward.process(column);
+        });
+    column_major
+}
+
+/// The 2-D spectrum of a real image (no padding beyond fast FFT sizes): `F(ky, kx)` for
+/// `kx` in `0..=columns/2` and `ky` in `0..rows` (negative `ky` wrap to `rows + ky`).
+#[derive(Debug, Clone)]
+pub struct RealSpectrum {
+    /// FFT size along the rows of the image (y, number of `ky` bins).
+    pub rows: usize,
+    /// FFT size along the columns of the image (x); `columns/2 + 1` `kx` bins are kept.
+    pub columns: usize,
+    /// Column-major values: `values[kx * rows + ky]`.
+    pub values: Vec<Complex<f64>>,
+}
+
+impl RealSpectrum {
+    /// The spectrum of `image` zero-padded to `(rows, columns)` (each at least the image's).
+    pub fn of(image: ArrayView2<f64>, rows: usize, columns: usize) -> RealSpectrum {
+        let (h, w) = image.dim();
+        let (rows, columns) = (rows.max(h), columns.max(w));
+        let row_forward = RealFftPlanner::<f64>::new().plan_fft_forward(columns);
+        let column_forward = FftPlanner::<f64>::new().plan_fft_forward(rows);
+        let values = forward_spectrum(
+            image,
+            (rows, columns),
+            row_forward.as_ref(),
+            column_forward.as_ref(),
+        );
+        RealSpectrum {
+            rows,
+            columns,
+            values,
+        }
+    }
+
+    /// The fast FFT size (prime factors ≤ 7) of at least `minimum` samples.
+    pub fn fast_size(minimum: usize) -> usize {
+        fast_fft_size(minimum)
+    }
+
+    /// `F` at `kx` in `0..=columns/2`, `ky` in `0..rows`.
+    pub fn at(&self, kx: usize, ky: usize) -> Complex<f64> {
+        self.values[kx * self.rows + ky]
     }
 }
 

@@ -46,7 +46,7 @@ mod options;
 mod preprocess;
 mod watershed;
 
-pub use correlate::{Correlator, correlate_same};
+pub use correlate::{Correlator, RealSpectrum, correlate_same};
 pub use error::FeatureError;
 pub use feature::{
     CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,

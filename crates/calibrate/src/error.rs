@@ -1,0 +1,67 @@
+//! Why a lattice could not be measured, or why the inputs cannot describe the image.
+
+use thiserror::Error;
+
+use crate::{ImageLattice, LatticeMatch};
+
+/// Errors of [`crate::measure_lattice`] and [`crate::check_inputs`].
+///
+/// The variants carry the measured values so that a caller (e.g. a command line) can say
+/// which of its own options to change; the messages speak only of lattices and images.
+#[derive(Debug, Error)]
+pub enum CalibrationError {
+    /// The image is too small or has no finite pixels.
+    #[error(
+        "the image is too small for a Fourier analysis ({columns} x {rows} px, at least 16 x 16 needed)"
+    )]
+    ImageTooSmall { columns: usize, rows: usize },
+    /// The pixel size is not a positive finite length.
+    #[error("the pixel size {pitch_x:e} x {pitch_y:e} m is not a positive length")]
+    BadPitch { pitch_x: f64, pitch_y: f64 },
+    /// No two independent periodicities stand out of the image's power spectrum.
+    #[error("no lattice is visible in the image's Fourier transform: {reason}")]
+    NoLattice { reason: String },
+    /// The image's lattice has the wrong symmetry for the lattice given.
+    #[error("the image shows {shows}; the {lattice} lattice cannot match it: {evidence}")]
+    WrongLatticeType {
+        /// What the image shows, in words (cell vectors, angle, in file units).
+        shows: String,
+        /// The lattice given.
+        lattice: String,
+        /// Why not, with the numbers.
+        evidence: String,
+        /// The measurement.
+        measured: Box<ImageLattice>,
+        /// The best match found (for its numbers).
+        best: Box<LatticeMatch>,
+    },
+    /// The image's lattice is the right kind but of another size than the lattice given,
+    /// beyond what a miscalibrated pixel size is allowed to explain.
+    #[error(
+        "the image shows {shows}, i.e. the {lattice} lattice's nearest-neighbour distance is \
+         {measured_nn:.4e} m ± {measured_nn_sigma:.1e} in file units; {given_nn:.4e} m cannot \
+         match it: the file's pixel size would be wrong by a factor {ratio:.3} (at most \
+         {tolerance:.0} % is accepted)",
+        measured_nn = measured_nn_m,
+        measured_nn_sigma = measured_nn_sigma_m,
+        given_nn = given_nn_m,
+        ratio = factor,
+        tolerance = 100.0 * tolerance
+    )]
+    WrongScale {
+        /// What the image shows, in words.
+        shows: String,
+        /// The lattice given.
+        lattice: String,
+        /// The lattice's nearest-neighbour distance as given, metres.
+        given_nn_m: f64,
+        /// The nearest-neighbour distance the image shows in file units, metres.
+        measured_nn_m: f64,
+        /// Its 1σ uncertainty, metres.
+        measured_nn_sigma_m: f64,
+        /// `measured / given`: the factor by which the file's pixel size would be wrong.
+        factor: f64,
+        /// The largest relative pixel-size error accepted.
+        tolerance: f64,
+    },
+}

@@ -1,0 +1,130 @@
+//! The lattice an STM image shows, measured from the image itself, before any feature is
+//! found: the peaks of its power spectrum give two cell vectors in the file's units (with
+//! uncertainties), for trace and retrace.
+//!
+//! Matched to the lattice the user named ([`match_lattice`]), they give the calibration
+//! of the file's frame (x and y scale, shear; [`Calibration`]) — the lattice is the internal
+//! standard, the file's pixel size may be off by tens of percent and differently per axis —
+//! and show when the lattice or its constant cannot be what the image shows
+//! ([`check_inputs`]): a square lattice on a hexagonal image, a constant that would need
+//! the pixel size to be wrong by ×2. The global affine map `K⁻¹` is also the floor that a
+//! full drift model must beat.
+//!
+//! ```
+//! use dhct_calibrate::{CheckOptions, calibrate_pair};
+//! use dhct_lattice::{Hexagonal, Square};
+//! use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPair};
+//! use ndarray::Array2;
+//!
+//! // A hexagonal lattice (a = 10 px) on a 128² image whose file says 1 Å per pixel, while
+//! // the truth is 1.2 Å along x: the lattice looks 1/1.2 as long along x.
+//! let geometry = ScanGeometry::new(128, 128, 1e-10, 1e-10, 1e-4,
+//!                                  ScanDirection::Right, ScanDirection::Down).unwrap();
+//! let z = Array2::from_shape_fn((128, 128), |(r, c)| {
+//!     let (x, y) = (c as f64 * 1.2, r as f64);
+//!     (0..3).map(|k| {
+//!         let t = std::f64::consts::PI / 3.0 * k as f64 + std::f64::consts::FRAC_PI_2;
+//!         let g = 2.0 * std::f64::consts::PI / (10.0 * 3f64.sqrt() / 2.0);
+//!         (g * (x * t.cos() + y * t.sin())).cos()
+//!     }).sum::<f64>()
+//! });
+//! let pair = ScanPair::new(geometry, ImageChannel::new("Z", "m", z), None).unwrap();
+//! let lattice = Hexagonal::new("hexagonal", 1e-9, dhct_lattice::PlaneGroup::P6mm).unwrap();
+//! let found = calibrate_pair(&pair, &lattice, None, &CheckOptions::default()).unwrap();
+//! let c = found.calibration;
+//! assert!((c.scale[0] - 1.0 / 1.2).abs() < 0.01 && (c.scale[1] - 1.0).abs() < 0.01);
+//! // A square lattice cannot be what this image shows.
+//! let square = Square::new(1e-9).unwrap();
+//! assert!(calibrate_pair(&pair, &square, None, &CheckOptions::default()).is_err());
+//! ```
+
+mod basis;
+mod check;
+mod error;
+mod matching;
+mod measure;
+mod spectrum;
+
+pub use check::{CheckOptions, check_inputs};
+pub use error::CalibrationError;
+pub use matching::{Calibration, LatticeMatch, ShellCheck, match_lattice};
+pub use measure::{
+    ImageLattice, LatticeMeasurement, LatticeShape, Reflection, length, measure_lattice,
+};
+pub use spectrum::{Peak, PowerSpectrum};
+
+use dhct_lattice::Lattice;
+use dhct_scan::{ScanPair, ScanPass};
+use ndarray::Array2;
+use serde::{Deserialize, Serialize};
+
+/// One image's lattice and its match.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PassCalibration {
+    /// Trace or retrace.
+    pub pass: ScanPass,
+    /// What the image shows, in file units.
+    pub lattice: ImageLattice,
+    /// Matched to the lattice given.
+    pub matched: LatticeMatch,
+}
+
+/// The calibration of a scan pair.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PairCalibration {
+    /// Per image (the trace first; the retrace when its lattice could be measured).
+    pub passes: Vec<PassCalibration>,
+    /// The images' calibrations combined (inverse-variance weighted).
+    pub calibration: Calibration,
+}
+
+/// Measures the lattice of the trace (and retrace) of `pair` inside `mask`, matches it to
+/// `lattice` and checks it against `options`. The trace decides: its failure is the error;
+/// a retrace whose lattice cannot be measured is left out.
+pub fn calibrate_pair(
+    pair: &ScanPair,
+    lattice: &dyn Lattice,
+    mask: Option<&Array2<bool>>,
+    options: &CheckOptions,
+) -> Result<PairCalibration, CalibrationError> {
+    let geometry = pair.geometry();
+    let measure = |pass: ScanPass| {
+        pair.image(pass)
+            .map(|image| measure_lattice(image.z.view(), geometry, mask))
+    };
+    let (trace, retrace) = rayon::join(|| measure(ScanPass::Trace), || measure(ScanPass::Retrace));
+    let trace = trace.ok_or_else(|| CalibrationError::NoLattice {
+        reason: "the scan has no trace image".into(),
+    })??;
+    let mut passes = Vec::new();
+    for (pass, measurement) in [(ScanPass::Trace, Some(trace))].into_iter().chain(
+        retrace
+            .and_then(Result::ok)
+            .map(|m| (ScanPass::Retrace, Some(m))),
+    ) {
+        let Some(measurement) = measurement else {
+            continue;
+        };
+        let matched = match_lattice(&measurement, lattice);
+        if pass == ScanPass::Trace {
+            check_inputs(&measurement, &matched, options)?;
+        } else if check_inputs(&measurement, &matched, options).is_err() {
+            // A retrace that contradicts an accepted trace is not used to calibrate.
+            continue;
+        }
+        passes.push(PassCalibration {
+            pass,
+            lattice: measurement.lattice,
+            matched,
+        });
+    }
+    let calibration = passes
+        .iter()
+        .map(|p| p.matched.calibration)
+        .reduce(|a, b| a.combined(&b))
+        .expect("the trace is always kept");
+    Ok(PairCalibration {
+        passes,
+        calibration,
+    })
+}

@@ -1,0 +1,434 @@
+//! The measured lattice against a known [`Lattice`]: which of the lattice's bases it is,
+//! the calibration that maps one onto the other, and whether reflections that the lattice's
+//! symmetry makes equivalent are equally strong in the image.
+//!
+//! The calibration is the upper-triangular `K` of `A = K·Q`, where `A` maps the lattice's
+//! (sample-frame) basis onto the measured one (file frame) and `Q` is a rotation, the
+//! lattice's orientation in the image, which no calibration removes:
+//! `x_file = kx·x + kxy·y`, `y_file = ky·y`. So `kx` and `ky` are how much longer a length
+//! along x and y looks in the file than it is, and `kxy/ky` is the shear of the slow axis
+//! (what a constant drift along the fast axis, or non-orthogonal piezo axes, produce).
+//! One frame cannot tell a pixel-size error along the slow axis from a constant slow drift,
+//! nor a shear from a constant fast drift: they are reported as measured.
+
+use dhct_lattice::Lattice;
+use nalgebra::{Matrix2, Vector2};
+use serde::{Deserialize, Serialize};
+
+use crate::measure::{LatticeMeasurement, real_basis};
+
+/// How the file's frame relates to the sample's, measured against a known lattice.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Calibration {
+    /// `K = [[kx, kxy], [0, ky]]` (row-major): file metres per sample metres.
+    pub matrix: [[f64; 2]; 2],
+    /// `[kx, ky]`: apparent over true length along x and y (1 = the file's pixel size is
+    /// right).
+    pub scale: [f64; 2],
+    /// 1σ of `scale`.
+    pub scale_sigma: [f64; 2],
+    /// Shear of the slow axis, `atan(kxy/ky)`, degrees.
+    pub shear_deg: f64,
+    /// 1σ of `shear_deg`.
+    pub shear_sigma_deg: f64,
+    /// `√(kx·ky)`: the mean scale (the factor by which the file's pixel size is off).
+    pub mean_scale: f64,
+    /// 1σ of `mean_scale`.
+    pub mean_scale_sigma: f64,
+    /// Ratio of the principal stretches of `A` (≥ 1): how far from a similarity the match
+    /// is.
+    pub anisotropy: f64,
+    /// Orientation of the lattice in the image: the rotation `Q`, degrees.
+    pub rotation_deg: f64,
+}
+
+impl Calibration {
+    /// No calibration (the file's pixel size taken as right).
+    pub fn identity() -> Calibration {
+        Calibration {
+            matrix: [[1.0, 0.0], [0.0, 1.0]],
+            scale: [1.0; 2],
+            scale_sigma: [0.0; 2],
+            shear_deg: 0.0,
+            shear_sigma_deg: 0.0,
+            mean_scale: 1.0,
+            mean_scale_sigma: 0.0,
+            anisotropy: 1.0,
+            rotation_deg: 0.0,
+        }
+    }
+
+    /// `K⁻¹` (row-major): file metres → sample metres (lattice orientation kept).
+    pub fn file_to_sample(&self) -> [[f64; 2]; 2] {
+        let [[kx, kxy], [_, ky]] = self.matrix;
+        [[1.0 / kx, -kxy / (kx * ky)], [0.0, 1.0 / ky]]
+    }
+
+    /// The inverse-variance weighted mean of two calibrations (e.g. trace and retrace).
+    pub fn combined(&self, other: &Calibration) -> Calibration {
+        let mean = |a: f64, sa: f64, b: f64, sb: f64| {
+            let (wa, wb) = (weight(sa), weight(sb));
+            ((a * wa + b * wb) / (wa + wb), (wa + wb).powf(-0.5))
+        };
+        let (kx, skx) = mean(
+            self.scale[0],
+            self.scale_sigma[0],
+            other.scale[0],
+            other.scale_sigma[0],
+        );
+        let (ky, sky) = mean(
+            self.scale[1],
+            self.scale_sigma[1],
+            other.scale[1],
+            other.scale_sigma[1],
+        );
+        let (shear, sshear) = mean(
+            self.shear_deg,
+            self.shear_sigma_deg,
+            other.shear_deg,
+            other.shear_sigma_deg,
+        );
+        let (mean_scale, smean) = mean(
+            self.mean_scale,
+            self.mean_scale_sigma,
+            other.mean_scale,
+            other.mean_scale_sigma,
+        );
+        Calibration {
+            matrix: [[kx, ky * shear.to_radians().tan()], [0.0, ky]],
+            scale: [kx, ky],
+            scale_sigma: [skx, sky],
+            shear_deg: shear,
+            shear_sigma_deg: sshear,
+            mean_scale,
+            mean_scale_sigma: smean,
+            anisotropy: 0.5 * (self.anisotropy + other.anisotropy),
+            rotation_deg: self.rotation_deg,
+        }
+    }
+}
+
+fn weight(sigma: f64) -> f64 {
+    // An unknown or zero uncertainty gets the weight of a 0.1 % one.
+    let s = if sigma.is_finite() && sigma > 0.0 {
+        sigma.max(1e-6)
+    } else {
+        1e-3
+    };
+    s.powi(-2)
+}
+
+/// The reflections of one shell of the lattice's reciprocal lattice (equal length, so
+/// equivalent under its symmetry for a symmetric motif) and their power in the image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShellCheck {
+    /// Spatial frequency of the shell in the lattice, cycles per metre.
+    pub frequency_per_m: f64,
+    /// Indices `(h, k)` in the lattice's basis (one of each ± pair).
+    pub indices: Vec<[i64; 2]>,
+    /// Power of each reflection over the background at its position.
+    pub snr: Vec<f64>,
+    /// Power of each reflection relative to the image's strongest peak.
+    pub relative_power: Vec<f64>,
+    /// Strongest over weakest power (the weakest floored at its background).
+    pub spread: f64,
+    /// Whether the strongest stands clearly out of the background (SNR ≥ 20) and is not
+    /// mere window leakage of a stronger peak (≥ 10⁻³ of the strongest), so that the
+    /// spread means something.
+    pub significant: bool,
+}
+
+/// The measured lattice matched to a known one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LatticeMatch {
+    /// The lattice's name.
+    pub lattice: String,
+    /// `U`: the lattice's basis used is `[a1 a2]·U` (row-major, integer, det ±1).
+    pub basis_change: [[i64; 2]; 2],
+    /// `S`: the image's measured cell is `S` lattice cells (row-major; the identity unless
+    /// the image shows a superstructure of the lattice).
+    pub supercell: [[i64; 2]; 2],
+    /// The calibration.
+    pub calibration: Calibration,
+    /// The first reciprocal shells of the lattice and their powers in the image.
+    pub shells: Vec<ShellCheck>,
+    /// The lattice's nearest-neighbour distance as the image shows it in file units
+    /// (the lattice's times the mean scale), metres.
+    pub nn_in_file_m: f64,
+    /// Its 1σ, metres.
+    pub nn_in_file_sigma_m: f64,
+}
+
+/// Every integer 2 × 2 matrix with entries in −2..=2 and determinant ±1.
+fn unimodular() -> Vec<Matrix2<f64>> {
+    let mut all = Vec::new();
+    for a in -2i64..=2 {
+        for b in -2i64..=2 {
+            for c in -2i64..=2 {
+                for d in -2i64..=2 {
+                    if (a * d - b * c).abs() == 1 {
+                        all.push(Matrix2::new(a as f64, b as f64, c as f64, d as f64));
+                    }
+                }
+            }
+        }
+    }
+    all
+}
+
+/// Singular values `(s1 ≥ s2)` of a 2 × 2 matrix.
+fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
+    let ata = a.transpose() * a;
+    let (t, d) = (ata.trace(), ata.determinant());
+    let root = (0.25 * t * t - d).max(0.0).sqrt();
+    ((0.5 * t + root).sqrt(), (0.5 * t - root).max(0.0).sqrt())
+}
+
+/// `A = K·Q` with `K` upper triangular (positive diagonal) and `Q` a rotation; needs
+/// `det A > 0`. Returns `(K, rotation angle of Q in radians)`.
+fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
+    let ky = a[(1, 0)].hypot(a[(1, 1)]);
+    let row2 = Vector2::new(a[(1, 0)], a[(1, 1)]) / ky;
+    let row1 = Vector2::new(row2.y, -row2.x);
+    let top = Vector2::new(a[(0, 0)], a[(0, 1)]);
+    let k = Matrix2::new(top.dot(&row1), top.dot(&row2), 0.0, ky);
+    (k, row2.x.atan2(row2.y))
+}
+
+fn lattice_matrix(lattice: &dyn Lattice) -> Matrix2<f64> {
+    let [a1, a2] = lattice.primitive_vectors();
+    Matrix2::from_columns(&[a1, a2])
+}
+
+/// The sublattices of index 2–4 of a 2-D lattice, as Hermite normal forms `[[a, b], [0, d]]`
+/// (`a·d` = index, `0 ≤ b < d`): the ways an image's cell can be a supercell of the
+/// lattice's (e.g. 2 × 2 for a charge-density wave).
+fn supercells() -> Vec<Matrix2<f64>> {
+    let mut all = Vec::new();
+    for index in 2..=4i64 {
+        for a in 1..=index {
+            if index % a != 0 {
+                continue;
+            }
+            let d = index / a;
+            for b in 0..d {
+                all.push(Matrix2::new(a as f64, b as f64, 0.0, d as f64));
+            }
+        }
+    }
+    all
+}
+
+/// The basis `U` of the ideal lattice whose orientation-preserving map onto `cell` is
+/// least anisotropic, and that anisotropy.
+fn best_basis(cell: &Matrix2<f64>, ideal: &Matrix2<f64>) -> (f64, Matrix2<f64>) {
+    let mut best = (f64::INFINITY, Matrix2::identity());
+    for u in unimodular() {
+        let Some(inverse) = (ideal * u).try_inverse() else {
+            continue;
+        };
+        let a = cell * inverse;
+        if a.determinant() <= 0.0 {
+            continue;
+        }
+        let (s1, s2) = singular_values(&a);
+        if s1 / s2 < best.0 - 1e-12 {
+            best = (s1 / s2, u);
+        }
+    }
+    best
+}
+
+/// Whether the image's strongest peak (frequency `g`, file units) is a reflection of the
+/// first shell of the lattice `target` placed on `cell`.
+fn strongest_in_first_shell(cell: &Matrix2<f64>, target: &Matrix2<f64>, g: Vector2<f64>) -> bool {
+    let h = cell.transpose() * g;
+    let rounded = h.map(f64::round);
+    if (h - rounded).abs().max() > 0.15 || rounded == Vector2::zeros() {
+        return false;
+    }
+    let index = [rounded.x as i64, rounded.y as i64];
+    let Some(length) = frequency(target, index).map(|f| f.norm()) else {
+        return false;
+    };
+    let first = [[1, 0], [0, 1], [1, 1], [1, -1]]
+        .iter()
+        .filter_map(|&i| frequency(target, i).map(|f| f.norm()))
+        .fold(f64::INFINITY, f64::min);
+    length <= 1.02 * first
+}
+
+/// Matches `measurement` to `lattice`: the basis of the lattice needing the least
+/// anisotropic orientation-preserving map onto the measured cell. When the image's
+/// dominant periodicity is a finer lattice inside the measured cell (a superstructure, e.g.
+/// the 2 × 2 charge-density wave of TiSe₂: the strongest peak belongs to the finer lattice's
+/// first shell), the finer lattice is matched instead and the supercell reported.
+pub fn match_lattice(measurement: &LatticeMeasurement, lattice: &dyn Lattice) -> LatticeMatch {
+    let measured = measurement.lattice.matrix();
+    let ideal = lattice_matrix(lattice);
+    let strongest = measurement.strongest_frequency();
+    let plain = best_basis(&measured, &ideal);
+    let mut chosen = (Matrix2::identity(), plain);
+    for s in supercells() {
+        let Some(finer) = s.try_inverse().map(|inverse| measured * inverse) else {
+            continue;
+        };
+        let (anisotropy, u) = best_basis(&finer, &ideal);
+        if anisotropy <= plain.0 * 1.02 + 1e-9
+            && anisotropy < chosen.1.0 * 1.02 + 1e-9
+            && (chosen.0 == Matrix2::identity() || anisotropy < chosen.1.0)
+            && strongest_in_first_shell(&finer, &(ideal * u), strongest)
+        {
+            chosen = (s, (anisotropy, u));
+        }
+    }
+    let (supercell, (_, u)) = chosen;
+    let cell = measured * supercell.try_inverse().unwrap_or_else(Matrix2::identity);
+    let target_inverse = (ideal * u).try_inverse().unwrap_or_else(Matrix2::identity);
+    let calibration = calibration_of(measurement, &measured, &supercell, &target_inverse);
+    let nn = lattice.nearest_neighbour_distance();
+    let integer = |m: &Matrix2<f64>| {
+        [
+            [m[(0, 0)] as i64, m[(0, 1)] as i64],
+            [m[(1, 0)] as i64, m[(1, 1)] as i64],
+        ]
+    };
+    LatticeMatch {
+        lattice: lattice.name().to_string(),
+        basis_change: integer(&u),
+        supercell: integer(&supercell),
+        calibration,
+        shells: shells(measurement, &cell, &(ideal * u)),
+        nn_in_file_m: nn * calibration.mean_scale,
+        nn_in_file_sigma_m: nn * calibration.mean_scale_sigma,
+    }
+}
+
+/// The calibration `K` of `A = measured·S⁻¹·target⁻¹` with uncertainties propagated from
+/// the spectral peak positions.
+fn calibration_of(
+    measurement: &LatticeMeasurement,
+    measured: &Matrix2<f64>,
+    supercell: &Matrix2<f64>,
+    target_inverse: &Matrix2<f64>,
+) -> Calibration {
+    let to_lattice = supercell.try_inverse().unwrap_or_else(Matrix2::identity) * target_inverse;
+    let a = measured * to_lattice;
+    let (k, rotation) = rq(&a);
+    let (s1, s2) = singular_values(&a);
+    // The measured cell in terms of the basis dual to the fitted reciprocal basis, so that
+    // a perturbed fit maps to the same cell (no re-reduction, which may swap vectors).
+    let as_measured = measurement.sigma_basis();
+    let v = as_measured
+        .try_inverse()
+        .map(|inv| (inv * measured).map(f64::round))
+        .unwrap_or_else(Matrix2::identity);
+    let k_of = |basis: &Matrix2<f64>| rq(&(basis * v * to_lattice)).0;
+    let sigma = |f: &dyn Fn(&Matrix2<f64>) -> f64| measurement.sigma_of(|b| f(&k_of(b)));
+    let shear = |k: &Matrix2<f64>| (k[(0, 1)] / k[(1, 1)]).atan().to_degrees();
+    Calibration {
+        matrix: [[k[(0, 0)], k[(0, 1)]], [0.0, k[(1, 1)]]],
+        scale: [k[(0, 0)], k[(1, 1)]],
+        scale_sigma: [sigma(&|k| k[(0, 0)]), sigma(&|k| k[(1, 1)])],
+        shear_deg: shear(&k),
+        shear_sigma_deg: sigma(&shear),
+        mean_scale: (k[(0, 0)] * k[(1, 1)]).sqrt(),
+        mean_scale_sigma: sigma(&|k| (k[(0, 0)] * k[(1, 1)]).sqrt()),
+        anisotropy: s1 / s2,
+        rotation_deg: rotation.to_degrees(),
+    }
+}
+
+/// Frequency of index `(h, k)` of basis `cell` (columns), cycles per metre.
+fn frequency(cell: &Matrix2<f64>, index: [i64; 2]) -> Option<Vector2<f64>> {
+    let reciprocal = real_basis(cell)?;
+    Some(reciprocal * Vector2::new(index[0] as f64, index[1] as f64))
+}
+
+/// The first two shells of the lattice (basis `target`) and the power in the image at the
+/// measured position of each reflection (same index in the measured basis).
+fn shells(
+    measurement: &LatticeMeasurement,
+    measured: &Matrix2<f64>,
+    target: &Matrix2<f64>,
+) -> Vec<ShellCheck> {
+    let mut reflections: Vec<([i64; 2], f64)> = Vec::new();
+    for h in -3i64..=3 {
+        for k in -3i64..=3 {
+            if (h > 0 || (h == 0 && k > 0))
+                && let Some(g) = frequency(target, [h, k])
+            {
+                reflections.push(([h, k], g.norm()));
+            }
+        }
+    }
+    reflections.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let strongest = measurement.strongest_power().max(f64::MIN_POSITIVE);
+    let mut result: Vec<ShellCheck> = Vec::new();
+    // Per shell: (power, background) of each reflection.
+    let mut powers: Vec<Vec<(f64, f64)>> = Vec::new();
+    for (index, g) in reflections {
+        let (power, background) = frequency(measured, index)
+            .map(|g| measurement.power_at(g))
+            .unwrap_or((0.0, 0.0));
+        let snr = power / background.max(f64::MIN_POSITIVE);
+        match result.last_mut() {
+            Some(shell) if (g - shell.frequency_per_m).abs() <= 0.02 * g => {
+                shell.indices.push(index);
+                shell.snr.push(snr);
+                shell.relative_power.push(power / strongest);
+                powers
+                    .last_mut()
+                    .expect("one list per shell")
+                    .push((power, background));
+            }
+            _ => {
+                if result.len() == 2 {
+                    break;
+                }
+                result.push(ShellCheck {
+                    frequency_per_m: g,
+                    indices: vec![index],
+                    snr: vec![snr],
+                    relative_power: vec![power / strongest],
+                    spread: 1.0,
+                    significant: false,
+                });
+                powers.push(vec![(power, background)]);
+            }
+        }
+    }
+    for (shell, powers) in result.iter_mut().zip(&powers) {
+        let top = powers.iter().map(|p| p.0).fold(0.0, f64::max);
+        let weakest = powers
+            .iter()
+            .map(|&(p, background)| p.max(background))
+            .fold(f64::INFINITY, f64::min)
+            .max(f64::MIN_POSITIVE);
+        shell.spread = top / weakest;
+        shell.significant =
+            shell.snr.iter().copied().fold(0.0, f64::max) >= 20.0 && top >= 1e-3 * strongest;
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rq_splits_scale_shear_and_rotation() {
+        let k = Matrix2::new(1.2, 0.1, 0.0, 0.8);
+        let angle = 0.3f64;
+        let q = Matrix2::new(angle.cos(), -angle.sin(), angle.sin(), angle.cos());
+        let (found, rotation) = rq(&(k * q));
+        assert!((found - k).abs().max() < 1e-12, "{found}");
+        assert!((rotation - angle).abs() < 1e-12);
+    }
+
+    #[test]
+    fn singular_values_of_a_stretch() {
+        let (s1, s2) = singular_values(&Matrix2::new(0.0, 3.0, -2.0, 0.0));
+        assert!((s1 - 3.0).abs() < 1e-12 && (s2 - 2.0).abs() < 1e-12);
+    }
+}

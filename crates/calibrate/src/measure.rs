@@ -1,0 +1,286 @@
+//! The lattice an image shows: two real-space cell vectors in file units with their
+//! uncertainties, from the image's spectral peaks.
+
+use dhct_scan::ScanGeometry;
+use nalgebra::{Matrix2, Matrix4, Vector2};
+use ndarray::{Array2, ArrayView2};
+use serde::{Deserialize, Serialize};
+
+use crate::CalibrationError;
+use crate::basis::{FittedBasis, find_basis, propagate, reduce};
+use crate::spectrum::PowerSpectrum;
+
+/// The shape of a 2-D lattice, judged from its reduced cell (tolerances: 3 % in length
+/// ratio, 2° in angle).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LatticeShape {
+    Hexagonal,
+    Square,
+    Rectangular,
+    CentredRectangular,
+    Oblique,
+}
+
+impl LatticeShape {
+    fn of(lengths: [f64; 2], angle_deg: f64) -> LatticeShape {
+        let equal = (lengths[0] - lengths[1]).abs() <= 0.03 * lengths[0].max(lengths[1]);
+        let near = |target: f64| (angle_deg - target).abs() <= 2.0;
+        match (equal, near(90.0), near(60.0)) {
+            (true, true, _) => LatticeShape::Square,
+            (true, _, true) => LatticeShape::Hexagonal,
+            (false, true, _) => LatticeShape::Rectangular,
+            (true, false, false) => LatticeShape::CentredRectangular,
+            _ => LatticeShape::Oblique,
+        }
+    }
+
+    /// In words: "a hexagonal", "a square", …
+    pub fn describe(self) -> &'static str {
+        match self {
+            LatticeShape::Hexagonal => "a hexagonal",
+            LatticeShape::Square => "a square",
+            LatticeShape::Rectangular => "a rectangular",
+            LatticeShape::CentredRectangular => "a centred-rectangular",
+            LatticeShape::Oblique => "an oblique",
+        }
+    }
+}
+
+/// One spectral peak indexed by the measured lattice.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Reflection {
+    /// Index `(h, k)` in the measured reciprocal basis.
+    pub index: [i64; 2],
+    /// Spatial frequency `[x, y]`, cycles per metre in file units.
+    pub frequency_per_m: [f64; 2],
+    /// Power over the median power at its radius.
+    pub snr: f64,
+}
+
+/// The lattice an image shows, in the file's units (its nominal pixel size).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImageLattice {
+    /// Reduced cell vectors `[a1, a2]`, metres, file frame (x right, y down), the angle
+    /// between them in 60°–90°.
+    pub vectors_m: [[f64; 2]; 2],
+    /// `|a1|`, `|a2|`, metres.
+    pub lengths_m: [f64; 2],
+    /// 1σ of the lengths, metres.
+    pub lengths_sigma_m: [f64; 2],
+    /// Angle between `a1` and `a2`, degrees.
+    pub angle_deg: f64,
+    /// Its 1σ, degrees.
+    pub angle_sigma_deg: f64,
+    /// The shape of the reduced cell.
+    pub shape: LatticeShape,
+    /// The indexed peaks, strongest first.
+    pub reflections: Vec<Reflection>,
+    /// Fraction of the detected peaks' power that the lattice indexes.
+    pub indexed_power_fraction: f64,
+    /// Peaks detected (indexed or not).
+    pub peaks: usize,
+}
+
+impl ImageLattice {
+    /// "a hexagonal lattice with cell vectors 2.470 Å and 2.466 Å at 60.1° (± 0.2°) in
+    /// file units".
+    pub fn describe(&self) -> String {
+        format!(
+            "{} lattice with cell vectors {} ± {} and {} ± {} at {:.1}° ± {:.1}° in file units",
+            self.shape.describe(),
+            length(self.lengths_m[0]),
+            length(self.lengths_sigma_m[0]),
+            length(self.lengths_m[1]),
+            length(self.lengths_sigma_m[1]),
+            self.angle_deg,
+            self.angle_sigma_deg
+        )
+    }
+
+    /// The real-space basis as a matrix (columns `a1`, `a2`), metres.
+    pub fn matrix(&self) -> Matrix2<f64> {
+        let [a1, a2] = self.vectors_m;
+        Matrix2::new(a1[0], a2[0], a1[1], a2[1])
+    }
+}
+
+/// A length in the unit a surface scientist reads it in (pm, Å, nm, µm).
+pub fn length(metres: f64) -> String {
+    let a = metres.abs();
+    if !a.is_finite() {
+        format!("{metres} m")
+    } else if a < 1e-10 {
+        format!("{:.2} pm", metres * 1e12)
+    } else if a < 1e-9 {
+        format!("{:.3} Å", metres * 1e10)
+    } else if a < 1e-6 {
+        format!("{:.3} nm", metres * 1e9)
+    } else {
+        format!("{:.3} µm", metres * 1e6)
+    }
+}
+
+/// A measurement with the spectrum it came from (to look up predicted reflections).
+#[derive(Debug, Clone)]
+pub struct LatticeMeasurement {
+    /// The lattice.
+    pub lattice: ImageLattice,
+    pub(crate) spectrum: PowerSpectrum,
+    /// Bins → cycles per metre, per axis.
+    pub(crate) bin_per_m: [f64; 2],
+    /// The measured reciprocal basis (bins, reduced) and its covariance.
+    pub(crate) reciprocal: Matrix2<f64>,
+    pub(crate) covariance: Matrix4<f64>,
+    /// Frequency (cycles per metre) and power of the strongest peak.
+    strongest: (Vector2<f64>, f64),
+}
+
+impl LatticeMeasurement {
+    /// Power of the strongest detected peak.
+    pub fn strongest_power(&self) -> f64 {
+        self.strongest.1
+    }
+
+    /// Spatial frequency of the strongest detected peak, cycles per metre (file units).
+    pub fn strongest_frequency(&self) -> Vector2<f64> {
+        self.strongest.0
+    }
+
+    /// Power and background (summed over 5 × 5 bins) at spatial frequency `g` (cycles per metre, file units).
+    pub fn power_at(&self, g: Vector2<f64>) -> (f64, f64) {
+        self.spectrum
+            .power_near([g.x / self.bin_per_m[0], g.y / self.bin_per_m[1]])
+    }
+
+    /// The real-space basis (metres, columns) dual to the fitted reciprocal basis, before
+    /// real-space reduction: the argument [`LatticeMeasurement::sigma_of`] perturbs.
+    pub fn sigma_basis(&self) -> Matrix2<f64> {
+        let to_per_m = Matrix2::from_diagonal(&Vector2::new(self.bin_per_m[0], self.bin_per_m[1]));
+        real_basis(&(to_per_m * self.reciprocal)).unwrap_or_else(Matrix2::identity)
+    }
+
+    /// 1σ of `f(A)`, `A` the real-space basis (metres, columns) of the measured reciprocal
+    /// basis (as measured, before real-space reduction).
+    pub fn sigma_of(&self, f: impl Fn(&Matrix2<f64>) -> f64) -> f64 {
+        let to_per_m = Matrix2::from_diagonal(&Vector2::new(self.bin_per_m[0], self.bin_per_m[1]));
+        propagate(&self.reciprocal, &self.covariance, |b| {
+            real_basis(&(to_per_m * b)).map_or(f64::NAN, |a| f(&a))
+        })
+    }
+}
+
+/// `A = B⁻ᵀ`: the real-space basis dual to reciprocal basis `B` (`aᵢ·bⱼ = δᵢⱼ`).
+pub fn real_basis(reciprocal: &Matrix2<f64>) -> Option<Matrix2<f64>> {
+    reciprocal.try_inverse().map(|b| b.transpose())
+}
+
+/// Measures the lattice of `z` (rows × columns of `geometry`), optionally inside `mask`.
+pub fn measure_lattice(
+    z: ArrayView2<f64>,
+    geometry: &ScanGeometry,
+    mask: Option<&Array2<bool>>,
+) -> Result<LatticeMeasurement, CalibrationError> {
+    let (pitch_x, pitch_y) = (geometry.pitch_x(), geometry.pitch_y());
+    if !(pitch_x.is_finite() && pitch_y.is_finite() && pitch_x > 0.0 && pitch_y > 0.0) {
+        return Err(CalibrationError::BadPitch { pitch_x, pitch_y });
+    }
+    let spectrum = PowerSpectrum::of(z, mask, geometry.fast_axis())?;
+    let peaks = spectrum.peaks();
+    if peaks.len() < 2 {
+        return Err(CalibrationError::NoLattice {
+            reason: format!(
+                "{} peak(s) stand out of the background (two independent ones are needed)",
+                peaks.len()
+            ),
+        });
+    }
+    let FittedBasis {
+        basis,
+        covariance,
+        indices,
+        indexed_power,
+    } = find_basis(&peaks).ok_or_else(|| CalibrationError::NoLattice {
+        reason: format!(
+            "{} peaks stand out, but no two independent ones index the others",
+            peaks.len()
+        ),
+    })?;
+    let bin_per_m = [
+        1.0 / (spectrum.columns as f64 * pitch_x),
+        1.0 / (spectrum.rows as f64 * pitch_y),
+    ];
+    let to_per_m = Matrix2::from_diagonal(&Vector2::new(bin_per_m[0], bin_per_m[1]));
+    let real = real_basis(&(to_per_m * basis)).ok_or_else(|| CalibrationError::NoLattice {
+        reason: "the peaks are collinear".into(),
+    })?;
+    let cell = conventional(reduce(real));
+    let mut reflections: Vec<Reflection> = peaks
+        .iter()
+        .zip(&indices)
+        .filter_map(|(p, index)| {
+            index.map(|index| Reflection {
+                index,
+                frequency_per_m: [p.k[0] * bin_per_m[0], p.k[1] * bin_per_m[1]],
+                snr: p.snr,
+            })
+        })
+        .collect();
+    reflections.sort_by(|a, b| b.snr.total_cmp(&a.snr));
+    let mut measurement = LatticeMeasurement {
+        lattice: ImageLattice {
+            vectors_m: [[cell[(0, 0)], cell[(1, 0)]], [cell[(0, 1)], cell[(1, 1)]]],
+            lengths_m: [cell.column(0).norm(), cell.column(1).norm()],
+            lengths_sigma_m: [0.0; 2],
+            angle_deg: angle_deg(&cell),
+            angle_sigma_deg: 0.0,
+            shape: LatticeShape::Oblique,
+            reflections,
+            indexed_power_fraction: indexed_power,
+            peaks: peaks.len(),
+        },
+        spectrum,
+        bin_per_m,
+        reciprocal: basis,
+        covariance,
+        strongest: (
+            Vector2::new(peaks[0].k[0] * bin_per_m[0], peaks[0].k[1] * bin_per_m[1]),
+            peaks[0].power,
+        ),
+    };
+    // Uncertainties of the reduced cell's lengths and angle: invariant quantities, so they
+    // are computed from the conventional cell of each perturbed basis.
+    let cell_of = |a: &Matrix2<f64>| conventional(reduce(*a));
+    let lengths_sigma_m = [
+        measurement.sigma_of(|a| cell_of(a).column(0).norm()),
+        measurement.sigma_of(|a| cell_of(a).column(1).norm()),
+    ];
+    let angle_sigma_deg = measurement.sigma_of(|a| angle_deg(&cell_of(a)));
+    let lattice = &mut measurement.lattice;
+    lattice.lengths_sigma_m = lengths_sigma_m;
+    lattice.angle_sigma_deg = angle_sigma_deg;
+    lattice.shape = LatticeShape::of(lattice.lengths_m, lattice.angle_deg);
+    Ok(measurement)
+}
+
+/// Angle between the columns of `a`, degrees.
+pub fn angle_deg(a: &Matrix2<f64>) -> f64 {
+    let (u, v) = (a.column(0), a.column(1));
+    (u.dot(&v) / (u.norm() * v.norm()))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
+/// A reduced basis with the angle between its vectors at most 90° (`a2` negated if not)
+/// and `a1` the shorter.
+pub fn conventional(reduced: Matrix2<f64>) -> Matrix2<f64> {
+    let (u, mut v) = (
+        reduced.column(0).into_owned(),
+        reduced.column(1).into_owned(),
+    );
+    if u.dot(&v) < 0.0 {
+        v = -v;
+    }
+    Matrix2::from_columns(&[u, v])
+}
