@@ -1,16 +1,18 @@
-//! PNG export: 16-bit grey and 8-bit colour-mapped pictures of one image.
+//! PNG export: 16-bit grey and 8-bit colour-mapped pictures of one image; and
+//! [`read_picture`], which decodes any PNG into grey levels and alpha (for masks).
 //!
 //! PNG is a picture format: it holds no physical scale, so dhct writes it for viewing and
-//! reports the z range it mapped, but does not read it back (see [`crate::read_as`]).
-//! Row 0 of the image is the top row of the picture.
+//! reports the z range it mapped, but does not read it back as a scan (see
+//! [`crate::read_as`]). Row 0 of the image is the top row of the picture.
 
 use std::io::Write;
 
 use dhct_scan::{FileFormat, ImageChannel};
 use serde::{Deserialize, Serialize};
 
-use crate::WriteError;
+use crate::limits::{Budget, ReadLimits};
 use crate::tiff_file::U16Scale;
+use crate::{ReadError, WriteError};
 
 const FORMAT: FileFormat = FileFormat::Png;
 
@@ -243,5 +245,193 @@ fn encoder_error(error: png::EncodingError) -> WriteError {
             format: FORMAT,
             reason: other.to_string(),
         },
+    }
+}
+
+/// A decoded PNG picture: grey levels and, when the file has one, alpha; row-major, row 0
+/// at the top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Picture {
+    /// Pixels along x.
+    pub columns: usize,
+    /// Pixels along y.
+    pub rows: usize,
+    /// Grey level of every pixel, 0 (black) to 1 (white); colour pictures give the mean of
+    /// red, green and blue.
+    pub grey: Vec<f64>,
+    /// Opacity of every pixel, 0 (transparent) to 1 (opaque), when the picture has an alpha
+    /// channel (grey + alpha, RGBA, or a palette or colour key with transparency).
+    pub alpha: Option<Vec<f64>>,
+    /// Bits per sample of the file (1, 2, 4, 8 or 16).
+    pub bit_depth: u8,
+}
+
+/// Decodes a PNG of any colour type (grey, grey + alpha, RGB, RGBA, palette; 1–16 bits)
+/// under `limits`: the decoder may allocate at most what the budget leaves, and the pixels
+/// are charged (decoded buffer plus grey and alpha planes) before decoding.
+pub fn read_picture(bytes: &[u8], limits: &ReadLimits) -> Result<Picture, ReadError> {
+    let mut budget = Budget::new(limits, bytes.len())?;
+    let decoder_bytes = usize::try_from(budget.bytes_left()).unwrap_or(usize::MAX);
+    let mut decoder = png::Decoder::new_with_limits(
+        std::io::Cursor::new(bytes),
+        png::Limits {
+            bytes: decoder_bytes,
+        },
+    );
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let mut reader = decoder.read_info().map_err(png_read_error)?;
+    let (width, height) = reader.info().size();
+    let bit_depth = reader.info().bit_depth as u8;
+    let (color, depth) = reader.output_color_type();
+    let samples = color.samples();
+    let bytes_per_sample = if depth == png::BitDepth::Sixteen {
+        2
+    } else {
+        1
+    };
+    let planes = if matches!(color, png::ColorType::GrayscaleAlpha | png::ColorType::Rgba) {
+        2
+    } else {
+        1
+    };
+    budget.charge_images(
+        FORMAT,
+        u64::from(width),
+        u64::from(height),
+        planes,
+        (samples * bytes_per_sample) as u64,
+    )?;
+    let size = reader.output_buffer_size().ok_or_else(|| {
+        ReadError::corrupt(
+            FORMAT,
+            format!("a {width} x {height} px picture is too large"),
+        )
+    })?;
+    let mut buffer = vec![0u8; size];
+    let frame = reader.next_frame(&mut buffer).map_err(png_read_error)?;
+    let line = frame.line_size;
+    let (columns, rows) = (width as usize, height as usize);
+    let max = if bytes_per_sample == 2 {
+        65535.0
+    } else {
+        255.0
+    };
+    let sample = |row: usize, column: usize, k: usize| -> f64 {
+        let at = row * line + (column * samples + k) * bytes_per_sample;
+        let value = if bytes_per_sample == 2 {
+            buffer
+                .get(at..at + 2)
+                .map_or(0, |b| u16::from_be_bytes([b[0], b[1]]))
+        } else {
+            buffer.get(at).map_or(0, |&b| u16::from(b))
+        };
+        f64::from(value) / max
+    };
+    let colour = matches!(color, png::ColorType::Rgb | png::ColorType::Rgba);
+    let mut grey = Vec::with_capacity(columns * rows);
+    let mut alpha = (planes == 2).then(|| Vec::with_capacity(columns * rows));
+    for row in 0..rows {
+        for column in 0..columns {
+            grey.push(if colour {
+                (sample(row, column, 0) + sample(row, column, 1) + sample(row, column, 2)) / 3.0
+            } else {
+                sample(row, column, 0)
+            });
+            if let Some(alpha) = alpha.as_mut() {
+                alpha.push(sample(row, column, samples - 1));
+            }
+        }
+    }
+    Ok(Picture {
+        columns,
+        rows,
+        grey,
+        alpha,
+        bit_depth,
+    })
+}
+
+/// Writes `picture` as a PNG: grey (or RGB with equal channels when `rgb`), plus an
+/// alpha channel when `picture.alpha` is set, at 8 or 16 (`sixteen_bit`) bits per sample;
+/// levels are rounded from 0..1. The inverse of [`read_picture`] (e.g. for masks).
+pub fn write_picture<W: Write>(
+    picture: &Picture,
+    rgb: bool,
+    sixteen_bit: bool,
+    w: &mut W,
+) -> Result<(), WriteError> {
+    let pixels = picture.columns * picture.rows;
+    if picture.grey.len() != pixels || picture.alpha.as_ref().is_some_and(|a| a.len() != pixels) {
+        return Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: format!(
+                "a {} x {} picture needs {pixels} levels, got {}",
+                picture.columns,
+                picture.rows,
+                picture.grey.len()
+            ),
+        });
+    }
+    let (width, height) = match (u32::try_from(picture.columns), u32::try_from(picture.rows)) {
+        (Ok(w), Ok(h)) if w > 0 && h > 0 => (w, h),
+        _ => {
+            return Err(WriteError::Unrepresentable {
+                format: FORMAT,
+                reason: "a PNG picture must be at least 1 x 1 px".into(),
+            });
+        }
+    };
+    let color = match (rgb, picture.alpha.is_some()) {
+        (false, false) => png::ColorType::Grayscale,
+        (false, true) => png::ColorType::GrayscaleAlpha,
+        (true, false) => png::ColorType::Rgb,
+        (true, true) => png::ColorType::Rgba,
+    };
+    let mut data = Vec::with_capacity(pixels * color.samples() * 2);
+    let mut push = |level: f64| {
+        let level = if level.is_finite() {
+            level.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        if sixteen_bit {
+            data.extend_from_slice(&((level * 65535.0).round() as u16).to_be_bytes());
+        } else {
+            data.push((level * 255.0).round() as u8);
+        }
+    };
+    for k in 0..pixels {
+        let grey = picture.grey[k];
+        for _ in 0..if rgb { 3 } else { 1 } {
+            push(grey);
+        }
+        if let Some(alpha) = &picture.alpha {
+            push(alpha[k]);
+        }
+    }
+    let depth = if sixteen_bit {
+        png::BitDepth::Sixteen
+    } else {
+        png::BitDepth::Eight
+    };
+    encode(w, width, height, color, depth, &data)
+}
+
+fn png_read_error(error: png::DecodingError) -> ReadError {
+    match error {
+        png::DecodingError::IoError(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            ReadError::Truncated {
+                format: FORMAT,
+                what: "PNG chunks".to_string(),
+                offset: 0,
+                needed: 1,
+                len: 0,
+            }
+        }
+        png::DecodingError::LimitsExceeded => ReadError::corrupt(
+            FORMAT,
+            "the picture needs more memory than the read limit allows",
+        ),
+        other => ReadError::corrupt(FORMAT, other.to_string()),
     }
 }

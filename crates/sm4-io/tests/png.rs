@@ -145,3 +145,62 @@ fn png_is_not_read_back_as_data() {
         Err(ReadError::Unsupported { .. })
     ));
 }
+
+#[test]
+fn pictures_of_every_colour_type_and_depth_read_back() {
+    use dhct_sm4_io::ReadLimits;
+    use dhct_sm4_io::png_file::{Picture, read_picture, write_picture};
+    let (columns, rows) = (5, 3);
+    let grey: Vec<f64> = (0..15).map(|k| f64::from(k) / 14.0).collect();
+    let alpha: Vec<f64> = (0..15)
+        .map(|k| if k % 2 == 0 { 1.0 } else { 0.0 })
+        .collect();
+    for with_alpha in [false, true] {
+        for rgb in [false, true] {
+            for sixteen in [false, true] {
+                let picture = Picture {
+                    columns,
+                    rows,
+                    grey: grey.clone(),
+                    alpha: with_alpha.then(|| alpha.clone()),
+                    bit_depth: if sixteen { 16 } else { 8 },
+                };
+                let mut bytes = Vec::new();
+                write_picture(&picture, rgb, sixteen, &mut bytes).unwrap();
+                let back = read_picture(&bytes, &ReadLimits::default()).unwrap();
+                let step = if sixteen { 1.0 / 65535.0 } else { 1.0 / 255.0 };
+                assert_eq!((back.columns, back.rows), (columns, rows));
+                assert_eq!(back.bit_depth, picture.bit_depth);
+                for (a, b) in back.grey.iter().zip(&grey) {
+                    assert!((a - b).abs() <= step, "{a} vs {b}");
+                }
+                assert_eq!(back.alpha.is_some(), with_alpha);
+                if let Some(back_alpha) = back.alpha {
+                    assert_eq!(back_alpha, alpha);
+                }
+            }
+        }
+    }
+    // Hostile input: truncated pictures and a header claiming a huge size are errors.
+    let picture = Picture {
+        columns,
+        rows,
+        grey,
+        alpha: None,
+        bit_depth: 8,
+    };
+    let mut bytes = Vec::new();
+    write_picture(&picture, false, false, &mut bytes).unwrap();
+    // (Cut before the 12-byte IEND chunk: the pixels are all there after it.)
+    for cut in 0..bytes.len() - 12 {
+        assert!(
+            read_picture(&bytes[..cut], &ReadLimits::default()).is_err(),
+            "cut at {cut}"
+        );
+    }
+    let tiny = ReadLimits {
+        max_bytes: 1 << 20,
+        max_pixels: 10,
+    };
+    assert!(read_picture(&bytes, &tiny).is_err());
+}
