@@ -11,6 +11,45 @@ pub enum LatticeError {
     EmptyMotif,
     #[error("motif site {index} has a non-finite fractional position {position:?}")]
     BadSite { index: usize, position: [f64; 2] },
+    #[error(
+        "motif site {index} has fractional position {position:?}, beyond ±{max} cells \
+         (give positions within the cell, e.g. 0 to 1)"
+    )]
+    FractionalOutOfRange {
+        index: usize,
+        position: [f64; 2],
+        max: f64,
+    },
+    #[error("motif site {index} has a non-finite relative height {value}")]
+    BadHeight { index: usize, value: f64 },
+    #[error("the motif has {count} sites; at most {max} are supported")]
+    TooManySites { count: usize, max: usize },
+    #[error(
+        "primitive vectors a1 and a2 are {angle_deg:.4}° apart, nearly parallel (they must be \
+         {min_deg}° to {max_deg}° apart; choose a less skewed primitive cell)",
+        max_deg = 180.0 - .min_deg
+    )]
+    NearlyParallel { angle_deg: f64, min_deg: f64 },
+    #[error(
+        "primitive vectors differ in length by a factor {ratio:.4e}; at most {max} is supported"
+    )]
+    AspectRatio { ratio: f64, max: f64 },
+    #[error(
+        "finding this lattice's neighbours needs {work:.3e} site comparisons, more than the \
+         limit of {max:.0e}: use fewer motif sites or a less elongated cell"
+    )]
+    TooComplex { work: f64, max: f64 },
+    #[error("{path} is {kind}, not a regular file", path = .path.display())]
+    NotRegularFile {
+        path: std::path::PathBuf,
+        kind: &'static str,
+    },
+    #[error("lattice file {path} is {bytes} bytes, more than the {max} a lattice file may have", path = .path.display())]
+    FileTooLarge {
+        path: std::path::PathBuf,
+        bytes: u64,
+        max: u64,
+    },
     #[error("motif sites {first} and {second} coincide")]
     CoincidentSites { first: usize, second: usize },
     #[error("unknown length unit '{0}' (use m, nm, A or pm)")]

@@ -40,21 +40,74 @@ pub enum LatticeFitError {
     Diverged { radius_m: f64, fraction_ok: f64 },
     #[error("a point is not finite: set {set}, index {index}")]
     NotFinite { set: usize, index: usize },
+    #[error("lattice_fit.{key} = {value} is outside its range {range}")]
+    BadOption {
+        key: &'static str,
+        value: f64,
+        range: &'static str,
+    },
+    #[error(
+        "the lattice fit did not converge: the indexing disc reached {radius_m:e} m after \
+         {iterations} doublings without covering every feature ({farthest_m:e} m from the seed)"
+    )]
+    NotConverged {
+        radius_m: f64,
+        farthest_m: f64,
+        iterations: usize,
+    },
 }
 
-/// Options of [`fit_lattice`].
+/// Most doublings of the indexing disc (from `initial_radius` NN distances, 40 doublings
+/// cover 10^12 NN distances: any image).
+pub const MAX_DISC_DOUBLINGS: usize = 40;
+
+/// Gauss–Newton iterations of the final fit.
+pub const MAX_GAUSS_NEWTON_ITERATIONS: usize = 20;
+
+/// Options of [`fit_lattice`]; [`LatticeFitOptions::validate`] checks each against its range.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct LatticeFitOptions {
-    /// Bonds count as nearest-neighbour bonds within `(1 ± window)` of the NN distance.
+    /// Bonds count as nearest-neighbour bonds within `(1 ± window)` of the NN distance;
+    /// 0.01 to 0.5.
     pub nn_window: f64,
     /// A feature farther than this fraction of the NN distance from its site is not used
-    /// to fit (it is still indexed and reported).
+    /// to fit (it is still indexed and reported); 0.01 to 1.
     pub max_deviation_fraction: f64,
-    /// Radius of the first disc, in NN distances.
+    /// Radius of the first disc, in NN distances; 1 to 1000.
     pub initial_radius: f64,
-    /// Minimum fraction of features within `max_deviation_fraction` at every stage.
+    /// Minimum fraction of features within `max_deviation_fraction` at every stage; 0 to 1.
     pub min_fraction_ok: f64,
+}
+
+impl LatticeFitOptions {
+    /// Checks every option against its documented range (finite; NaN is refused).
+    pub fn validate(&self) -> Result<(), LatticeFitError> {
+        let checks: [(&'static str, f64, f64, f64, &'static str); 4] = [
+            ("nn_window", self.nn_window, 0.01, 0.5, "0.01..=0.5"),
+            (
+                "max_deviation_fraction",
+                self.max_deviation_fraction,
+                0.01,
+                1.0,
+                "0.01..=1",
+            ),
+            (
+                "initial_radius",
+                self.initial_radius,
+                1.0,
+                1000.0,
+                "1..=1000 nearest-neighbour distances",
+            ),
+            ("min_fraction_ok", self.min_fraction_ok, 0.0, 1.0, "0..=1"),
+        ];
+        for (key, value, low, high, range) in checks {
+            if !(value.is_finite() && (low..=high).contains(&value)) {
+                return Err(LatticeFitError::BadOption { key, value, range });
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for LatticeFitOptions {
@@ -116,6 +169,15 @@ pub struct LatticeFit {
     pub rms_deviation_m: f64,
     /// Points used in the final fit.
     pub used: usize,
+    /// Whether the final Gauss–Newton fit met its step tolerance within
+    /// [`MAX_GAUSS_NEWTON_ITERATIONS`]; false means the parameters are those of the last
+    /// iteration (reported, not an error).
+    #[serde(default = "converged_default")]
+    pub converged: bool,
+}
+
+fn converged_default() -> bool {
+    true
 }
 
 impl LatticeFit {
@@ -307,6 +369,7 @@ pub fn fit_lattice(
     sets: &[&[[f64; 2]]],
     options: &LatticeFitOptions,
 ) -> Result<LatticeFit, LatticeFitError> {
+    options.validate()?;
     for (set, points) in sets.iter().enumerate() {
         if let Some(index) = points
             .iter()
@@ -352,6 +415,7 @@ pub fn fit_lattice(
         let mut b = transform(angle, [scale0, scale0]);
         let mut origin = seed - b * lattice.site_position(0);
         let mut radius = options.initial_radius * nn;
+        let mut doublings = 0;
         let outcome = loop {
             let Some(inverse) = b.try_inverse() else {
                 break Err(LatticeFitError::Diverged {
@@ -401,7 +465,15 @@ pub fn fit_lattice(
                     - pairs.len() as f64 * 1e-30; // prefer more points at equal cost
                 break Ok(cost);
             }
+            if doublings >= MAX_DISC_DOUBLINGS || !radius.is_finite() {
+                break Err(LatticeFitError::NotConverged {
+                    radius_m: radius,
+                    farthest_m: farthest,
+                    iterations: doublings,
+                });
+            }
             radius *= 2.0;
+            doublings += 1;
         };
         match outcome {
             Ok(cost)
@@ -456,7 +528,8 @@ pub fn fit_lattice(
     params[4] = sy;
     let mut used = 0;
     let mut rms = f64::NAN;
-    for _ in 0..20 {
+    let mut converged = false;
+    for _ in 0..MAX_GAUSS_NEWTON_ITERATIONS {
         let t = transform(params[2], [params[3], params[4]]);
         let (sin, cos) = params[2].sin_cos();
         let mut normal = DMatrix::<f64>::zeros(count, count);
@@ -501,6 +574,7 @@ pub fn fit_lattice(
         };
         params += &step;
         if step.iter().take(2).all(|v| v.abs() < 1e-6 * nn) && step[2].abs() < 1e-12 {
+            converged = true;
             break;
         }
     }
@@ -521,6 +595,7 @@ pub fn fit_lattice(
         points: Vec::new(),
         rms_deviation_m: rms,
         used,
+        converged,
     };
     let t = final_fit.transform();
     let inverse = t.try_inverse().ok_or(LatticeFitError::Diverged {

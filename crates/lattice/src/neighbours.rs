@@ -9,8 +9,50 @@ use crate::{Lattice, MotifSite};
 /// Relative tolerance for two distances to count as one shell.
 const SHELL_TOLERANCE: f64 = 1e-6;
 
+/// Most cells visited along either lattice direction in a neighbour search: bounds the work
+/// for any lattice, even one that `UserLattice` validation would refuse (e.g. a preset
+/// rectangle of extreme aspect ratio), at the cost of missing neighbours beyond it.
+pub const MAX_CELL_REACH: i64 = 2048;
+
+/// Most neighbour shells computed by [`crate::Lattice::neighbour_shells`].
+pub const MAX_SHELLS: usize = 64;
+
+/// Most cells [`lattice_sites`] visits (10^8, about 5 GB of sites); a larger region gives
+/// no sites.
+pub const MAX_REGION_CELLS: f64 = 1e8;
+
+/// The offset of a motif site from its cell origin, with the fractional position wrapped
+/// into `[0, 1)`: the set of features (and so every neighbour vector) is the same, and the
+/// search reach no longer grows with a site given many cells away.
 fn site_offset(vectors: [Vector2<f64>; 2], site: &MotifSite) -> Vector2<f64> {
-    vectors[0] * site.fractional[0] + vectors[1] * site.fractional[1]
+    let wrap = |f: f64| f.rem_euclid(1.0);
+    vectors[0] * wrap(site.fractional[0]) + vectors[1] * wrap(site.fractional[1])
+}
+
+/// Cells to visit along a1 and a2 (each way) to find every feature within `radius` of
+/// any motif site, capped at [`MAX_CELL_REACH`] (0 for non-finite input).
+fn search_reach(vectors: [Vector2<f64>; 2], motif: &[MotifSite], radius: f64) -> (i64, i64) {
+    let [a1, a2] = vectors;
+    let area = (a1.x * a2.y - a1.y * a2.x).abs();
+    // Distance between neighbouring lines of constant n (and of constant m).
+    let (h1, h2) = (area / a2.norm(), area / a1.norm());
+    let max_offset = motif
+        .iter()
+        .map(|s| site_offset(vectors, s).norm())
+        .fold(0.0, f64::max);
+    let reach = radius + 2.0 * max_offset;
+    // `as` saturates and maps NaN to 0; the cap bounds the loops.
+    let cells = |h: f64| ((reach / h).ceil().min(MAX_CELL_REACH as f64) as i64 + 1).max(1);
+    (cells(h1), cells(h2))
+}
+
+/// Site comparisons needed to find the nearest neighbours of every motif site: what
+/// [`crate::UserLattice`] validation bounds.
+pub(crate) fn neighbour_search_work(vectors: [Vector2<f64>; 2], motif: &[MotifSite]) -> f64 {
+    let reach = vectors[0].norm().max(vectors[1].norm());
+    let (n_max, m_max) = search_reach(vectors, motif, reach);
+    let sites = motif.len() as f64;
+    (2 * n_max + 1) as f64 * (2 * m_max + 1) as f64 * sites * sites
 }
 
 /// All vectors from site `from` to features within `radius` (excluding itself).
@@ -21,16 +63,7 @@ fn vectors_within(
     radius: f64,
 ) -> Vec<Vector2<f64>> {
     let [a1, a2] = vectors;
-    let area = (a1.x * a2.y - a1.y * a2.x).abs();
-    // Distance between neighbouring lines of constant n (and of constant m).
-    let (h1, h2) = (area / a2.norm(), area / a1.norm());
-    let max_offset = motif
-        .iter()
-        .map(|s| site_offset(vectors, s).norm())
-        .fold(0.0, f64::max);
-    let reach = radius + 2.0 * max_offset;
-    let n_max = (reach / h1).ceil() as i64 + 1;
-    let m_max = (reach / h2).ceil() as i64 + 1;
+    let (n_max, m_max) = search_reach(vectors, motif, radius);
     let origin = site_offset(vectors, &motif[from]);
     let mut out = Vec::new();
     for n in -n_max..=n_max {
@@ -94,7 +127,9 @@ pub(crate) fn shell_distances(
     count: usize,
 ) -> Vec<f64> {
     // Multiples of the shorter primitive vector alone give `count` distinct distances.
-    let radius = count.max(1) as f64 * vectors[0].norm().min(vectors[1].norm());
+    let count = count.clamp(1, MAX_SHELLS);
+    let shortest = vectors[0].norm().min(vectors[1].norm());
+    let radius = count as f64 * shortest;
     let mut distances: Vec<f64> = (0..motif.len())
         .flat_map(|site| vectors_within(vectors, motif, site, radius))
         .map(|v| v.norm())
@@ -108,6 +143,10 @@ pub(crate) fn shell_distances(
         }
     }
     shells.truncate(count);
+    if shells.is_empty() {
+        // Only for degenerate input (non-finite vectors): never an empty list.
+        shells.push(shortest);
+    }
     shells
 }
 
@@ -145,6 +184,7 @@ pub struct LatticeSite {
 
 /// Every feature of `lattice`, rotated by `angle` (radians, from +x towards +y) about the
 /// cell origin placed at `origin` (metres), that lies inside `[0, width] x [0, height]`.
+/// Regions of more than [`MAX_REGION_CELLS`] cells, and non-finite input, give no sites.
 pub fn lattice_sites(
     lattice: &dyn Lattice,
     origin: Vector2<f64>,
@@ -170,12 +210,18 @@ pub fn lattice_sites(
         lo = lo.inf(&f);
         hi = hi.sup(&f);
     }
+    let (n_lo, n_hi) = (lo.x.floor() - 1.0, hi.x.ceil() + 1.0);
+    let (m_lo, m_hi) = (lo.y.floor() - 1.0, hi.y.ceil() + 1.0);
+    let cells = (n_hi - n_lo + 1.0) * (m_hi - m_lo + 1.0);
+    if !(cells.is_finite() && cells <= MAX_REGION_CELLS) {
+        return Vec::new();
+    }
     let offsets: Vec<_> = (0..lattice.motif().len())
         .map(|s| rotation * lattice.site_position(s))
         .collect();
     let mut sites = Vec::new();
-    for n in (lo.x.floor() as i64 - 1)..=(hi.x.ceil() as i64 + 1) {
-        for m in (lo.y.floor() as i64 - 1)..=(hi.y.ceil() as i64 + 1) {
+    for n in (n_lo as i64)..=(n_hi as i64) {
+        for m in (m_lo as i64)..=(m_hi as i64) {
             let cell = origin + basis * Vector2::new(n as f64, m as f64);
             for (site, offset) in offsets.iter().enumerate() {
                 let position = cell + offset;

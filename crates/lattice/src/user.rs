@@ -5,7 +5,30 @@ use std::path::Path;
 use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
+use crate::neighbours::neighbour_search_work;
 use crate::{Lattice, LatticeError, MotifSite, PlaneGroup};
+
+/// Most motif sites of a user lattice.
+pub const MAX_MOTIF_SITES: usize = 256;
+
+/// Largest |fractional coordinate| of a motif site, in cells.
+pub const MAX_FRACTIONAL: f64 = 1000.0;
+
+/// Smallest angle between the primitive vectors, degrees (and 180° minus it the largest).
+pub const MIN_VECTOR_ANGLE_DEG: f64 = 10.0;
+
+/// Largest ratio of the primitive vectors' lengths.
+pub const MAX_ASPECT_RATIO: f64 = 20.0;
+
+/// Accepted primitive-vector lengths, metres: 0.1 pm to 10 µm.
+pub const VECTOR_LENGTH_M: std::ops::RangeInclusive<f64> = 1e-13..=1e-5;
+
+/// Most site comparisons the nearest-neighbour search of a user lattice may need (about a
+/// second of work).
+pub const MAX_NEIGHBOUR_WORK: f64 = 5e7;
+
+/// Largest lattice file read, bytes.
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
 
 /// A lattice read from a file. Example (TOML):
 ///
@@ -73,6 +96,12 @@ fn unit_factor(unit: &str) -> Result<f64, LatticeError> {
 
 impl UserLattice {
     /// Builds and validates a lattice from primitive vectors (metres), motif and plane group.
+    ///
+    /// Refused, each with an error naming the value: non-finite numbers; vectors shorter
+    /// than 0.1 pm or longer than 10 µm, less than 10° from parallel, or differing in length
+    /// by more than a factor 20; an empty motif or one of more than 256 sites; a site beyond
+    /// ±1000 cells; a non-finite relative height; coincident sites; and lattices whose
+    /// neighbour search would need more than 5·10^7 site comparisons (about a second).
     pub fn new(
         name: impl Into<String>,
         a1: Vector2<f64>,
@@ -80,25 +109,8 @@ impl UserLattice {
         plane_group: PlaneGroup,
         motif: Vec<MotifSite>,
     ) -> Result<UserLattice, LatticeError> {
-        let finite = |v: Vector2<f64>| v.x.is_finite() && v.y.is_finite();
-        let cross = a1.x * a2.y - a1.y * a2.x;
-        if !finite(a1) || !finite(a2) || cross.abs() <= 1e-9 * a1.norm() * a2.norm() {
-            return Err(LatticeError::Degenerate {
-                a1: [a1.x, a1.y],
-                a2: [a2.x, a2.y],
-            });
-        }
-        if motif.is_empty() {
-            return Err(LatticeError::EmptyMotif);
-        }
-        for (index, site) in motif.iter().enumerate() {
-            if !site.fractional.iter().all(|f| f.is_finite()) {
-                return Err(LatticeError::BadSite {
-                    index,
-                    position: site.fractional,
-                });
-            }
-        }
+        check_vectors(a1, a2)?;
+        check_motif(&motif)?;
         // Two sites that differ by a lattice vector are the same feature.
         for first in 0..motif.len() {
             for second in first + 1..motif.len() {
@@ -108,6 +120,13 @@ impl UserLattice {
                     return Err(LatticeError::CoincidentSites { first, second });
                 }
             }
+        }
+        let work = neighbour_search_work([a1, a2], &motif);
+        if work.is_nan() || work > MAX_NEIGHBOUR_WORK {
+            return Err(LatticeError::TooComplex {
+                work,
+                max: MAX_NEIGHBOUR_WORK,
+            });
         }
         Ok(UserLattice {
             name: name.into(),
@@ -127,18 +146,142 @@ impl UserLattice {
         serde_json::from_str(text).map_err(|e| LatticeError::Parse(e.to_string()))
     }
 
-    /// Reads a `.toml` or `.json` file (JSON when the content starts with `{`).
+    /// Reads a `.toml` or `.json` file (JSON when the content starts with `{`). Only a
+    /// regular file of at most 1 MiB is read: a FIFO, device or directory is
+    /// refused before it is opened, so nothing blocks.
     pub fn from_path(path: &Path) -> Result<UserLattice, LatticeError> {
-        let text = std::fs::read_to_string(path).map_err(|source| LatticeError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = read_lattice_file(path)?;
         if text.trim_start().starts_with('{') {
             Self::from_json(&text)
         } else {
             Self::from_toml(&text)
         }
     }
+}
+
+/// Checks the primitive vectors (see [`UserLattice::new`]).
+fn check_vectors(a1: Vector2<f64>, a2: Vector2<f64>) -> Result<(), LatticeError> {
+    let finite = |v: Vector2<f64>| v.x.is_finite() && v.y.is_finite();
+    let cross = a1.x * a2.y - a1.y * a2.x;
+    if !finite(a1) || !finite(a2) || cross.abs() <= 1e-9 * a1.norm() * a2.norm() {
+        return Err(LatticeError::Degenerate {
+            a1: [a1.x, a1.y],
+            a2: [a2.x, a2.y],
+        });
+    }
+    for (what, v) in [("|a1|", a1), ("|a2|", a2)] {
+        if !VECTOR_LENGTH_M.contains(&v.norm()) {
+            return Err(LatticeError::BadLength {
+                what,
+                value: v.norm(),
+            });
+        }
+    }
+    let angle_deg = cross.abs().atan2(a1.dot(&a2)).to_degrees();
+    if !(MIN_VECTOR_ANGLE_DEG..=180.0 - MIN_VECTOR_ANGLE_DEG).contains(&angle_deg) {
+        return Err(LatticeError::NearlyParallel {
+            angle_deg,
+            min_deg: MIN_VECTOR_ANGLE_DEG,
+        });
+    }
+    let ratio = a1.norm().max(a2.norm()) / a1.norm().min(a2.norm());
+    if ratio > MAX_ASPECT_RATIO {
+        return Err(LatticeError::AspectRatio {
+            ratio,
+            max: MAX_ASPECT_RATIO,
+        });
+    }
+    Ok(())
+}
+
+/// Checks the motif's size and every site's numbers (see [`UserLattice::new`]).
+fn check_motif(motif: &[MotifSite]) -> Result<(), LatticeError> {
+    if motif.is_empty() {
+        return Err(LatticeError::EmptyMotif);
+    }
+    if motif.len() > MAX_MOTIF_SITES {
+        return Err(LatticeError::TooManySites {
+            count: motif.len(),
+            max: MAX_MOTIF_SITES,
+        });
+    }
+    for (index, site) in motif.iter().enumerate() {
+        if !site.fractional.iter().all(|f| f.is_finite()) {
+            return Err(LatticeError::BadSite {
+                index,
+                position: site.fractional,
+            });
+        }
+        if site.fractional.iter().any(|f| f.abs() > MAX_FRACTIONAL) {
+            return Err(LatticeError::FractionalOutOfRange {
+                index,
+                position: site.fractional,
+                max: MAX_FRACTIONAL,
+            });
+        }
+        if !site.relative_height.is_finite() {
+            return Err(LatticeError::BadHeight {
+                index,
+                value: site.relative_height,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The text of a lattice file: only a regular file (checked before opening) of at most
+/// [`MAX_FILE_BYTES`].
+fn read_lattice_file(path: &Path) -> Result<String, LatticeError> {
+    use std::io::Read;
+    let io = |source| LatticeError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let metadata = std::fs::metadata(path).map_err(io)?;
+    if !metadata.is_file() {
+        let kind = file_kind(&metadata);
+        return Err(LatticeError::NotRegularFile {
+            path: path.to_path_buf(),
+            kind,
+        });
+    }
+    let too_large = |bytes| LatticeError::FileTooLarge {
+        path: path.to_path_buf(),
+        bytes,
+        max: MAX_FILE_BYTES,
+    };
+    if metadata.len() > MAX_FILE_BYTES {
+        return Err(too_large(metadata.len()));
+    }
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_FILE_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > MAX_FILE_BYTES {
+        return Err(too_large(text.len() as u64));
+    }
+    Ok(text)
+}
+
+/// What a non-regular file is, for error messages.
+fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
+    let kind = metadata.file_type();
+    if kind.is_dir() {
+        return "a directory";
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a named pipe (FIFO)";
+        }
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+    }
+    "not a regular file"
 }
 
 impl TryFrom<UserLatticeFile> for UserLattice {
