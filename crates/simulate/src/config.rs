@@ -37,11 +37,32 @@ use crate::effects::EffectConfig;
 use crate::error::{finite, finite2, fraction, invalid, non_negative, positive};
 use crate::{Region, SimulationError};
 
-/// Largest image the simulator accepts, pixels (2^28).
-pub const MAX_PIXELS: usize = 1 << 28;
+/// Memory a simulation takes per pixel, bytes (measured: 2048² px take 0.30 GB peak, about
+/// 72 bytes per pixel for trace, retrace, displacement fields, truth and outputs; rounded up).
+pub const BYTES_PER_PIXEL: u64 = 80;
 
-/// Largest number of random adatoms.
+/// Most memory the images of one simulation may take: 2 GiB.
+pub const MAX_MEMORY_BYTES: u64 = 2 << 30;
+
+/// Largest image the simulator accepts, pixels: [`MAX_MEMORY_BYTES`] / [`BYTES_PER_PIXEL`]
+/// (26.8 million, e.g. 5120 × 5120; 16384² would need 21 GB).
+pub const MAX_PIXELS: usize = (MAX_MEMORY_BYTES / BYTES_PER_PIXEL) as usize;
+
+/// Largest number of random adatoms (and of listed adatom or vacancy positions).
 pub const MAX_ADATOMS: usize = 1_000_000;
+
+/// Most displacement effects in one simulation (each is evaluated at every pixel).
+pub const MAX_EFFECTS: usize = 64;
+
+/// Most steps, strain regions and lobes of a feature (each list).
+pub const MAX_LIST: usize = 256;
+
+/// Most lattice sites in the nominal scanned area (cells × motif sites): 2·10^7 (each
+/// site takes tens of bytes in the site table).
+pub const MAX_NOMINAL_SITES: f64 = 2e7;
+
+/// Largest simulator config file read, bytes.
+pub const MAX_CONFIG_BYTES: u64 = 16 << 20;
 
 /// Everything one simulation needs. Deterministic: the same config gives bit-identical
 /// output, whatever the number of threads.
@@ -391,10 +412,14 @@ impl SimulationConfig {
     }
 
     /// Reads and validates a `.toml` or `.json` config (JSON if the text starts with `{`).
+    /// Only a regular file of at most [`MAX_CONFIG_BYTES`] is read: a FIFO, device or
+    /// directory is refused before it is opened.
     pub fn from_path(path: &Path) -> Result<SimulationConfig, SimulationError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SimulationError::Io {
-            path: path.to_path_buf(),
-            source,
+        let text = dhct_sm4_io::read_regular_text(path, MAX_CONFIG_BYTES).map_err(|error| {
+            SimulationError::Io {
+                path: path.to_path_buf(),
+                source: std::io::Error::other(error.to_string()),
+            }
         })?;
         let parsed = if text.trim_start().starts_with('{') {
             Self::from_json_str(&text)
@@ -429,15 +454,62 @@ impl SimulationConfig {
     }
 
     /// Checks every value; errors name the field (`scan.width_m`, `effects[1].t0_s` ...).
+    /// Besides ranges, counts are capped so that memory and time stay bounded: pixels
+    /// ([`MAX_PIXELS`]), effects ([`MAX_EFFECTS`]), lists ([`MAX_LIST`], [`MAX_ADATOMS`])
+    /// and lattice sites in the scanned area ([`MAX_NOMINAL_SITES`]).
     pub fn validate(&self) -> Result<(), SimulationError> {
         self.scan.validate()?;
         self.surface.validate()?;
+        self.check_sites()?;
+        if self.effects.len() > MAX_EFFECTS {
+            return Err(invalid(
+                "effects",
+                format!(
+                    "{} effects exceed the limit of {MAX_EFFECTS} (each is evaluated at every pixel)",
+                    self.effects.len()
+                ),
+            ));
+        }
         non_negative("tip.sigma_m", self.tip.sigma_m)?;
         self.noise.validate()?;
         for (index, effect) in self.effects.iter().enumerate() {
             effect.validate(&format!("effects[{index}]"))?;
         }
         Ok(())
+    }
+}
+
+impl SimulationConfig {
+    /// Refuses a lattice whose scanned area holds more than [`MAX_NOMINAL_SITES`] sites.
+    fn check_sites(&self) -> Result<(), SimulationError> {
+        let Ok(lattice) = self.surface.lattice.build() else {
+            return Ok(()); // reported by SurfaceConfig::validate
+        };
+        let sites = self.scan.width_m * self.scan.height_m / lattice.cell_area()
+            * lattice.motif().len() as f64;
+        if sites.is_finite() && sites <= MAX_NOMINAL_SITES {
+            return Ok(());
+        }
+        Err(invalid(
+            "surface.lattice",
+            format!(
+                "the {:.3e} x {:.3e} m scan holds {sites:.3e} lattice sites, more than the \
+                 limit of {MAX_NOMINAL_SITES:.0e}: a smaller area or a larger lattice constant",
+                self.scan.width_m, self.scan.height_m
+            ),
+        ))
+    }
+}
+
+/// `list` may hold at most `max` entries.
+fn check_len<T>(field: &str, list: &[T], max: usize) -> Result<(), SimulationError> {
+    if list.len() <= max {
+        Ok(())
+    } else {
+        Err(invalid(
+            field,
+            format!("{} entries exceed the limit of {max}", list.len()),
+        ))
     }
 }
 
@@ -452,12 +524,17 @@ impl ScanConfig {
         }
         match self.columns.checked_mul(self.rows) {
             Some(pixels) if pixels <= MAX_PIXELS => {}
-            _ => {
+            pixels => {
+                let gigabytes =
+                    pixels.map_or(f64::INFINITY, |p| p as f64) * BYTES_PER_PIXEL as f64 / 1e9;
                 return Err(invalid(
                     "scan.columns × scan.rows",
                     format!(
-                        "{} x {} px exceeds the limit of 2^28 = {MAX_PIXELS} pixels",
-                        self.columns, self.rows
+                        "{} x {} px would need about {gigabytes:.1} GB; the limit is \
+                         {MAX_PIXELS} pixels ({:.1} GB, e.g. 5120 x 5120)",
+                        self.columns,
+                        self.rows,
+                        MAX_MEMORY_BYTES as f64 / 1e9
                     ),
                 ));
             }
@@ -512,6 +589,8 @@ impl SurfaceConfig {
         finite2("surface.origin_m", self.origin_m)?;
         self.feature.validate("surface.feature")?;
         self.defects.validate()?;
+        check_len("surface.steps", &self.steps, MAX_LIST)?;
+        check_len("surface.strain", &self.strain, MAX_LIST)?;
         if let Some(domain) = &self.second_domain {
             domain.region.validate("surface.second_domain.region")?;
             finite("surface.second_domain.angle_rad", domain.angle_rad)?;
@@ -550,6 +629,7 @@ impl FeatureShape {
             positive(&format!("{field}.sigma_m"), sigma)?;
         }
         finite(&format!("{field}.angle_rad"), self.angle_rad)?;
+        check_len(&format!("{field}.lobes"), &self.lobes, MAX_LIST)?;
         for (index, lobe) in self.lobes.iter().enumerate() {
             let lobe_field = format!("{field}.lobes[{index}]");
             finite2(&format!("{lobe_field}.offset_m"), lobe.offset_m)?;
@@ -574,6 +654,16 @@ impl DefectConfig {
     /// Checks fractions, counts and positions.
     pub fn validate(&self) -> Result<(), SimulationError> {
         fraction("surface.defects.vacancy_fraction", self.vacancy_fraction)?;
+        check_len(
+            "surface.defects.vacancy_positions_m",
+            &self.vacancy_positions_m,
+            MAX_ADATOMS,
+        )?;
+        check_len(
+            "surface.defects.adatom_positions_m",
+            &self.adatom_positions_m,
+            MAX_ADATOMS,
+        )?;
         for (index, p) in self.vacancy_positions_m.iter().enumerate() {
             finite2(&format!("surface.defects.vacancy_positions_m[{index}]"), *p)?;
         }
