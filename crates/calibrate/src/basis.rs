@@ -73,21 +73,23 @@ fn score(basis: &Matrix2<f64>, peaks: &[Peak]) -> Option<Score> {
             })
         })
         .collect();
-    // Occupancy within the radius of the indexed peaks that matter (≥ 1 % of the strongest
-    // indexed one): a weak noise peak indexed by chance far out must not dilute it.
-    let strongest = peaks
+    // Occupancy within the radius holding 90 % of the indexed power: weak harmonics and
+    // noise peaks indexed far out (a distorted image smears its higher orders) must not
+    // dilute it.
+    let mut indexed: Vec<(f64, f64)> = peaks
         .iter()
         .zip(&indices)
         .filter(|(_, i)| i.is_some())
-        .map(|(p, _)| p.power)
-        .fold(0.0, f64::max);
-    let (mut radius, mut count) = (0.0f64, 0usize);
-    for (p, _) in peaks
-        .iter()
-        .zip(&indices)
-        .filter(|(p, i)| i.is_some() && p.power >= 0.01 * strongest)
-    {
-        radius = radius.max(p.k[0].hypot(p.k[1]));
+        .map(|(p, _)| (p.k[0].hypot(p.k[1]), p.power))
+        .collect();
+    indexed.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (mut radius, mut count, mut accumulated) = (0.0f64, 0usize, 0.0);
+    for (r, power) in indexed {
+        if accumulated >= 0.9 * indexed_power {
+            break;
+        }
+        accumulated += power;
+        radius = r;
         count += 1;
     }
     let cell = basis.determinant().abs();

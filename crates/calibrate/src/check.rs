@@ -1,5 +1,6 @@
 //! Whether the lattice and constant given can be what the image shows.
 
+use dhct_scan::Axis;
 use serde::{Deserialize, Serialize};
 
 use crate::{CalibrationError, LatticeMatch, LatticeMeasurement};
@@ -8,9 +9,10 @@ use crate::{CalibrationError, LatticeMatch, LatticeMeasurement};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CheckOptions {
-    /// Largest relative error of the file's pixel size (the geometric mean of x and y)
-    /// accepted: the lattice's nearest-neighbour distance in file units may differ from
-    /// the one given by at most this fraction (either way). Default 0.15; a lattice preset
+    /// Largest relative error of the file's pixel size along the fast axis accepted: the
+    /// lattice's size in file units may differ from the one given by at most this fraction
+    /// (either way) along the fast axis, and by [`SLOW_AXIS_SLACK`] times as much along the
+    /// slow axis (where a drift looks the same). Default 0.15; a lattice preset
     /// whose constant is known (nothing typed) is typically given 0.5.
     pub pitch_tolerance: f64,
     /// Stop when the image's symmetry contradicts the lattice's (e.g. a square lattice on
@@ -56,16 +58,22 @@ impl CheckOptions {
     }
 }
 
+/// The slow axis may be off by this factor more than the fast axis: a constant drift of
+/// up to about the slow-scan speed stretches or squeezes it like a wrong pixel size.
+pub const SLOW_AXIS_SLACK: f64 = 2.0;
+
 /// A match with a moderate stretch and a moderate spread is still a contradiction when
 /// both point the same way.
 const COMBINED_ANISOTROPY: f64 = 1.4;
 const COMBINED_SPREAD: f64 = 3.0;
 
 /// Checks `matched` (from `measurement`) against the options: the lattice's symmetry,
-/// then its size.
+/// then its size along the fast axis (`fast_axis`), where the pixel size is what it says
+/// unless the file is wrong; the slow axis gets [`SLOW_AXIS_SLACK`].
 pub fn check_inputs(
     measurement: &LatticeMeasurement,
     matched: &LatticeMatch,
+    fast_axis: Axis,
     options: &CheckOptions,
 ) -> Result<(), CalibrationError> {
     let shows = measurement.lattice.describe();
@@ -115,15 +123,25 @@ pub fn check_inputs(
             });
         }
     }
-    let factor = calibration.mean_scale;
+    // The fast axis carries the pixel size: a slow drift stretches the slow axis as much
+    // as a wrong pixel size would (one frame cannot tell them apart), so the slow axis only
+    // has to stay within what a drift up to the slow-scan speed can do.
+    let (fast, slow) = match fast_axis {
+        Axis::Horizontal => (calibration.scale[0], calibration.scale[1]),
+        Axis::Vertical => (calibration.scale[1], calibration.scale[0]),
+    };
     let limit = 1.0 + options.pitch_tolerance;
-    if !(factor <= limit && factor >= 1.0 / limit) {
+    let slow_limit = SLOW_AXIS_SLACK * limit;
+    let within = |k: f64, limit: f64| k <= limit && k >= 1.0 / limit;
+    if !(within(fast, limit) && within(slow, slow_limit)) {
+        let factor = if within(fast, limit) { slow } else { fast };
+        let nn = matched.nn_in_file_m / calibration.mean_scale;
         return Err(CalibrationError::WrongScale {
             shows,
             lattice: matched.lattice.clone(),
-            given_nn_m: matched.nn_in_file_m / factor,
-            measured_nn_m: matched.nn_in_file_m,
-            measured_nn_sigma_m: matched.nn_in_file_sigma_m,
+            given_nn_m: nn,
+            measured_nn_m: nn * factor,
+            measured_nn_sigma_m: nn * calibration.scale_sigma[0].max(calibration.scale_sigma[1]),
             factor,
             tolerance: options.pitch_tolerance,
         });

@@ -39,14 +39,12 @@ pub enum CalibrationError {
     /// beyond what a miscalibrated pixel size is allowed to explain.
     #[error(
         "the image shows {shows}, i.e. the {lattice} lattice's nearest-neighbour distance is \
-         {measured_nn:.4e} m ± {measured_nn_sigma:.1e} in file units; {given_nn:.4e} m cannot \
-         match it: the file's pixel size would be wrong by a factor {ratio:.3} (at most \
-         {tolerance:.0} % is accepted)",
-        measured_nn = measured_nn_m,
-        measured_nn_sigma = measured_nn_sigma_m,
-        given_nn = given_nn_m,
-        ratio = factor,
-        tolerance = 100.0 * tolerance
+         {measured} ± {sigma} in file units; {given} cannot match it: the file's pixel size \
+         would be wrong by a factor {factor:.3} (at most {tolerance_percent:.0} % is accepted along the fast axis)",
+        measured = crate::length(*measured_nn_m),
+        sigma = crate::length(*measured_nn_sigma_m),
+        given = crate::length(*given_nn_m),
+        tolerance_percent = 100.0 * tolerance
     )]
     WrongScale {
         /// What the image shows, in words.
@@ -59,7 +57,9 @@ pub enum CalibrationError {
         measured_nn_m: f64,
         /// Its 1σ uncertainty, metres.
         measured_nn_sigma_m: f64,
-        /// `measured / given`: the factor by which the file's pixel size would be wrong.
+        /// `measured / given` along the axis that failed (the fast axis, unless only the
+        /// slow axis is beyond its wider limit): the factor by which the file's pixel size
+        /// would be wrong.
         factor: f64,
         /// The largest relative pixel-size error accepted.
         tolerance: f64,

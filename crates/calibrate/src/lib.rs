@@ -17,11 +17,11 @@
 //! use ndarray::Array2;
 //!
 //! // A hexagonal lattice (a = 10 px) on a 128² image whose file says 1 Å per pixel, while
-//! // the truth is 1.2 Å along x: the lattice looks 1/1.2 as long along x.
+//! // the truth is 1.1 Å along x: the lattice looks 1/1.1 as long along x.
 //! let geometry = ScanGeometry::new(128, 128, 1e-10, 1e-10, 1e-4,
 //!                                  ScanDirection::Right, ScanDirection::Down).unwrap();
 //! let z = Array2::from_shape_fn((128, 128), |(r, c)| {
-//!     let (x, y) = (c as f64 * 1.2, r as f64);
+//!     let (x, y) = (c as f64 * 1.1, r as f64);
 //!     (0..3).map(|k| {
 //!         let t = std::f64::consts::PI / 3.0 * k as f64 + std::f64::consts::FRAC_PI_2;
 //!         let g = 2.0 * std::f64::consts::PI / (10.0 * 3f64.sqrt() / 2.0);
@@ -32,7 +32,7 @@
 //! let lattice = Hexagonal::new("hexagonal", 1e-9, dhct_lattice::PlaneGroup::P6mm).unwrap();
 //! let found = calibrate_pair(&pair, &lattice, None, &CheckOptions::default()).unwrap();
 //! let c = found.calibration;
-//! assert!((c.scale[0] - 1.0 / 1.2).abs() < 0.01 && (c.scale[1] - 1.0).abs() < 0.01);
+//! assert!((c.scale[0] - 1.0 / 1.1).abs() < 0.01 && (c.scale[1] - 1.0).abs() < 0.01);
 //! // A square lattice cannot be what this image shows.
 //! let square = Square::new(1e-9).unwrap();
 //! assert!(calibrate_pair(&pair, &square, None, &CheckOptions::default()).is_err());
@@ -45,7 +45,7 @@ mod matching;
 mod measure;
 mod spectrum;
 
-pub use check::{CheckOptions, check_inputs};
+pub use check::{CheckOptions, SLOW_AXIS_SLACK, check_inputs};
 pub use error::CalibrationError;
 pub use matching::{Calibration, LatticeMatch, ShellCheck, match_lattice};
 pub use measure::{
@@ -107,8 +107,8 @@ pub fn calibrate_pair(
         };
         let matched = match_lattice(&measurement, lattice);
         if pass == ScanPass::Trace {
-            check_inputs(&measurement, &matched, options)?;
-        } else if check_inputs(&measurement, &matched, options).is_err() {
+            check_inputs(&measurement, &matched, geometry.fast_axis(), options)?;
+        } else if check_inputs(&measurement, &matched, geometry.fast_axis(), options).is_err() {
             // A retrace that contradicts an accepted trace is not used to calibrate.
             continue;
         }

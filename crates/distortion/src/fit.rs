@@ -14,7 +14,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::lm::{Problem, huber_weights, levenberg_marquardt, mad_sigma};
-use crate::model::{DistortionModel, DriftCreep, HysteresisLaw, Parameter};
+use crate::model::{
+    Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
+};
 use crate::{DistortionError, LocalDistortion};
 
 /// Which hysteresis law to fit.
@@ -90,7 +92,7 @@ pub fn fit_model(
             needed: MIN_FEATURES,
         });
     }
-    let (drift, mut parameters) = fit_drift(
+    let (drift, mut parameters, diagnostics) = fit_drift(
         local,
         frame_duration_s,
         line_scan_time_s,
@@ -103,6 +105,7 @@ pub fn fit_model(
         drift,
         hysteresis,
         parameters,
+        diagnostics,
     })
 }
 
@@ -145,7 +148,7 @@ fn fit_drift(
     line_scan_time_s: f64,
     robust_rounds: usize,
     secant_mode: bool,
-) -> Result<(DriftCreep, Vec<Parameter>), DistortionError> {
+) -> Result<(DriftCreep, Vec<Parameter>, FitDiagnostics), DistortionError> {
     let t: Vec<f64> = local.iter().map(|l| l.time_s).collect();
     let offsets: Vec<&[f64]> = local
         .iter()
@@ -266,16 +269,55 @@ fn fit_drift(
     if !(t0.is_finite() && p.iter().all(|v| v.is_finite())) {
         return Err(DistortionError::FitFailed("drift/creep"));
     }
+    let names = ["v_x", "a_x", "C_x", "v_y", "a_y", "C_y", "t0"];
     let parameters = vec![
-        parameter("v_x", p[0] / NM, s[0] / NM, "m/s"),
-        parameter("a_x", p[1] / NM, s[1] / NM, "m/s^2"),
-        parameter("C_x", p[2] / NM, s[2] / NM, "m"),
-        parameter("v_y", p[3] / NM, s[3] / NM, "m/s"),
-        parameter("a_y", p[4] / NM, s[4] / NM, "m/s^2"),
-        parameter("C_y", p[5] / NM, s[5] / NM, "m"),
-        parameter("t0", t0, t0_sigma, "s"),
+        parameter(names[0], p[0] / NM, s[0] / NM, "m/s"),
+        parameter(names[1], p[1] / NM, s[1] / NM, "m/s^2"),
+        parameter(names[2], p[2] / NM, s[2] / NM, "m"),
+        parameter(names[3], p[3] / NM, s[3] / NM, "m/s"),
+        parameter(names[4], p[4] / NM, s[4] / NM, "m/s^2"),
+        parameter(names[5], p[5] / NM, s[5] / NM, "m"),
+        parameter(names[6], t0, t0_sigma, "s"),
     ];
-    Ok((drift, parameters))
+    let diagnostics = FitDiagnostics {
+        degenerate_pairs: strong_correlations(&fit.inverse_normal, &names),
+        at_bounds: if t0_map.at_bound(p[6]) {
+            vec![Bound {
+                parameter: "t0".into(),
+                value: t0,
+                range: [t0_map.lo.exp(), t0_map.hi.exp()],
+            }]
+        } else {
+            Vec::new()
+        },
+    };
+    Ok((drift, parameters, diagnostics))
+}
+
+/// Correlation beyond which two parameters count as nearly degenerate (only a combination
+/// of them is measured).
+pub const DEGENERATE_CORRELATION: f64 = 0.95;
+
+/// Pairs of parameters whose estimates correlate beyond ±[`DEGENERATE_CORRELATION`], from
+/// the inverse normal matrix.
+fn strong_correlations(inverse: &Option<DMatrix<f64>>, names: &[&str]) -> Vec<DegeneratePair> {
+    let Some(c) = inverse else {
+        return Vec::new();
+    };
+    let mut pairs = Vec::new();
+    for i in 0..names.len() {
+        for j in i + 1..names.len() {
+            let r = c[(i, j)] / (c[(i, i)] * c[(j, j)]).sqrt();
+            if r.is_finite() && r.abs() > DEGENERATE_CORRELATION {
+                pairs.push(DegeneratePair {
+                    first: names[i].into(),
+                    second: names[j].into(),
+                    correlation: r,
+                });
+            }
+        }
+    }
+    pairs
 }
 
 /// `t0 = exp(lo + (hi − lo)·σ(p))`: the creep time constant as a function of an
@@ -299,6 +341,12 @@ impl LogisticLog {
     fn derivative(&self, p: f64) -> f64 {
         let s = Self::logistic(p);
         self.t0(p) * (self.hi - self.lo) * s * (1.0 - s)
+    }
+
+    /// Whether `t0(p)` lies within 1 % (in log) of a bound of the range.
+    fn at_bound(&self, p: f64) -> bool {
+        let fraction = Self::logistic(p);
+        !(0.01..=0.99).contains(&fraction)
     }
 
     /// The `p` of `t0` (clamped just inside the bounds).

@@ -65,7 +65,9 @@ pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sa
 pub use error::DistortionError;
 pub use fit::{FitOptions, HysteresisChoice, fit_model};
 pub use local::{LocalDistortion, LocalSettings, estimate_lattice_angle, local_distortions};
-pub use model::{DistortionModel, DriftCreep, HysteresisLaw, Parameter};
+pub use model::{
+    Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
+};
 pub use neighbours::{
     AngleStats, ExclusionCounts, NeighbourOptions, NeighbourSelection, Rdf, RdfFit,
     SelectedFeature, nn_angle_stats, radial_distribution, select_features, select_nearest,
@@ -169,6 +171,24 @@ pub fn analyse(
     lattice: &dyn Lattice,
     options: &DhctOptions,
 ) -> Result<DhctResult, DistortionError> {
+    analyse_seeded(inputs, geometry, lattice, options, None)
+}
+
+/// [`analyse`] with the first neighbour search done in `selection_geometry` (the same
+/// pixel grid with another pixel size, e.g. calibrated from the lattice the image shows)
+/// instead of `geometry`: on a file whose pixel size is off by tens of percent the NN
+/// window around the lattice's spacing would otherwise miss every neighbour. The local
+/// distortions are measured in `geometry` all the same, so the model absorbs the pixel
+/// size error (as slow drift and a hysteresis scale) and its parameters keep their
+/// meaning.
+pub fn analyse_seeded(
+    inputs: &[PassInput],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+    selection_geometry: Option<&ScanGeometry>,
+) -> Result<DhctResult, DistortionError> {
+    let search = selection_geometry.unwrap_or(geometry);
     let method = options
         .method
         .unwrap_or_else(|| lattice.local_distortion_method());
@@ -180,13 +200,8 @@ pub fn analyse(
             continue;
         };
         let points_px: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
-        let selection = select_features(
-            &points_px,
-            geometry,
-            input.mask,
-            lattice,
-            &options.neighbours,
-        )?;
+        let selection =
+            select_features(&points_px, search, input.mask, lattice, &options.neighbours)?;
         passes.push(measure_pass(
             input, pass, selection, None, geometry, lattice, method,
         ));
@@ -200,7 +215,7 @@ pub fn analyse(
             .map(|(previous, input)| {
                 let points_px: Vec<[f64; 2]> =
                     input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
-                let selected = select_nearest(&points_px, geometry, input.mask, lattice)?;
+                let selected = select_nearest(&points_px, search, input.mask, lattice)?;
                 let nearest = NeighbourSelection {
                     selected,
                     exclusions: ExclusionCounts::default(),

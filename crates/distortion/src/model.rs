@@ -76,6 +76,37 @@ pub struct Parameter {
     pub unit: String,
 }
 
+/// Two fitted parameters whose estimates are nearly degenerate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DegeneratePair {
+    /// First parameter's name.
+    pub first: String,
+    /// Second parameter's name.
+    pub second: String,
+    /// Their correlation coefficient (|r| > 0.95).
+    pub correlation: f64,
+}
+
+/// A fitted parameter that ended at a bound of its allowed range.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Bound {
+    /// The parameter's name.
+    pub parameter: String,
+    /// Its value, in its unit.
+    pub value: f64,
+    /// The allowed range `[low, high]`, same unit.
+    pub range: [f64; 2],
+}
+
+/// What the fit says about its own weak spots.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FitDiagnostics {
+    /// Pairs of drift/creep parameters correlated beyond ±0.95.
+    pub degenerate_pairs: Vec<DegeneratePair>,
+    /// Parameters at a bound of their range.
+    pub at_bounds: Vec<Bound>,
+}
+
 /// The fitted distortion of one scan: drift + creep and fast-scan hysteresis.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DistortionModel {
@@ -85,6 +116,9 @@ pub struct DistortionModel {
     pub hysteresis: HysteresisLaw,
     /// Every fitted parameter with uncertainty and unit (drift first, then hysteresis).
     pub parameters: Vec<Parameter>,
+    /// Degenerate pairs and parameters at bounds (empty for a model not fitted).
+    #[serde(default)]
+    pub diagnostics: FitDiagnostics,
 }
 
 fn direction_vector(direction: ScanDirection) -> [f64; 2] {
@@ -111,6 +145,7 @@ impl DistortionModel {
             drift: DriftCreep::none(),
             hysteresis: HysteresisLaw::none(),
             parameters: Vec::new(),
+            diagnostics: FitDiagnostics::default(),
         }
     }
 
@@ -120,6 +155,7 @@ impl DistortionModel {
             drift,
             hysteresis,
             parameters: Vec::new(),
+            diagnostics: FitDiagnostics::default(),
         }
     }
 

@@ -148,6 +148,20 @@ pub fn radial_distribution(
     Ok(Rdf { r_m, g })
 }
 
+impl RdfFit {
+    /// Whether the fit describes shells: every amplitude positive and every width between
+    /// 0.2 % and 30 % of its shell's distance (a degenerate fit gives widths of picometres
+    /// with amplitudes of thousands, or shells wider than the lattice).
+    pub fn is_plausible(&self) -> bool {
+        self.amplitudes.iter().all(|a| a.is_finite() && *a > 0.0)
+            && self
+                .widths_m
+                .iter()
+                .zip(&self.shells_m)
+                .all(|(w, r)| w.is_finite() && *w >= 0.002 * r && *w <= 0.3 * r)
+    }
+}
+
 /// Fits Gaussians at the shell distances `shells_m` (nominal, metres; only their ratios
 /// and the first as a start value are used) to `rdf`, refining the NN distance.
 pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
@@ -288,7 +302,13 @@ pub fn select_features(
         options.bin_fraction * a_nominal,
     )?;
     let rdf_fit = fit_rdf(&rdf, &shells)?;
-    let scale = rdf_fit.nn_distance_m / a_nominal;
+    // A degenerate fit (a needle or a shell as wide as the lattice) says nothing about
+    // the spacing: the window stays at the nominal one.
+    let scale = if rdf_fit.is_plausible() {
+        rdf_fit.nn_distance_m / a_nominal
+    } else {
+        1.0
+    };
     let nn_distances_m: Vec<f64> = nn_distances(lattice).iter().map(|d| d * scale).collect();
     let reach = nn_distances_m.last().copied().unwrap_or(a_nominal) * (1.0 + options.window);
     let expected = lattice.nearest_neighbours(0).len();

@@ -118,6 +118,10 @@ impl Prepared {
             KernelChoice::GaussianSigma { sigma_px } => {
                 (Kernel::gaussian(*sigma_px)?, (2.0 * sigma_px).round() / 2.0)
             }
+            KernelChoice::FractionOfNeighbourDistance { fraction } => {
+                let sigma_px = fraction * nn_px;
+                (Kernel::gaussian(sigma_px)?, (2.0 * sigma_px).round() / 2.0)
+            }
             KernelChoice::Custom { kernel } => (kernel.clone(), f64::NAN),
         };
         let (kh, kw) = kernel.values().dim();

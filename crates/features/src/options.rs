@@ -47,6 +47,9 @@ pub enum KernelChoice {
     FromNeighbourDistance,
     /// An isotropic Gaussian of this σ, pixels.
     GaussianSigma { sigma_px: f64 },
+    /// An isotropic Gaussian whose σ is this fraction of the nearest-neighbour distance (a
+    /// small feature in a large cell, e.g. a Si(111)-7×7 corner hole: 0.1).
+    FractionOfNeighbourDistance { fraction: f64 },
     /// A user template.
     Custom { kernel: Kernel },
 }

@@ -27,6 +27,7 @@
 //! assert!((shells[1] / shells[0] - 3f64.sqrt()).abs() < 1e-9);
 //! ```
 
+mod appearance;
 mod error;
 mod fit;
 mod motif;
@@ -35,6 +36,7 @@ mod plane_group;
 mod presets;
 mod user;
 
+pub use appearance::FeatureAppearance;
 pub use error::LatticeError;
 pub use fit::{
     AngularDistribution, IndexedPoint, LatticeFit, LatticeFitError, LatticeFitOptions,
@@ -43,7 +45,7 @@ pub use fit::{
 pub use motif::MotifSite;
 pub use neighbours::{LatticeSite, lattice_sites, mean_bond_rotation};
 pub use plane_group::PlaneGroup;
-pub use presets::{Hexagonal, Honeycomb, Rectangular, Square};
+pub use presets::{Hexagonal, Honeycomb, Rectangular, SI111_7X7_A, Square};
 pub use user::UserLattice;
 
 use nalgebra::Vector2;
@@ -121,6 +123,12 @@ pub trait Lattice: std::fmt::Debug + Send + Sync {
         } else {
             LocalDistortionMethod::Affine
         }
+    }
+
+    /// How the tracked features look (bright or dark, how wide): the default is bright
+    /// atoms with the DHCT kernel.
+    fn feature_appearance(&self) -> FeatureAppearance {
+        FeatureAppearance::default()
     }
 
     /// Area of the primitive cell, m².

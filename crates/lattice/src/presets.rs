@@ -3,7 +3,7 @@
 use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
-use crate::{Lattice, LatticeError, MotifSite, PlaneGroup};
+use crate::{FeatureAppearance, Lattice, LatticeError, MotifSite, PlaneGroup};
 
 fn check_length(what: &'static str, value: f64) -> Result<(), LatticeError> {
     if value.is_finite() && value > 0.0 {
@@ -20,6 +20,9 @@ fn hexagonal_vectors(a: f64) -> [Vector2<f64>; 2] {
     ]
 }
 
+/// The Si(111)-7×7 cell constant, metres (7 × 3.840 Å).
+pub const SI111_7X7_A: f64 = 2.688e-9;
+
 /// A hexagonal (trigonal) lattice with one imaged feature per cell and 6 nearest neighbours
 /// at distance `a`: graphite's imaged atoms, close-packed adsorbates, SAMs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -28,6 +31,8 @@ pub struct Hexagonal {
     a: f64,
     plane_group: PlaneGroup,
     motif: Vec<MotifSite>,
+    #[serde(default)]
+    appearance: FeatureAppearance,
 }
 
 impl Hexagonal {
@@ -43,6 +48,7 @@ impl Hexagonal {
             a,
             plane_group,
             motif: vec![MotifSite::new(0.0, 0.0, "")],
+            appearance: FeatureAppearance::default(),
         })
     }
 
@@ -54,6 +60,7 @@ impl Hexagonal {
             a: 2.46e-10,
             plane_group: PlaneGroup::P3m1,
             motif: vec![MotifSite::new(0.0, 0.0, "C")],
+            appearance: FeatureAppearance::default(),
         }
     }
 
@@ -64,7 +71,31 @@ impl Hexagonal {
             a: 4.99e-10,
             plane_group: PlaneGroup::P6mm,
             motif: vec![MotifSite::new(0.0, 0.0, "S")],
+            appearance: FeatureAppearance::default(),
         }
+    }
+
+    /// The Si(111)-7×7 reconstruction tracked by its corner holes: one dark, narrow feature
+    /// per cell (σ ≈ a/10), a = 2.688 nm (7 × 3.840 Å), plane group p31m. The 12 adatoms and
+    /// the dimer rows inside the cell are not tracked, so the neighbour shells (a, √3a, 2a)
+    /// cannot lock onto intra-cell distances.
+    pub fn si111_7x7() -> Hexagonal {
+        Hexagonal {
+            name: "si111-7x7".into(),
+            a: SI111_7X7_A,
+            plane_group: PlaneGroup::P31m,
+            motif: vec![MotifSite::new(0.0, 0.0, "corner hole")],
+            appearance: FeatureAppearance {
+                dark: true,
+                width_fraction: Some(0.1),
+            },
+        }
+    }
+
+    /// This lattice with another constant `a` (metres), everything else kept.
+    pub fn with_constant(&self, a: f64) -> Result<Hexagonal, LatticeError> {
+        check_length("a", a)?;
+        Ok(Hexagonal { a, ..self.clone() })
     }
 
     /// The lattice constant, metres.
@@ -85,6 +116,9 @@ impl Lattice for Hexagonal {
     }
     fn plane_group(&self) -> PlaneGroup {
         self.plane_group
+    }
+    fn feature_appearance(&self) -> FeatureAppearance {
+        self.appearance
     }
 }
 

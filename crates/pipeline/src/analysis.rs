@@ -8,6 +8,9 @@ use dhct_unitcell::{AveragedCell, ConfidenceEllipse, LocalCell, SymmetryResidual
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
+use crate::{AffineComparison, Warning};
+use dhct_calibrate::PairCalibration;
+
 /// Everything the chain produced.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Analysis {
@@ -24,11 +27,28 @@ pub struct Analysis {
     pub unit_cell: Option<UnitCellAnalysis>,
     /// Why there is no unit-cell analysis, if there is none.
     pub unit_cell_note: Option<String>,
-    /// Plausibility warnings: results that may be wrong without any stage failing
-    /// (e.g. a corrected lattice constant far from the nominal one).
-    pub warnings: Vec<String>,
+    /// The lattice the images show (file units) and the calibration it gives, or why it
+    /// could not be measured.
+    pub calibration: Result<PairCalibration, String>,
+    /// Per region: the full model against the global affine correction.
+    pub affine: Vec<AffineComparison>,
+    /// Which correction the results come from.
+    pub correction: CorrectionSource,
+    /// What not to trust, and what to do: weak spots of the fit, implausible results,
+    /// assumptions (see [`WarningCode`]).
+    pub warnings: Vec<Warning>,
     /// Wall time of each stage.
     pub timings: StageTimings,
+}
+
+/// Which correction the corrected features and images come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CorrectionSource {
+    /// The fitted drift + creep + hysteresis model.
+    DriftModel,
+    /// The global affine correction (the model did worse than it).
+    Affine,
 }
 
 /// One image's results.
@@ -126,6 +146,9 @@ pub struct UnitCellAnalysis {
 /// Wall time of each stage, seconds.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct StageTimings {
+    /// Measuring the lattice the images show (Fourier transform) and checking the inputs.
+    #[serde(default)]
+    pub calibration_s: f64,
     /// Feature finding and fitting (both images).
     pub features_s: f64,
     /// Neighbours, local distortion and model fit.
@@ -143,6 +166,8 @@ pub struct StageTimings {
 /// The stage that is about to start (for progress reporting).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Stage {
+    /// Measuring the lattice the image shows.
+    Calibration,
     /// Finding and fitting features.
     Features,
     /// Neighbours, local distortion, model fit.
@@ -159,6 +184,7 @@ impl Stage {
     /// Short description for a progress line.
     pub fn describe(self) -> &'static str {
         match self {
+            Stage::Calibration => "measuring the lattice the image shows",
             Stage::Features => "finding and fitting features",
             Stage::Model => "fitting drift, creep and hysteresis",
             Stage::Correction => "correcting features and images",

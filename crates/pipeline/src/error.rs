@@ -78,6 +78,10 @@ pub enum PipelineError {
     /// The mask selects no pixel.
     #[error("the mask selects no pixel (is it inverted?)")]
     EmptyMask,
+    /// The lattice or its constant cannot be what the image shows (measured from the
+    /// image's Fourier transform before any feature is found).
+    #[error("{0}")]
+    Calibration(Box<dhct_calibrate::CalibrationError>),
     /// An option is out of range.
     #[error("invalid option: {0}")]
     BadOption(String),

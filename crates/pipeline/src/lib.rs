@@ -34,24 +34,32 @@
 //! assert!((fit.scale[0] - 1.0).abs() < 0.01 && (fit.scale[1] - 1.0).abs() < 0.01);
 //! ```
 
+mod affine;
 mod analysis;
+mod calibration;
 mod error;
 mod options;
 mod regions;
+mod warnings;
 
+pub use affine::AffineComparison;
 pub use analysis::{
-    Analysis, FeatureIndex, PassOutput, RegionFit, SkippedRegion, Stage, StageTimings,
-    UnitCellAnalysis,
+    Analysis, CorrectionSource, FeatureIndex, PassOutput, RegionFit, SkippedRegion, Stage,
+    StageTimings, UnitCellAnalysis,
 };
+pub use calibration::CalibrationOptions;
 pub use error::PipelineError;
 pub use options::{CellSelection, PipelineOptions, RegionOptions, UnitCellOptions};
 pub use regions::label_regions;
+pub use warnings::{
+    CALIBRATION_WARNING, DEVIATION_WARNING, INDEXED_WARNING, SCALE_WARNING, Warning, WarningCode,
+};
 
 use std::time::Instant;
 
 use dhct_distortion::{
-    CorrectedFeature, DistortionError, PassInput, Rdf, analyse, correct_features, correct_image,
-    radial_distribution,
+    CorrectedFeature, DistortionError, PassInput, Rdf, analyse_seeded, correct_features,
+    correct_image, radial_distribution,
 };
 use dhct_features::{Feature, FeatureSet, find_features_in_pair_and_correlation};
 use dhct_lattice::{Lattice, angular_distribution, fit_lattice};
@@ -96,12 +104,21 @@ pub fn run(
     }
     let mut timings = StageTimings::default();
 
-    // 1. Features.
+    // 0. The lattice the image shows, checked against the inputs.
+    progress(Stage::Calibration);
+    let t = Instant::now();
+    let calibration = calibration::measure(pair, lattice, mask, &options.calibration)?;
+    timings.calibration_s = t.elapsed().as_secs_f64();
+
+    // 1. Features (the kernel sized from the lattice's spacing as the image shows it).
     progress(Stage::Features);
     let t = Instant::now();
     let mut feature_options = options.features.clone();
     if !feature_options.neighbour_distance.is_finite() {
         feature_options.neighbour_distance = lattice.nearest_neighbour_distance();
+    }
+    if let Ok(found) = &calibration {
+        feature_options.neighbour_distance *= found.calibration.mean_scale;
     }
     let found = find_features_in_pair_and_correlation(pair, &feature_options, mask)?;
     for (set, _) in &found {
@@ -125,7 +142,11 @@ pub fn run(
             mask,
         })
         .collect();
-    let dhct = match analyse(&inputs, geometry, lattice, &options.dhct) {
+    let seeded = calibration
+        .as_ref()
+        .ok()
+        .and_then(|found| calibration::seeded_geometry(geometry, found));
+    let dhct = match analyse_seeded(&inputs, geometry, lattice, &options.dhct, seeded.as_ref()) {
         Ok(dhct) => dhct,
         Err(DistortionError::TooFewFeatures {
             found: usable,
@@ -161,30 +182,39 @@ pub fn run(
     };
     timings.model_s = t.elapsed().as_secs_f64();
 
-    // 3. Correction.
+    // 3–4. Features corrected by the model and fitted per region; the global affine
+    // correction, fitted the same way, is the floor the model must beat.
     progress(Stage::Correction);
     let t = Instant::now();
-    let corrected: Vec<(Vec<CorrectedFeature>, Array2<f64>)> = found
-        .par_iter()
-        .map(|(set, _)| {
-            let features = correct_features(&dhct.model, geometry, &set.features);
-            let image = pair
-                .image(set.pass)
-                .expect("features were found in this image");
-            let z = correct_image(&dhct.model, geometry, set.pass, &image.z)?;
-            Ok((features, z))
-        })
-        .collect::<Result<_, PipelineError>>()?;
+    let mut dhct = dhct;
+    let sets: Vec<&FeatureSet> = found.iter().map(|(s, _)| s).collect();
+    let mut corrected_features = correct_sets(&dhct.model, geometry, &sets);
     timings.correction_s = t.elapsed().as_secs_f64();
-
-    // 4. Lattice fit per region.
     progress(Stage::LatticeFit);
     let t = Instant::now();
-    let sets: Vec<&FeatureSet> = found.iter().map(|(s, _)| s).collect();
-    let corrected_features: Vec<&[CorrectedFeature]> =
-        corrected.iter().map(|(c, _)| c.as_slice()).collect();
-    let (regions, skipped_regions) =
+    let (mut regions, mut skipped_regions) =
         fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
+    let mut correction = CorrectionSource::DriftModel;
+    let mut comparisons = Vec::new();
+    if let Ok(found) = &calibration {
+        let c = &found.calibration;
+        comparisons = regions
+            .iter()
+            .filter_map(|r| affine::compare(r, &sets, geometry, c, lattice, &options.lattice_fit))
+            .collect();
+        // The largest region decides.
+        if comparisons
+            .first()
+            .is_some_and(AffineComparison::model_is_worse)
+            && let Some(model) = affine::affine_model(geometry, c)
+        {
+            dhct.model = model;
+            corrected_features = correct_sets(&dhct.model, geometry, &sets);
+            (regions, skipped_regions) =
+                fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
+            correction = CorrectionSource::Affine;
+        }
+    }
     let mut indices: Vec<Vec<Option<FeatureIndex>>> =
         sets.iter().map(|s| vec![None; s.features.len()]).collect();
     for (r, region) in regions.iter().enumerate() {
@@ -205,6 +235,21 @@ pub fn run(
         }
     }
     timings.lattice_fit_s = t.elapsed().as_secs_f64();
+
+    // The images, with the correction chosen.
+    let t = Instant::now();
+    let images: Vec<Array2<f64>> = sets
+        .par_iter()
+        .map(|set| {
+            let image = pair
+                .image(set.pass)
+                .expect("features were found in this image");
+            correct_image(&dhct.model, geometry, set.pass, &image.z).map_err(PipelineError::from)
+        })
+        .collect::<Result<_, _>>()?;
+    timings.correction_s += t.elapsed().as_secs_f64();
+    let corrected: Vec<(Vec<CorrectedFeature>, Array2<f64>)> =
+        corrected_features.into_iter().zip(images).collect();
 
     // 5. Unit cells.
     progress(Stage::UnitCells);
@@ -246,7 +291,14 @@ pub fn run(
             }
         })
         .collect();
-    let warnings = plausibility_warnings(lattice, &regions, &passes);
+    let mut warnings = warnings::calibration_warnings(&calibration);
+    warnings.extend(warnings::assumption_warnings(geometry));
+    warnings.extend(warnings::fit_warnings(&dhct));
+    warnings.extend(warnings::affine_warnings(
+        &comparisons,
+        correction == CorrectionSource::Affine,
+    ));
+    warnings.extend(warnings::plausibility_warnings(lattice, &regions, &passes));
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(Analysis {
         passes,
@@ -255,113 +307,23 @@ pub fn run(
         skipped_regions,
         unit_cell,
         unit_cell_note,
+        calibration,
+        affine: comparisons,
+        correction,
         warnings,
         timings,
     })
 }
 
-/// Ratio of the lattice-fit deviation to the features' localisation uncertainty beyond
-/// which a warning is given.
-pub const DEVIATION_WARNING: f64 = 3.0;
-
-/// Fitted lattice scale beyond which a warning is given (fraction).
-pub const SCALE_WARNING: f64 = 0.03;
-
-/// Results that look wrong although every stage succeeded.
-fn plausibility_warnings(
-    lattice: &dyn Lattice,
-    regions: &[RegionFit],
-    passes: &[PassOutput],
-) -> Vec<String> {
-    let mut warnings = Vec::new();
-    for r in regions {
-        let worst = r
-            .fit
-            .scale
-            .iter()
-            .map(|s| (s - 1.0).abs())
-            .fold(0.0, f64::max);
-        if worst > SCALE_WARNING {
-            warnings.push(format!(
-                "region {}: the corrected lattice is {:.1} % x {:.1} % of the nominal {} lattice \
-                 (scales {:.4}, {:.4}); check the pixel size in the file, --nn, and the drift \
-                 model (a drift near the slow-scan speed is not recoverable)",
-                r.region,
-                100.0 * r.fit.scale[0],
-                100.0 * r.fit.scale[1],
-                lattice.name(),
-                r.fit.scale[0],
-                r.fit.scale[1]
-            ));
-        }
-        let offset = r
-            .fit
-            .set_offsets_m
-            .iter()
-            .skip(1)
-            .map(|o| o[0].hypot(o[1]))
-            .fold(0.0, f64::max);
-        if offset > 0.25 * lattice.nearest_neighbour_distance() {
-            warnings.push(format!(
-                "region {}: trace and retrace disagree by {:.1} pm after correction (more than a \
-                 quarter of the NN distance)",
-                r.region,
-                offset * 1e12
-            ));
-        }
-    }
-    // The corrected lattice should deviate from its fit about as much as the features'
-    // own localisation uncertainty; far more means the model missed something.
-    for r in regions {
-        let mut sigmas: Vec<f64> = Vec::new();
-        for (k, members) in r.members.iter().enumerate() {
-            let Some(pass) = passes.iter().find(|p| p.pass == r.passes[k]) else {
-                continue;
-            };
-            let pitch = (pass.features.features.first())
-                .map(|f| {
-                    if f.x_px != 0.0 {
-                        f.x_m / f.x_px
-                    } else {
-                        f64::NAN
-                    }
-                })
-                .unwrap_or(f64::NAN);
-            sigmas.extend(members.iter().map(|&i| {
-                let f = &pass.features.features[i];
-                pitch.abs() * (0.5 * (f.x_sigma_px.powi(2) + f.y_sigma_px.powi(2))).sqrt()
-            }));
-        }
-        sigmas.retain(|s| s.is_finite() && *s > 0.0);
-        if sigmas.is_empty() {
-            continue;
-        }
-        sigmas.sort_by(f64::total_cmp);
-        let localisation = sigmas[sigmas.len() / 2];
-        let ratio = r.whole_ellipse.sigma_major_m / localisation;
-        if ratio > DEVIATION_WARNING {
-            warnings.push(format!(
-                "region {}: features deviate {:.1} pm (1σ, major axis) from the fitted lattice, \
-                 {ratio:.1}× their localisation uncertainty ({:.1} pm): the drift model may not \
-                 describe this scan, or the surface is not the lattice given (run dhct diagnose)",
-                r.region,
-                r.whole_ellipse.sigma_major_m * 1e12,
-                localisation * 1e12
-            ));
-        }
-    }
-    for p in passes {
-        let total = p.features.features.len();
-        let indexed = p.indices.iter().flatten().count();
-        if total > 0 && (indexed as f64) < 0.5 * total as f64 {
-            warnings.push(format!(
-                "{}: only {indexed} of {total} features were indexed by the lattice fit (use a \
-                 mask to exclude steps, defects and other domains)",
-                p.pass
-            ));
-        }
-    }
-    warnings
+/// Every set's features moved to the sample frame by `model`.
+fn correct_sets(
+    model: &dhct_distortion::DistortionModel,
+    geometry: &dhct_scan::ScanGeometry,
+    sets: &[&FeatureSet],
+) -> Vec<Vec<CorrectedFeature>> {
+    sets.par_iter()
+        .map(|set| correct_features(model, geometry, &set.features))
+        .collect()
 }
 
 fn found_sets_first(found: &[(FeatureSet, Array2<f64>)]) -> &FeatureSet {
@@ -456,7 +418,7 @@ fn fit_regions(
     mask: Option<&Array2<bool>>,
     options: &PipelineOptions,
     sets: &[&FeatureSet],
-    corrected: &[&[CorrectedFeature]],
+    corrected: &[Vec<CorrectedFeature>],
 ) -> Result<(Vec<RegionFit>, Vec<SkippedRegion>), PipelineError> {
     let geometry = pair.geometry();
     let (labels, sizes) = match mask {

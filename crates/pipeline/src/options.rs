@@ -2,7 +2,7 @@
 //! the results so a run can be repeated).
 
 use dhct_distortion::DhctOptions;
-use dhct_features::{FeatureOptions, LineCorrection};
+use dhct_features::{FeatureOptions, KernelChoice, LineCorrection, Polarity};
 use dhct_lattice::{Lattice, LatticeFitOptions, LocalDistortionMethod, PlaneGroup};
 use serde::{Deserialize, Serialize};
 
@@ -24,6 +24,9 @@ pub struct PipelineOptions {
     pub unit_cell: UnitCellOptions,
     /// Keep the normalised cross-correlation maps in the result (for plots).
     pub keep_correlation: bool,
+    /// The lattice the image shows, measured before anything else: checks the inputs,
+    /// seeds the kernel and neighbour search, gives the affine floor.
+    pub calibration: crate::CalibrationOptions,
 }
 
 impl Default for PipelineOptions {
@@ -35,6 +38,7 @@ impl Default for PipelineOptions {
             regions: RegionOptions::default(),
             unit_cell: UnitCellOptions::default(),
             keep_correlation: true,
+            calibration: crate::CalibrationOptions::default(),
         }
     }
 }
@@ -58,11 +62,19 @@ impl PipelineOptions {
         };
         options.features.line_correction = LineCorrection::Median;
         options.dhct.method = Some(LocalDistortionMethod::Affine);
+        let appearance = lattice.feature_appearance();
+        if appearance.dark {
+            options.features.polarity = Polarity::Dark;
+        }
+        if let Some(fraction) = appearance.width_fraction {
+            options.features.kernel = KernelChoice::FractionOfNeighbourDistance { fraction };
+        }
         options
     }
 
     /// Checks the options this crate adds (the stages check their own).
     pub fn validate(&self) -> Result<(), PipelineError> {
+        self.calibration.validate()?;
         let r = self.unit_cell.resolution;
         if r < 8 || !r.is_multiple_of(2) || r > 1024 {
             return Err(PipelineError::BadOption(format!(

@@ -25,7 +25,11 @@ fn chain_on_simulated_graphite() {
         stages.lock().unwrap().push(s)
     })
     .unwrap();
-    assert_eq!(stages.into_inner().unwrap().len(), 5);
+    assert_eq!(
+        stages.into_inner().unwrap().len(),
+        6,
+        "calibration, features, model, correction, lattice fit, unit cells"
+    );
     assert_eq!(analysis.passes.len(), 2);
     assert_eq!(analysis.regions.len(), 1);
     let fit = &analysis.regions[0].fit;

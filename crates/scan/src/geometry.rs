@@ -133,6 +133,16 @@ impl ScanGeometry {
         Ok(self)
     }
 
+    /// The same scan with another pixel pitch (metres), e.g. calibrated from the lattice
+    /// the image shows; timing, directions and sources are kept.
+    pub fn with_pitch(mut self, pitch_x: f64, pitch_y: f64) -> Result<ScanGeometry, GeometryError> {
+        positive("x pixel pitch", pitch_x)?;
+        positive("y pixel pitch", pitch_y)?;
+        self.pitch_x = pitch_x;
+        self.pitch_y = pitch_y;
+        Ok(self)
+    }
+
     /// Sets the scan angle (radians, counter-clockwise, scan frame relative to the instrument).
     pub fn with_scan_angle(mut self, scan_angle: f64) -> Result<ScanGeometry, GeometryError> {
         finite("scan angle", scan_angle)?;

@@ -1,0 +1,16 @@
+//! How a lattice's tracked features look in an STM image, so that feature finding can be
+//! set up for it without the user knowing the details.
+
+use serde::{Deserialize, Serialize};
+
+/// The appearance of the tracked features.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FeatureAppearance {
+    /// Depressions (e.g. the corner holes of Si(111)-7×7) rather than protrusions.
+    pub dark: bool,
+    /// Gaussian width σ of a feature as a fraction of the nearest-neighbour distance;
+    /// `None`: the DHCT kernel (σ ≈ NN/4), right for close-packed atoms but far too wide for
+    /// a small feature in a large cell.
+    pub width_fraction: Option<f64>,
+}

@@ -1,0 +1,406 @@
+//! What a finished analysis should not be trusted for: weak spots of the fit, results that
+//! look wrong although every stage succeeded, and assumptions taken instead of data. Each
+//! warning has a stable code, a message with the numbers, and what the user can do.
+
+use dhct_calibrate::PairCalibration;
+use dhct_distortion::{DhctResult, Parameter};
+use dhct_lattice::Lattice;
+use dhct_scan::{ScanGeometry, ValueSource};
+use serde::{Deserialize, Serialize};
+
+use crate::{AffineComparison, PassOutput, RegionFit};
+
+/// Ratio of the lattice-fit deviation to the features' localisation uncertainty beyond
+/// which a warning is given.
+pub const DEVIATION_WARNING: f64 = 3.0;
+
+/// Fitted lattice scale beyond which a warning is given (fraction).
+pub const SCALE_WARNING: f64 = 0.03;
+
+/// Pixel-size error (fraction, mean or per axis) beyond which the calibration is reported
+/// as a warning.
+pub const CALIBRATION_WARNING: f64 = 0.03;
+
+/// Below this fraction of indexed features a warning is given.
+pub const INDEXED_WARNING: f64 = 0.5;
+
+/// What a warning is about (stable names, for scripts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarningCode {
+    /// The lattice could not be measured from the image's Fourier transform.
+    LatticeNotMeasured,
+    /// The file's pixel size is off (calibrated from the lattice).
+    PixelSizeCalibrated,
+    /// The scan timing (pixel period, turnaround, directions) was assumed.
+    AssumedTiming,
+    /// The pixel size was assumed.
+    AssumedPixelSize,
+    /// A fitted parameter ended at a bound of its range.
+    ParameterAtBound,
+    /// Two fitted parameters are nearly degenerate.
+    DegenerateParameters,
+    /// A parameter's uncertainty exceeds its value, or is undetermined.
+    UncertainParameter,
+    /// The RDF fit is degenerate (shell widths implausible).
+    ImplausibleRdf,
+    /// The full model does worse than a global affine correction.
+    WorseThanAffine,
+    /// The corrected lattice is far from the nominal one.
+    LatticeScale,
+    /// Trace and retrace disagree after correction.
+    TraceRetraceOffset,
+    /// Features deviate far more than their localisation uncertainty.
+    LargeDeviation,
+    /// Few features were indexed.
+    FewIndexed,
+}
+
+/// One warning.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Warning {
+    /// What it is about.
+    pub code: WarningCode,
+    /// What was found, with the numbers.
+    pub message: String,
+    /// What the user can do about it.
+    pub what_to_do: String,
+}
+
+impl Warning {
+    fn new(code: WarningCode, message: String, what_to_do: &str) -> Warning {
+        Warning {
+            code,
+            message,
+            what_to_do: what_to_do.to_string(),
+        }
+    }
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: {} (what to do: {})",
+            self.code.name(),
+            self.message,
+            self.what_to_do
+        )
+    }
+}
+
+impl WarningCode {
+    /// The stable name (as in JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            WarningCode::LatticeNotMeasured => "lattice_not_measured",
+            WarningCode::PixelSizeCalibrated => "pixel_size_calibrated",
+            WarningCode::AssumedTiming => "assumed_timing",
+            WarningCode::AssumedPixelSize => "assumed_pixel_size",
+            WarningCode::ParameterAtBound => "parameter_at_bound",
+            WarningCode::DegenerateParameters => "degenerate_parameters",
+            WarningCode::UncertainParameter => "uncertain_parameter",
+            WarningCode::ImplausibleRdf => "implausible_rdf",
+            WarningCode::WorseThanAffine => "worse_than_affine",
+            WarningCode::LatticeScale => "lattice_scale",
+            WarningCode::TraceRetraceOffset => "trace_retrace_offset",
+            WarningCode::LargeDeviation => "large_deviation",
+            WarningCode::FewIndexed => "few_indexed",
+        }
+    }
+}
+
+/// What the calibration stage found or could not do.
+pub(crate) fn calibration_warnings(found: &Result<PairCalibration, String>) -> Vec<Warning> {
+    let found = match found {
+        Ok(found) => found,
+        Err(reason) => {
+            return vec![Warning::new(
+                WarningCode::LatticeNotMeasured,
+                format!(
+                    "the lattice could not be measured from the image's Fourier transform \
+                     ({reason}): the lattice and its constant were not checked against the \
+                     image, and the file's pixel size is taken as right"
+                ),
+                "check that the lattice and --nn describe the image; a mask over the \
+                 atomically resolved area helps the measurement",
+            )];
+        }
+    };
+    let c = &found.calibration;
+    let off = |k: f64| (k - 1.0).abs() > CALIBRATION_WARNING;
+    if !(off(c.scale[0]) || off(c.scale[1]) || off(c.mean_scale)) {
+        return Vec::new();
+    }
+    vec![Warning::new(
+        WarningCode::PixelSizeCalibrated,
+        format!(
+            "the lattice looks {:.1} % × {:.1} % as long along x × y in the file as the \
+             lattice given (shear {:.1}°): the file's pixel size is off, or a constant drift \
+             stretched the frame; the lattice was taken as the standard",
+            100.0 * c.scale[0],
+            100.0 * c.scale[1],
+            c.shear_deg
+        ),
+        "if the lattice constant given is right, nothing: the corrected data are calibrated \
+         by it; otherwise give the right one (--nn)",
+    )]
+}
+
+/// The scan timing or pixel size that the file did not state.
+pub(crate) fn assumption_warnings(geometry: &ScanGeometry) -> Vec<Warning> {
+    let mut warnings = Vec::new();
+    if geometry.timing_source() != ValueSource::Stated {
+        warnings.push(Warning::new(
+            WarningCode::AssumedTiming,
+            format!(
+                "the scan timing was not read from the file but assumed ({:.4} ms per pixel): \
+                 drift velocities, accelerations and times are in assumed units (the \
+                 correction itself does not depend on them)",
+                geometry.pixel_period() * 1e3
+            ),
+            "give the real timing with --line-time or --pixel-period",
+        ));
+    }
+    if geometry.scale_source() != ValueSource::Stated {
+        warnings.push(Warning::new(
+            WarningCode::AssumedPixelSize,
+            "the pixel size was not read from the file but assumed".into(),
+            "give it with --pitch, or rely on the lattice (see the calibration)",
+        ));
+    }
+    warnings
+}
+
+/// Weak spots of the model fit: parameters at bounds, degenerate pairs, uncertainties
+/// larger than the values, implausible RDF fits.
+pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
+    let model = &dhct.model;
+    let mut warnings: Vec<Warning> = model
+        .diagnostics
+        .at_bounds
+        .iter()
+        .map(|b| {
+            Warning::new(
+                WarningCode::ParameterAtBound,
+                format!(
+                    "{} = {:.4e} ended at a bound of its range [{:.3e}, {:.3e}]: the data do \
+                     not determine it",
+                    b.parameter, b.value, b.range[0], b.range[1]
+                ),
+                "treat the drift/creep split as unmeasured; a longer or second frame, or \
+                 the real scan timing, constrains it",
+            )
+        })
+        .collect();
+    warnings.extend(model.diagnostics.degenerate_pairs.iter().map(|p| {
+        Warning::new(
+            WarningCode::DegenerateParameters,
+            format!(
+                "{} and {} are nearly degenerate (correlation {:+.3}): only their combination \
+                 is measured",
+                p.first, p.second, p.correlation
+            ),
+            "do not interpret them separately; the correction uses only their combination",
+        )
+    }));
+    warnings.extend(model.parameters.iter().filter_map(uncertain));
+    for pass in &dhct.passes {
+        let fit = &pass.used_selection().rdf_fit;
+        if !fit.is_plausible() {
+            warnings.push(Warning::new(
+                WarningCode::ImplausibleRdf,
+                format!(
+                    "{}: the RDF fit is degenerate (shell widths {}): the neighbour window \
+                     stayed at the lattice's nominal spacing",
+                    pass.pass,
+                    fit.widths_m
+                        .iter()
+                        .map(|w| dhct_calibrate::length(*w))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                "check the lattice and --nn; mask defects and other domains",
+            ));
+        }
+    }
+    warnings
+}
+
+fn uncertain(p: &Parameter) -> Option<Warning> {
+    let undetermined = !p.sigma.is_finite();
+    if !(undetermined || p.sigma > p.value.abs()) {
+        return None;
+    }
+    Some(Warning::new(
+        WarningCode::UncertainParameter,
+        if undetermined {
+            format!(
+                "{} = {:.4e} {} is undetermined by the data",
+                p.name, p.value, p.unit
+            )
+        } else {
+            format!(
+                "{} = {:.4e} ± {:.1e} {}: the uncertainty exceeds the value",
+                p.name, p.value, p.sigma, p.unit
+            )
+        },
+        "read it as consistent with zero; it still enters the correction",
+    ))
+}
+
+/// The full model against the global affine correction.
+pub(crate) fn affine_warnings(comparisons: &[AffineComparison], fell_back: bool) -> Vec<Warning> {
+    comparisons
+        .iter()
+        .filter(|c| c.model_is_worse())
+        .map(|c| {
+            Warning::new(
+                WarningCode::WorseThanAffine,
+                format!(
+                    "region {}: the drift/creep/hysteresis model does worse than a global \
+                     affine correction (rms {:.1} pm on {} features vs {:.1} pm on {}, lattice \
+                     scales {:.4} × {:.4} vs {:.4} × {:.4}){}",
+                    c.region,
+                    c.model_rms_m * 1e12,
+                    c.model_used,
+                    c.affine_rms_m * 1e12,
+                    c.affine_used,
+                    c.model_scale[0],
+                    c.model_scale[1],
+                    c.affine_scale[0],
+                    c.affine_scale[1],
+                    if fell_back {
+                        ": the affine correction was kept"
+                    } else {
+                        ""
+                    }
+                ),
+                "the model does not describe this scan: use the affine result, mask defects \
+                 and steps, or run dhct diagnose to see what is missing",
+            )
+        })
+        .collect()
+}
+
+/// Results that look wrong although every stage succeeded.
+pub(crate) fn plausibility_warnings(
+    lattice: &dyn Lattice,
+    regions: &[RegionFit],
+    passes: &[PassOutput],
+) -> Vec<Warning> {
+    let mut warnings = Vec::new();
+    for r in regions {
+        warnings.extend(scale_warning(lattice, r));
+        warnings.extend(offset_warning(lattice, r));
+        warnings.extend(deviation_warning(r, passes));
+    }
+    for p in passes {
+        let total = p.features.features.len();
+        let indexed = p.indices.iter().flatten().count();
+        if total > 0 && (indexed as f64) < INDEXED_WARNING * total as f64 {
+            warnings.push(Warning::new(
+                WarningCode::FewIndexed,
+                format!(
+                    "{}: only {indexed} of {total} features were indexed by the lattice fit",
+                    p.pass
+                ),
+                "use a mask to exclude steps, defects and other domains",
+            ));
+        }
+    }
+    warnings
+}
+
+fn scale_warning(lattice: &dyn Lattice, r: &RegionFit) -> Option<Warning> {
+    let worst = r
+        .fit
+        .scale
+        .iter()
+        .map(|s| (s - 1.0).abs())
+        .fold(0.0, f64::max);
+    (worst > SCALE_WARNING).then(|| {
+        Warning::new(
+            WarningCode::LatticeScale,
+            format!(
+                "region {}: the corrected lattice is {:.1} % x {:.1} % of the nominal {} \
+                 lattice (scales {:.4}, {:.4})",
+                r.region,
+                100.0 * r.fit.scale[0],
+                100.0 * r.fit.scale[1],
+                lattice.name(),
+                r.fit.scale[0],
+                r.fit.scale[1]
+            ),
+            "check the lattice constant (--nn) and the drift model (a drift near the \
+             slow-scan speed is not recoverable)",
+        )
+    })
+}
+
+fn offset_warning(lattice: &dyn Lattice, r: &RegionFit) -> Option<Warning> {
+    let offset = r
+        .fit
+        .set_offsets_m
+        .iter()
+        .skip(1)
+        .map(|o| o[0].hypot(o[1]))
+        .fold(0.0, f64::max);
+    (offset > 0.25 * lattice.nearest_neighbour_distance()).then(|| {
+        Warning::new(
+            WarningCode::TraceRetraceOffset,
+            format!(
+                "region {}: trace and retrace disagree by {:.1} pm after correction (more \
+                 than a quarter of the NN distance)",
+                r.region,
+                offset * 1e12
+            ),
+            "check the turnaround time and the scan directions (--turnaround, --fast)",
+        )
+    })
+}
+
+/// The corrected lattice should deviate from its fit about as much as the features' own
+/// localisation uncertainty; far more means the model missed something.
+fn deviation_warning(r: &RegionFit, passes: &[PassOutput]) -> Option<Warning> {
+    let mut sigmas: Vec<f64> = Vec::new();
+    for (k, members) in r.members.iter().enumerate() {
+        let Some(pass) = passes.iter().find(|p| p.pass == r.passes[k]) else {
+            continue;
+        };
+        let pitch = (pass.features.features.first())
+            .map(|f| {
+                if f.x_px != 0.0 {
+                    f.x_m / f.x_px
+                } else {
+                    f64::NAN
+                }
+            })
+            .unwrap_or(f64::NAN);
+        sigmas.extend(members.iter().map(|&i| {
+            let f = &pass.features.features[i];
+            pitch.abs() * (0.5 * (f.x_sigma_px.powi(2) + f.y_sigma_px.powi(2))).sqrt()
+        }));
+    }
+    sigmas.retain(|s| s.is_finite() && *s > 0.0);
+    if sigmas.is_empty() {
+        return None;
+    }
+    sigmas.sort_by(f64::total_cmp);
+    let localisation = sigmas[sigmas.len() / 2];
+    let ratio = r.whole_ellipse.sigma_major_m / localisation;
+    (ratio > DEVIATION_WARNING).then(|| {
+        Warning::new(
+            WarningCode::LargeDeviation,
+            format!(
+                "region {}: features deviate {:.1} pm (1σ, major axis) from the fitted \
+                 lattice, {ratio:.1}× their localisation uncertainty ({:.1} pm)",
+                r.region,
+                r.whole_ellipse.sigma_major_m * 1e12,
+                localisation * 1e12
+            ),
+            "the drift model may not describe this scan, or the surface is not the lattice \
+             given: run dhct diagnose",
+        )
+    })
+}
