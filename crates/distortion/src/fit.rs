@@ -21,7 +21,7 @@ use crate::{DistortionError, LocalDistortion};
 
 /// Which hysteresis law to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum HysteresisChoice {
     /// No hysteresis (`S ≡ 1`).
     None,
@@ -36,18 +36,40 @@ pub enum HysteresisChoice {
     Exponential,
 }
 
-/// Options of [`fit_model`].
+/// Options of [`fit_model`]; [`FitOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FitOptions {
-    /// Hysteresis law.
+    /// Hysteresis law (a quartic's `time_scale_s`, when given, 1 µs..=10^6 s).
     pub hysteresis: HysteresisChoice,
-    /// Huber IRLS rounds (0 = plain least squares).
+    /// Huber IRLS rounds (0 = plain least squares); 0..=50 (each is a full refit).
     pub robust_rounds: usize,
     /// Compare each measurement with the model's secant over the feature's neighbours
     /// (what the local fit actually measures) instead of its derivative at the feature.
     /// Removes the curvature bias of `S` near the line start and of creep near `t = 0`.
     pub secant: bool,
+}
+
+impl FitOptions {
+    /// Checks every option against its documented range; the error names the key, the
+    /// value and the range.
+    pub fn validate(&self) -> Result<(), DistortionError> {
+        let mut checks = vec![("robust_rounds", self.robust_rounds as f64, 0.0, 50.0)];
+        if let HysteresisChoice::Quartic {
+            time_scale_s: Some(t),
+        } = self.hysteresis
+        {
+            checks.push(("hysteresis.time_scale_s", t, 1e-6, 1e6));
+        }
+        for (key, value, low, high) in checks {
+            if !(value.is_finite() && (low..=high).contains(&value)) {
+                return Err(DistortionError::BadParameter(format!(
+                    "fit.{key} = {value} is outside {low}..={high}"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for FitOptions {

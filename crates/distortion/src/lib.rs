@@ -79,9 +79,9 @@ use dhct_scan::{ScanGeometry, ScanPass};
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
-/// Options of [`analyse`].
+/// Options of [`analyse`]; [`DhctOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct DhctOptions {
     /// Neighbour search and RDF.
     pub neighbours: NeighbourOptions,
@@ -89,6 +89,15 @@ pub struct DhctOptions {
     pub fit: FitOptions,
     /// Local-distortion method; `None` = the lattice's own choice.
     pub method: Option<LocalDistortionMethod>,
+}
+
+impl DhctOptions {
+    /// Checks the neighbour and fit options ([`NeighbourOptions::validate`],
+    /// [`FitOptions::validate`]).
+    pub fn validate(&self) -> Result<(), DistortionError> {
+        self.neighbours.validate()?;
+        self.fit.validate()
+    }
 }
 
 /// One pass's input: its features (controller frame) and optional mask.

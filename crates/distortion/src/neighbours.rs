@@ -14,16 +14,38 @@ use serde::{Deserialize, Serialize};
 use crate::DistortionError;
 use crate::lm::levenberg_marquardt;
 
-/// Options of the neighbour search.
+/// Options of the neighbour search; [`NeighbourOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct NeighbourOptions {
-    /// Half-width of the NN window as a fraction of each NN distance (DHCT: 0.35).
+    /// Half-width of the NN window as a fraction of each NN distance (DHCT: 0.35);
+    /// 0.05..=0.5.
     pub window: f64,
-    /// Number of RDF shells fitted (3 = a, √3a, 2a for trigonal).
+    /// Number of RDF shells fitted (3 = a, √3a, 2a for trigonal); 1..=10 (the RDF's
+    /// length and the fit's size grow with it).
     pub rdf_shells: usize,
-    /// RDF bin width as a fraction of the nominal NN distance (DHCT: 0.01).
+    /// RDF bin width as a fraction of the nominal NN distance (DHCT: 0.01); 0.001..=0.1
+    /// (the number of bins, and so memory, grows as its inverse).
     pub bin_fraction: f64,
+}
+
+impl NeighbourOptions {
+    /// Checks every option against its documented range; the error names the key, the
+    /// value and the range.
+    pub fn validate(&self) -> Result<(), DistortionError> {
+        for (key, value, low, high) in [
+            ("window", self.window, 0.05, 0.5),
+            ("rdf_shells", self.rdf_shells as f64, 1.0, 10.0),
+            ("bin_fraction", self.bin_fraction, 0.001, 0.1),
+        ] {
+            if !(value.is_finite() && (low..=high).contains(&value)) {
+                return Err(DistortionError::BadParameter(format!(
+                    "neighbours.{key} = {value} is outside {low}..={high}"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for NeighbourOptions {
@@ -269,6 +291,7 @@ pub fn select_features(
     lattice: &dyn Lattice,
     options: &NeighbourOptions,
 ) -> Result<NeighbourSelection, DistortionError> {
+    options.validate()?;
     if let Some(mask) = mask {
         let (rows, columns) = mask.dim();
         if rows != geometry.rows() || columns != geometry.columns() {

@@ -2,6 +2,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::Kernel;
 
+/// The error of an option outside its range: `key = value is outside range`.
+fn out_of_range(key: &str, value: f64, range: &str) -> crate::FeatureError {
+    crate::FeatureError::BadParameter(format!("{key} = {value} is outside {range}"))
+}
+
 /// Whether features are protrusions (atoms, molecules) or depressions (holes, e.g. the
 /// Si(111)-7×7 corner holes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -15,7 +20,12 @@ pub enum Polarity {
 /// Background removed before feature finding (the image handed to the correction is never
 /// altered; this only changes what the correlation and the Gaussian fits see).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case", tag = "kind", content = "order")]
+#[serde(
+    rename_all = "kebab-case",
+    tag = "kind",
+    content = "order",
+    deny_unknown_fields
+)]
 pub enum Background {
     /// Leave z as it is.
     None,
@@ -40,7 +50,7 @@ pub enum LineCorrection {
 
 /// Which correlation template to use.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case", tag = "kind")]
+#[serde(rename_all = "kebab-case", tag = "kind", deny_unknown_fields)]
 pub enum KernelChoice {
     /// The DHCT kernel sized from the nearest-neighbour distance.
     #[default]
@@ -55,8 +65,9 @@ pub enum KernelChoice {
 }
 
 /// Parameters of feature finding. Only `neighbour_distance` has no default.
+/// [`FeatureOptions::validate`] checks every number against its documented range.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FeatureOptions {
     /// Expected nearest-neighbour distance, metres (e.g. 2.46e-10 for graphite).
     pub neighbour_distance: f64,
@@ -98,6 +109,40 @@ impl Default for FeatureOptions {
 }
 
 impl FeatureOptions {
+    /// Checks every numeric option against its range; the error names the key, the value
+    /// and the range: `neighbour_distance` NaN (the lattice's, filled in by the caller) or
+    /// 1 pm..=1 µm; `threshold` −1..=0.99; a Gaussian kernel's `sigma_px` 0.5..=256;
+    /// `background` polynomial order 1..=6; `duplicate_fraction` 0..=1;
+    /// `fit_radius_fraction` 0.1..=1; `min_median_ncc` −1..=1.
+    pub fn validate(&self) -> Result<(), crate::FeatureError> {
+        let d = self.neighbour_distance;
+        if !(d.is_nan() || (1e-12..=1e-6).contains(&d)) {
+            return Err(out_of_range(
+                "neighbour_distance",
+                d,
+                "NaN (the lattice's) or 1e-12..=1e-6 m",
+            ));
+        }
+        let mut checks = vec![
+            ("threshold", self.threshold, -1.0, 0.99),
+            ("duplicate_fraction", self.duplicate_fraction, 0.0, 1.0),
+            ("fit_radius_fraction", self.fit_radius_fraction, 0.1, 1.0),
+            ("min_median_ncc", self.min_median_ncc, -1.0, 1.0),
+        ];
+        if let KernelChoice::GaussianSigma { sigma_px } = &self.kernel {
+            checks.push(("kernel.sigma_px", *sigma_px, 0.5, 256.0));
+        }
+        if let Background::Polynomial(order) = self.background {
+            checks.push(("background.order", f64::from(order), 1.0, 6.0));
+        }
+        for (key, value, low, high) in checks {
+            if !(value.is_finite() && (low..=high).contains(&value)) {
+                return Err(out_of_range(key, value, &format!("{low}..={high}")));
+            }
+        }
+        Ok(())
+    }
+
     /// Defaults for a lattice whose nearest-neighbour distance is `neighbour_distance` metres.
     pub fn for_neighbour_distance(neighbour_distance: f64) -> FeatureOptions {
         FeatureOptions {

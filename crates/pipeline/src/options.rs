@@ -8,9 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::PipelineError;
 
-/// Options of [`crate::run`].
+/// Options of [`crate::run`]. Unknown keys are errors when deserialising, and
+/// [`PipelineOptions::validate`] checks every number against its documented range.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PipelineOptions {
     /// Feature finding (`neighbour_distance` NaN = the lattice's NN distance).
     pub features: FeatureOptions,
@@ -72,8 +73,26 @@ impl PipelineOptions {
         options
     }
 
-    /// Checks the options this crate adds (the stages check their own).
+    /// Checks every numeric option of every stage against its documented range, in one
+    /// place: [`FeatureOptions::validate`], [`DhctOptions::validate`],
+    /// [`LatticeFitOptions::validate`], then this crate's own (regions, unit cells). The
+    /// error names the key (e.g. `dhct.neighbours.rdf_shells`), the value and the range.
     pub fn validate(&self) -> Result<(), PipelineError> {
+        self.features
+            .validate()
+            .map_err(|e| PipelineError::BadOption(format!("features.{}", bare(&e.to_string()))))?;
+        self.dhct
+            .validate()
+            .map_err(|e| PipelineError::BadOption(format!("dhct.{}", bare(&e.to_string()))))?;
+        self.lattice_fit
+            .validate()
+            .map_err(|e| PipelineError::BadOption(e.to_string()))?;
+        let n = self.regions.min_features;
+        if !(1..=10_000_000).contains(&n) {
+            return Err(PipelineError::BadOption(format!(
+                "regions.min_features = {n} is outside 1..=10000000"
+            )));
+        }
         self.calibration.validate()?;
         let r = self.unit_cell.resolution;
         if r < 8 || !r.is_multiple_of(2) || r > 1024 {
@@ -110,9 +129,17 @@ impl PipelineOptions {
     }
 }
 
+/// A stage's "invalid parameter: key = value is outside range" without its prefix.
+fn bare(message: &str) -> &str {
+    message
+        .split_once(": ")
+        .filter(|(prefix, _)| prefix.starts_with("invalid"))
+        .map_or(message, |(_, rest)| rest)
+}
+
 /// Which features a region's lattice fit uses.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct RegionOptions {
     /// Features closer than this many NN distances to the edge of their mask region are
     /// not used (they are corrected but not indexed). Ignored without a mask.
@@ -132,7 +159,7 @@ impl Default for RegionOptions {
 
 /// Local cells and the averaged unit cell.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct UnitCellOptions {
     /// Samples along each cell vector of the averaged cell (even).
     pub resolution: usize,
@@ -155,7 +182,7 @@ impl Default for UnitCellOptions {
 /// Selection of local cells by the properties of their four corner features (paper §V:
 /// "cell selection by height, width, presence of a defect").
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct CellSelection {
     /// Keep a cell only if every corner's fitted height (z units of the image, metres for
     /// topography) lies in `[low, high]`.
@@ -166,4 +193,62 @@ pub struct CellSelection {
     /// Drop cells with a defect-like corner: height or width farther than this many robust
     /// standard deviations (1.4826 × MAD) from the median of all features.
     pub exclude_outliers_sigma: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every numeric option that memory or time depend on is refused out of range, by a
+    /// message naming the key, the value and the range.
+    #[test]
+    fn every_numeric_option_is_checked_with_key_value_and_range() {
+        type Edit = fn(&mut PipelineOptions);
+        let cases: [(&str, Edit); 12] = [
+            ("features.threshold = inf", |o| {
+                o.features.threshold = f64::INFINITY
+            }),
+            ("features.neighbour_distance = 1", |o| {
+                o.features.neighbour_distance = 1.0
+            }),
+            ("features.fit_radius_fraction = NaN", |o| {
+                o.features.fit_radius_fraction = f64::NAN
+            }),
+            ("features.kernel.sigma_px = 100000", |o| {
+                o.features.kernel = KernelChoice::GaussianSigma { sigma_px: 1e5 }
+            }),
+            ("dhct.neighbours.rdf_shells = 10000", |o| {
+                o.dhct.neighbours.rdf_shells = 10_000
+            }),
+            ("dhct.neighbours.bin_fraction = 0.000000001", |o| {
+                o.dhct.neighbours.bin_fraction = 1e-9
+            }),
+            ("dhct.neighbours.window = -1", |o| {
+                o.dhct.neighbours.window = -1.0
+            }),
+            ("dhct.fit.robust_rounds = 1000000", |o| {
+                o.dhct.fit.robust_rounds = 1_000_000
+            }),
+            ("lattice_fit.initial_radius = NaN", |o| {
+                o.lattice_fit.initial_radius = f64::NAN
+            }),
+            ("lattice_fit.nn_window = 3", |o| {
+                o.lattice_fit.nn_window = 3.0
+            }),
+            ("regions.min_features = 0", |o| o.regions.min_features = 0),
+            ("unit_cell.resolution", |o| o.unit_cell.resolution = 1 << 20),
+        ];
+        let graphite = dhct_lattice::Hexagonal::graphite();
+        assert!(PipelineOptions::for_lattice(&graphite).validate().is_ok());
+        for (expected, edit) in cases {
+            let mut options = PipelineOptions::for_lattice(&graphite);
+            edit(&mut options);
+            let message = options.validate().expect_err(expected).to_string();
+            assert!(message.contains(expected), "{expected}: {message}");
+            assert!(
+                message.contains("..=") || message.contains("in 8..=1024"),
+                "{expected}: no range in {message}"
+            );
+        }
+    }
 }
