@@ -64,16 +64,49 @@ impl DriftCreep {
 }
 
 /// One fitted parameter with its 1σ uncertainty and unit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+///
+/// Serialised (model.json) as `{"name", "value", "sigma", "determined", "unit"}`: when the
+/// data cannot fix the uncertainty (a singular or non-finite covariance, e.g. a parameter
+/// the frame does not constrain) `sigma` is NaN here, and written as `"sigma": null` with
+/// `"determined": false`; otherwise `"determined": true`. Reading accepts `null` (as NaN)
+/// and ignores `determined`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct Parameter {
     /// Name, e.g. `"v_x"`.
     pub name: String,
     /// Value in `unit`.
     pub value: f64,
-    /// 1σ uncertainty from the fit covariance (scaled by the residual variance), `unit`.
+    /// 1σ uncertainty from the fit covariance (scaled by the residual variance), `unit`;
+    /// NaN when undetermined (see [`Parameter::is_determined`]).
+    #[serde(deserialize_with = "sigma_or_nan")]
     pub sigma: f64,
     /// SI unit, e.g. `"m/s"`.
     pub unit: String,
+}
+
+impl Parameter {
+    /// Whether the data fixed the uncertainty (`sigma` finite).
+    pub fn is_determined(&self) -> bool {
+        self.sigma.is_finite()
+    }
+}
+
+impl Serialize for Parameter {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut out = serializer.serialize_struct("Parameter", 5)?;
+        out.serialize_field("name", &self.name)?;
+        out.serialize_field("value", &self.value)?;
+        out.serialize_field("sigma", &self.is_determined().then_some(self.sigma))?;
+        out.serialize_field("determined", &self.is_determined())?;
+        out.serialize_field("unit", &self.unit)?;
+        out.end()
+    }
+}
+
+/// A σ that may be `null` (undetermined): NaN.
+fn sigma_or_nan<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
 }
 
 /// Two fitted parameters whose estimates are nearly degenerate.
@@ -230,6 +263,31 @@ impl DistortionModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn undetermined_sigma_is_written_as_null_with_determined_false() {
+        let fixed = Parameter {
+            name: "v_x".into(),
+            value: 1e-12,
+            sigma: 2e-13,
+            unit: "m/s".into(),
+        };
+        let loose = Parameter {
+            sigma: f64::NAN,
+            ..fixed.clone()
+        };
+        let json = serde_json::to_value(&fixed).unwrap();
+        assert_eq!(json["sigma"], 2e-13);
+        assert_eq!(json["determined"], true);
+        let json = serde_json::to_value(&loose).unwrap();
+        assert!(json["sigma"].is_null(), "{json}");
+        assert_eq!(json["determined"], false);
+        let back: Parameter = serde_json::from_value(json).unwrap();
+        assert!(back.sigma.is_nan() && !back.is_determined());
+        let back: Parameter =
+            serde_json::from_value(serde_json::to_value(&fixed).unwrap()).unwrap();
+        assert_eq!(back, fixed);
+    }
 
     #[test]
     fn integrals_match_numerical_quadrature() {
