@@ -24,6 +24,9 @@ use crate::machine;
 pub struct StageTimes {
     /// Reading and decoding the SM4 file.
     pub read_s: f64,
+    /// Measuring the lattice the images show (FFT) and checking the inputs.
+    #[serde(default)]
+    pub calibration_s: f64,
     /// Feature finding and fitting, both images.
     pub features_s: f64,
     /// Neighbours, RDF, selection and local distortion (part of `model_s`, timed again).
@@ -94,6 +97,7 @@ pub fn measure_file(
             .sum(),
         times: StageTimes {
             read_s,
+            calibration_s: t.calibration_s,
             features_s: t.features_s,
             neighbours_local_s,
             model_fit_s,

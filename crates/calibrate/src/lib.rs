@@ -49,7 +49,8 @@ pub use check::{CheckOptions, SLOW_AXIS_SLACK, check_inputs};
 pub use error::CalibrationError;
 pub use matching::{Calibration, LatticeMatch, ShellCheck, match_lattice};
 pub use measure::{
-    ImageLattice, LatticeMeasurement, LatticeShape, Reflection, length, measure_lattice,
+    ImageLattice, LatticeMeasurement, LatticeShape, MAX_MEASURED_SIDE, MIN_BINNED_NN_PX,
+    Reflection, binning_factor, length, measure_lattice, measure_lattice_binned,
 };
 pub use spectrum::{Peak, PowerSpectrum};
 
@@ -88,9 +89,12 @@ pub fn calibrate_pair(
     options: &CheckOptions,
 ) -> Result<PairCalibration, CalibrationError> {
     let geometry = pair.geometry();
+    let nn_px =
+        lattice.nearest_neighbour_distance() / (geometry.pitch_x() * geometry.pitch_y()).sqrt();
+    let factor = binning_factor(geometry.columns(), geometry.rows(), nn_px);
     let measure = |pass: ScanPass| {
         pair.image(pass)
-            .map(|image| measure_lattice(image.z.view(), geometry, mask))
+            .map(|image| measure_lattice_binned(image.z.view(), geometry, mask, factor))
     };
     let (trace, retrace) = rayon::join(|| measure(ScanPass::Trace), || measure(ScanPass::Retrace));
     let trace = trace.ok_or_else(|| CalibrationError::NoLattice {

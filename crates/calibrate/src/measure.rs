@@ -175,6 +175,73 @@ pub fn real_basis(reciprocal: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     reciprocal.try_inverse().map(|b| b.transpose())
 }
 
+/// Largest image side (pixels) measured at full resolution; larger images are binned.
+pub const MAX_MEASURED_SIDE: usize = 1024;
+
+/// Fewest pixels per expected nearest-neighbour distance kept when binning.
+pub const MIN_BINNED_NN_PX: f64 = 5.0;
+
+/// The binning factor (a power of 2) for measuring an image of `columns × rows` px whose
+/// lattice is expected at `nn_px` pixels: the image is shrunk to at most
+/// [`MAX_MEASURED_SIDE`] px a side as long as the lattice keeps [`MIN_BINNED_NN_PX`] px
+/// (the Fourier peaks then cost a sixteenth of the time at 2048² and lose no precision
+/// that the seeds need).
+pub fn binning_factor(columns: usize, rows: usize, nn_px: f64) -> usize {
+    let mut factor = 1;
+    while columns.max(rows) / factor > MAX_MEASURED_SIDE
+        && nn_px / (2 * factor) as f64 >= MIN_BINNED_NN_PX
+    {
+        factor *= 2;
+    }
+    factor
+}
+
+/// [`measure_lattice`] on `z` averaged over `factor × factor` blocks (non-finite pixels
+/// and pixels outside `mask` left out; a block with none left is left out).
+pub fn measure_lattice_binned(
+    z: ArrayView2<f64>,
+    geometry: &ScanGeometry,
+    mask: Option<&Array2<bool>>,
+    factor: usize,
+) -> Result<LatticeMeasurement, CalibrationError> {
+    if factor <= 1 {
+        return measure_lattice(z, geometry, mask);
+    }
+    let (rows, columns) = (z.nrows() / factor, z.ncols() / factor);
+    let binned = Array2::from_shape_fn((rows, columns), |(r, c)| {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for i in r * factor..(r + 1) * factor {
+            for j in c * factor..(c + 1) * factor {
+                let v = z[[i, j]];
+                if v.is_finite() && mask.is_none_or(|m| m[[i, j]]) {
+                    sum += v;
+                    count += 1;
+                }
+            }
+        }
+        if count > 0 {
+            sum / count as f64
+        } else {
+            f64::NAN
+        }
+    });
+    let pitch = |p: f64| p * factor as f64;
+    let binned_geometry = ScanGeometry::new(
+        columns,
+        rows,
+        pitch(geometry.pitch_x()),
+        pitch(geometry.pitch_y()),
+        geometry.pixel_period() * factor as f64,
+        geometry.trace_fast(),
+        geometry.slow_direction(),
+    )
+    .map_err(|_| CalibrationError::BadPitch {
+        pitch_x: geometry.pitch_x(),
+        pitch_y: geometry.pitch_y(),
+    })?;
+    measure_lattice(binned.view(), &binned_geometry, None)
+}
+
 /// Measures the lattice of `z` (rows × columns of `geometry`), optionally inside `mask`.
 pub fn measure_lattice(
     z: ArrayView2<f64>,

@@ -201,6 +201,7 @@ fn summarise(runs: &[Measurement]) -> (StageTimes, StageTimes) {
     }
     fill!(
         read_s,
+        calibration_s,
         features_s,
         neighbours_local_s,
         model_fit_s,
@@ -219,8 +220,9 @@ type Stage = fn(&StageTimes) -> f64;
 
 fn stage_table(min: &StageTimes, med: &StageTimes) -> Table {
     let mut table = Table::new(&["stage", "min s", "median s"]);
-    let rows: [(&str, Stage); 10] = [
+    let rows: [(&str, Stage); 11] = [
         ("read SM4", |t| t.read_s),
+        ("calibration (lattice from the FFT)", |t| t.calibration_s),
         ("features (both images)", |t| t.features_s),
         ("  NN + local distortion (re-timed)", |t| {
             t.neighbours_local_s
