@@ -588,3 +588,27 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod rdf_plausibility {
+    use super::RdfFit;
+
+    fn fit(amplitudes: Vec<f64>, widths_m: Vec<f64>) -> RdfFit {
+        RdfFit {
+            nn_distance_m: 2.46e-10,
+            shells_m: vec![2.46e-10, 4.26e-10],
+            amplitudes,
+            fwhm_m: widths_m.iter().map(|w| 2.355 * w).collect(),
+            widths_m,
+        }
+    }
+
+    #[test]
+    fn needles_and_shells_wider_than_the_lattice_are_implausible() {
+        assert!(fit(vec![3.0, 2.0], vec![10e-12, 15e-12]).is_plausible());
+        // A needle (the field finding: amplitude 4187, width 2.9 pm) and a 7 cm shell.
+        assert!(!fit(vec![4187.0, 2.0], vec![2.9e-13, 15e-12]).is_plausible());
+        assert!(!fit(vec![3.0, 2.0], vec![10e-12, 0.07]).is_plausible());
+        assert!(!fit(vec![-1.0, 2.0], vec![10e-12, 15e-12]).is_plausible());
+    }
+}

@@ -404,3 +404,117 @@ fn deviation_warning(r: &RegionFit, passes: &[PassOutput]) -> Option<Warning> {
         )
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dhct_distortion::{
+        Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw,
+    };
+    use dhct_scan::ScanDirection;
+
+    fn parameter(name: &str, value: f64, sigma: f64) -> Parameter {
+        Parameter {
+            name: name.into(),
+            value,
+            sigma,
+            unit: "m/s".into(),
+        }
+    }
+
+    fn codes(warnings: &[Warning]) -> Vec<WarningCode> {
+        warnings.iter().map(|w| w.code).collect()
+    }
+
+    #[test]
+    fn a_weak_fit_is_named_with_what_to_do() {
+        let mut model = DistortionModel::new(DriftCreep::none(), HysteresisLaw::none());
+        model.parameters = vec![
+            parameter("v_x", 7.2e-8, 1e-10),
+            parameter("C_x", -3.8e-3, f64::NAN),
+            parameter("a_x", 1e-16, 5e-16),
+        ];
+        model.diagnostics = FitDiagnostics {
+            degenerate_pairs: vec![DegeneratePair {
+                first: "v_x".into(),
+                second: "C_x".into(),
+                correlation: -0.999,
+            }],
+            at_bounds: vec![Bound {
+                parameter: "t0".into(),
+                value: 52428.8,
+                range: [0.01, 52428.8],
+            }],
+        };
+        let warnings = fit_warnings(&DhctResult {
+            model,
+            passes: Vec::new(),
+        });
+        assert_eq!(
+            codes(&warnings),
+            [
+                WarningCode::ParameterAtBound,
+                WarningCode::DegenerateParameters,
+                WarningCode::UncertainParameter,
+                WarningCode::UncertainParameter
+            ]
+        );
+        assert!(
+            warnings[2].message.contains("C_x") && warnings[2].message.contains("undetermined")
+        );
+        assert!(warnings[3].message.contains("a_x"));
+        assert!(warnings.iter().all(|w| !w.what_to_do.is_empty()));
+        // A well determined parameter says nothing.
+        assert!(uncertain(&parameter("v_y", 1e-9, 1e-11)).is_none());
+    }
+
+    #[test]
+    fn an_assumed_timing_and_a_model_worse_than_affine_are_warnings() {
+        let geometry = ScanGeometry::new(
+            8,
+            8,
+            1e-10,
+            1e-10,
+            1e-3,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap()
+        .with_timing_source(ValueSource::Assumed);
+        let warnings = assumption_warnings(&geometry);
+        assert_eq!(codes(&warnings), [WarningCode::AssumedTiming]);
+        assert!(warnings[0].what_to_do.contains("--line-time"));
+        assert!(
+            assumption_warnings(&geometry.clone().with_timing_source(ValueSource::Stated))
+                .is_empty()
+        );
+
+        let comparison = AffineComparison {
+            region: 0,
+            model_rms_m: 43e-12,
+            affine_rms_m: 42e-12,
+            model_used: 600,
+            affine_used: 610,
+            model_scale: [0.999, 0.971],
+            affine_scale: [0.997, 0.998],
+        };
+        assert!(comparison.model_is_worse());
+        let warnings = affine_warnings(&[comparison], true);
+        assert_eq!(codes(&warnings), [WarningCode::WorseThanAffine]);
+        assert!(warnings[0].message.contains("affine correction was kept"));
+        let better = AffineComparison {
+            model_rms_m: 3e-12,
+            model_scale: [1.0, 1.0],
+            ..comparison
+        };
+        assert!(!better.model_is_worse());
+        assert!(affine_warnings(&[better], false).is_empty());
+    }
+
+    #[test]
+    fn a_lattice_that_cannot_be_measured_or_a_wrong_pixel_size_is_reported() {
+        let warnings = calibration_warnings(&Err("no peak".into()));
+        assert_eq!(codes(&warnings), [WarningCode::LatticeNotMeasured]);
+        assert!(warnings[0].message.contains("no peak"));
+    }
+}
