@@ -73,15 +73,16 @@ pub struct PassCalibration {
 /// The calibration of a scan pair.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PairCalibration {
-    /// Per image (the trace first; the retrace when its lattice could be measured).
+    /// Per image (the first image first; the retrace when its lattice could be measured
+    /// and agrees with the inputs).
     pub passes: Vec<PassCalibration>,
     /// The images' calibrations combined (inverse-variance weighted).
     pub calibration: Calibration,
 }
 
 /// Measures the lattice of the trace (and retrace) of `pair` inside `mask`, matches it to
-/// `lattice` and checks it against `options`. The trace decides: its failure is the error;
-/// a retrace whose lattice cannot be measured is left out.
+/// `lattice` and checks it against `options`. The trace (or the only image) decides: its
+/// failure is the error; a retrace whose lattice cannot be measured is left out.
 pub fn calibrate_pair(
     pair: &ScanPair,
     lattice: &dyn Lattice,
@@ -97,36 +98,42 @@ pub fn calibrate_pair(
             .map(|image| measure_lattice_binned(image.z.view(), geometry, mask, factor))
     };
     let (trace, retrace) = rayon::join(|| measure(ScanPass::Trace), || measure(ScanPass::Retrace));
-    let trace = trace.ok_or_else(|| CalibrationError::NoLattice {
-        reason: "the scan has no trace image".into(),
-    })??;
-    let mut passes = Vec::new();
-    for (pass, measurement) in [(ScanPass::Trace, Some(trace))].into_iter().chain(
-        retrace
-            .and_then(Result::ok)
-            .map(|m| (ScanPass::Retrace, Some(m))),
-    ) {
-        let Some(measurement) = measurement else {
+    // The first image present decides (the trace, unless the scan has only a retrace): its
+    // failure is the error; a second image whose lattice cannot be measured, or that
+    // contradicts the first, is not used to calibrate.
+    let mut measured = [(ScanPass::Trace, trace), (ScanPass::Retrace, retrace)]
+        .into_iter()
+        .filter_map(|(pass, m)| m.map(|m| (pass, m)));
+    let (first_pass, first) = measured.next().ok_or_else(|| CalibrationError::NoLattice {
+        reason: "the scan has no image".into(),
+    })?;
+    let first = first?;
+    let fast = geometry.fast_axis();
+    let matched = match_lattice(&first, lattice);
+    check_inputs(&first, &matched, fast, options)?;
+    let mut passes = vec![PassCalibration {
+        pass: first_pass,
+        lattice: first.lattice,
+        matched,
+    }];
+    for (pass, measurement) in measured {
+        let Ok(measurement) = measurement else {
             continue;
         };
         let matched = match_lattice(&measurement, lattice);
-        if pass == ScanPass::Trace {
-            check_inputs(&measurement, &matched, geometry.fast_axis(), options)?;
-        } else if check_inputs(&measurement, &matched, geometry.fast_axis(), options).is_err() {
-            // A retrace that contradicts an accepted trace is not used to calibrate.
-            continue;
+        if check_inputs(&measurement, &matched, fast, options).is_ok() {
+            passes.push(PassCalibration {
+                pass,
+                lattice: measurement.lattice,
+                matched,
+            });
         }
-        passes.push(PassCalibration {
-            pass,
-            lattice: measurement.lattice,
-            matched,
-        });
     }
     let calibration = passes
         .iter()
         .map(|p| p.matched.calibration)
         .reduce(|a, b| a.combined(&b))
-        .expect("the trace is always kept");
+        .expect("the first image is always kept");
     Ok(PairCalibration {
         passes,
         calibration,

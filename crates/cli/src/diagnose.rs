@@ -372,10 +372,10 @@ pub fn run_file(
 ) -> Result<()> {
     let pair = correct::read_pair(input, retrace, &config.geometry)?;
     let geometry = pair.geometry().clone();
+    let mask = correct::load_mask(&config, &geometry)?;
     let correct::Resolved {
         lattice, options, ..
-    } = correct::resolve(&config)?;
-    let mask = correct::load_mask(&config, &geometry)?;
+    } = correct::with_measured_nn(correct::resolve(&config)?, &pair, mask.as_ref())?;
     let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
     let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
     let report = diagnose_features(&refs, &geometry, lattice.as_ref(), mask.as_ref(), &options)?;

@@ -127,13 +127,25 @@ struct CorrectArgs {
     /// A TOML config (e.g. the config.toml a previous run wrote); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// graphite (default), honeycomb, sam-sqrt3, hexagonal, square, or a lattice file
-    /// (TOML/JSON).
+    /// graphite (default), honeycomb, sam-sqrt3, si111-7x7, hexagonal, square, or a lattice
+    /// file (TOML/JSON).
     #[arg(long)]
     lattice: Option<String>,
-    /// Nearest-neighbour distance, e.g. 2.46A or 0.246nm (a bare number is metres).
-    #[arg(long, value_parser = units::parse_length)]
-    nn: Option<f64>,
+    /// Nearest-neighbour distance, e.g. 2.46A or 0.246nm (a bare number is metres), or
+    /// `auto`: the distance the image shows in the file's units. Presets with a known
+    /// constant (graphite, sam-sqrt3, honeycomb, si111-7x7) need none. The image is checked
+    /// against it: a constant that would need the file's pixel size to be off by more than
+    /// 15 % (50 % for a preset's constant) stops the run.
+    #[arg(long, value_parser = parse_nn)]
+    nn: Option<correct::Length>,
+    /// The lattice constant is right and the file's pixel size may be wrong by any factor
+    /// (up to ×10): calibrate from the lattice without the plausibility limit.
+    #[arg(long)]
+    calibrate: bool,
+    /// Do not check the lattice and its constant against the image (and do not calibrate
+    /// from it): for users who know better.
+    #[arg(long)]
+    trust_inputs: bool,
     /// Mask image (PNG, NPY, ...): analyse only where it is bright; each connected region is
     /// fitted as its own lattice domain.
     #[arg(long)]
@@ -167,7 +179,9 @@ impl CorrectArgs {
         };
         Ok(base.overridden_by(correct::CorrectConfig {
             lattice: self.lattice.clone(),
-            nn: self.nn.map(correct::Length::Metres),
+            nn: self.nn.clone(),
+            calibrate: self.calibrate.then_some(true),
+            trust_inputs: self.trust_inputs.then_some(true),
             polarity: self.polarity,
             mask: self.mask.clone(),
             plane_group: self.plane_group,
@@ -175,6 +189,14 @@ impl CorrectArgs {
             geometry: self.geometry.overrides(),
             ..correct::CorrectConfig::default()
         }))
+    }
+}
+
+fn parse_nn(text: &str) -> Result<correct::Length, String> {
+    if text.trim().eq_ignore_ascii_case("auto") {
+        Ok(correct::Length::Text("auto".into()))
+    } else {
+        units::parse_length(text).map(correct::Length::Metres)
     }
 }
 
@@ -259,6 +281,8 @@ fn main() -> ExitCode {
             } else {
                 print!("{}", correct::text_summary(&summary, output));
             }
+            // Warnings go to stderr whatever --quiet and --json say.
+            eprint!("{}", correct::warning_lines(&summary));
             Ok(())
         }),
         Command::Diagnose {

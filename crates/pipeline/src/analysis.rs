@@ -8,7 +8,7 @@ use dhct_unitcell::{AveragedCell, ConfidenceEllipse, LocalCell, SymmetryResidual
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
-use crate::{AffineComparison, Warning};
+use crate::{AffineComparison, CorrectedImageCheck, Warning};
 use dhct_calibrate::PairCalibration;
 
 /// Everything the chain produced.
@@ -34,6 +34,9 @@ pub struct Analysis {
     pub affine: Vec<AffineComparison>,
     /// Which correction the results come from.
     pub correction: CorrectionSource,
+    /// The lattice of each corrected image measured by FFT against the lattice given (an
+    /// independent check of the result; empty when the lattice could not be measured).
+    pub corrected_images: Vec<CorrectedImageCheck>,
     /// What not to trust, and what to do: weak spots of the fit, implausible results,
     /// assumptions (see [`WarningCode`]).
     pub warnings: Vec<Warning>,

@@ -2,9 +2,12 @@
 //! the lattice given before any feature is found; it seeds the feature kernel and the
 //! neighbour search, and its global affine map is the floor the full model must beat.
 
-use dhct_calibrate::{CalibrationError, CheckOptions, PairCalibration, calibrate_pair};
+use dhct_calibrate::{
+    Calibration, CalibrationError, CheckOptions, PairCalibration, binning_factor, calibrate_pair,
+    match_lattice, measure_lattice_binned,
+};
 use dhct_lattice::Lattice;
-use dhct_scan::{ScanGeometry, ScanPair};
+use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
@@ -68,4 +71,82 @@ pub(crate) fn seeded_geometry(
         .clone()
         .with_pitch(geometry.pitch_x() / kx, geometry.pitch_y() / ky)
         .ok()
+}
+
+/// The lattice of one corrected image, measured by FFT as an outside check would measure
+/// it (not by dhct's own lattice fit), against the lattice given.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CorrectedImageCheck {
+    /// Trace or retrace.
+    pub pass: ScanPass,
+    /// Apparent over true lengths along x and y, shear (1, 1, 0° when the corrected image
+    /// has exactly the lattice given).
+    pub calibration: Calibration,
+    /// Largest change of an angle between the lattice's vectors `a1`, `a2`, `a2 − a1` in the
+    /// corrected image, degrees.
+    pub angle_error_deg: f64,
+}
+
+/// Largest deviation of a corrected image's lattice (scale along x or y) from the lattice
+/// given before a warning is given.
+pub const CORRECTED_SCALE_TOLERANCE: f64 = 0.015;
+
+/// Largest change of a lattice angle in a corrected image, degrees, before a warning.
+pub const CORRECTED_ANGLE_TOLERANCE_DEG: f64 = 1.0;
+
+impl CorrectedImageCheck {
+    /// Whether the corrected image's lattice is the lattice given to within the tolerances.
+    pub fn passes(&self) -> bool {
+        self.calibration
+            .scale
+            .iter()
+            .all(|k| (k - 1.0).abs() <= CORRECTED_SCALE_TOLERANCE)
+            && self.angle_error_deg <= CORRECTED_ANGLE_TOLERANCE_DEG
+    }
+}
+
+/// The largest change of the angles between `a1`, `a2` and `a2 − a1` of `lattice` (placed
+/// with the calibration's rotation) under the calibration's `K`, degrees.
+fn angle_error_deg(lattice: &dyn Lattice, calibration: &Calibration) -> f64 {
+    let [a1, a2] = lattice.primitive_vectors();
+    let (s, c) = calibration.rotation_deg.to_radians().sin_cos();
+    let [[kx, kxy], [_, ky]] = calibration.matrix;
+    let place = |v: nalgebra::Vector2<f64>| {
+        let r = nalgebra::Vector2::new(c * v.x - s * v.y, s * v.x + c * v.y);
+        (r, nalgebra::Vector2::new(kx * r.x + kxy * r.y, ky * r.y))
+    };
+    let vectors = [place(a1), place(a2), place(a2 - a1)];
+    let mut worst: f64 = 0.0;
+    for i in 0..3 {
+        for j in i + 1..3 {
+            let before = vectors[i].0.angle(&vectors[j].0);
+            let after = vectors[i].1.angle(&vectors[j].1);
+            worst = worst.max((after - before).abs().to_degrees());
+        }
+    }
+    worst
+}
+
+/// Measures each corrected image's lattice (grid of `geometry`, sample units); images whose
+/// lattice cannot be measured are left out.
+pub(crate) fn check_corrected(
+    images: &[(ScanPass, &Array2<f64>)],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+) -> Vec<CorrectedImageCheck> {
+    let nn_px =
+        lattice.nearest_neighbour_distance() / (geometry.pitch_x() * geometry.pitch_y()).sqrt();
+    let factor = binning_factor(geometry.columns(), geometry.rows(), nn_px);
+    images
+        .iter()
+        .filter_map(|&(pass, z)| {
+            let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
+            let calibration = match_lattice(&measured, lattice).calibration;
+            Some(CorrectedImageCheck {
+                pass,
+                calibration,
+                angle_error_deg: angle_error_deg(lattice, &calibration),
+            })
+        })
+        .collect()
 }

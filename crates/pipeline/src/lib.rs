@@ -47,7 +47,10 @@ pub use analysis::{
     Analysis, CorrectionSource, FeatureIndex, PassOutput, RegionFit, SkippedRegion, Stage,
     StageTimings, UnitCellAnalysis,
 };
-pub use calibration::CalibrationOptions;
+pub use calibration::{
+    CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CalibrationOptions,
+    CorrectedImageCheck,
+};
 pub use error::PipelineError;
 pub use options::{CellSelection, PipelineOptions, RegionOptions, UnitCellOptions};
 pub use regions::label_regions;
@@ -248,6 +251,16 @@ pub fn run(
         })
         .collect::<Result<_, _>>()?;
     timings.correction_s += t.elapsed().as_secs_f64();
+    // The corrected images measured as an outside check would measure them.
+    let t = Instant::now();
+    let image_checks = if calibration.is_ok() {
+        let passes: Vec<(ScanPass, &Array2<f64>)> =
+            sets.iter().map(|s| s.pass).zip(images.iter()).collect();
+        calibration::check_corrected(&passes, geometry, lattice)
+    } else {
+        Vec::new()
+    };
+    timings.calibration_s += t.elapsed().as_secs_f64();
     let corrected: Vec<(Vec<CorrectedFeature>, Array2<f64>)> =
         corrected_features.into_iter().zip(images).collect();
 
@@ -299,6 +312,7 @@ pub fn run(
         correction == CorrectionSource::Affine,
     ));
     warnings.extend(warnings::plausibility_warnings(lattice, &regions, &passes));
+    warnings.extend(warnings::corrected_image_warnings(lattice, &image_checks));
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(Analysis {
         passes,
@@ -310,6 +324,7 @@ pub fn run(
         calibration,
         affine: comparisons,
         correction,
+        corrected_images: image_checks,
         warnings,
         timings,
     })

@@ -8,7 +8,10 @@ use dhct_lattice::Lattice;
 use dhct_scan::{ScanGeometry, ValueSource};
 use serde::{Deserialize, Serialize};
 
-use crate::{AffineComparison, PassOutput, RegionFit};
+use crate::{
+    AffineComparison, CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE,
+    CorrectedImageCheck, PassOutput, RegionFit,
+};
 
 /// Ratio of the lattice-fit deviation to the features' localisation uncertainty beyond
 /// which a warning is given.
@@ -54,6 +57,8 @@ pub enum WarningCode {
     LargeDeviation,
     /// Few features were indexed.
     FewIndexed,
+    /// A corrected image's lattice, measured by FFT, is not the lattice given.
+    CorrectedImageOff,
 }
 
 /// One warning.
@@ -106,6 +111,7 @@ impl WarningCode {
             WarningCode::TraceRetraceOffset => "trace_retrace_offset",
             WarningCode::LargeDeviation => "large_deviation",
             WarningCode::FewIndexed => "few_indexed",
+            WarningCode::CorrectedImageOff => "corrected_image_off",
         }
     }
 }
@@ -278,6 +284,37 @@ pub(crate) fn affine_warnings(comparisons: &[AffineComparison], fell_back: bool)
                 ),
                 "the model does not describe this scan: use the affine result, mask defects \
                  and steps, or run dhct diagnose to see what is missing",
+            )
+        })
+        .collect()
+}
+
+/// Corrected images whose lattice, measured by FFT, is not the lattice given.
+pub(crate) fn corrected_image_warnings(
+    lattice: &dyn Lattice,
+    checks: &[CorrectedImageCheck],
+) -> Vec<Warning> {
+    checks
+        .iter()
+        .filter(|c| !c.passes())
+        .map(|c| {
+            let k = &c.calibration;
+            Warning::new(
+                WarningCode::CorrectedImageOff,
+                format!(
+                    "corrected {}: its lattice, measured by FFT, is {:.2} % × {:.2} % of the {} \
+                     lattice along x × y with angles {:.2}° off (more than {:.1} % or {:.0}° off)",
+                    c.pass,
+                    100.0 * k.scale[0],
+                    100.0 * k.scale[1],
+                    lattice.name(),
+                    c.angle_error_deg,
+                    100.0 * CORRECTED_SCALE_TOLERANCE,
+                    CORRECTED_ANGLE_TOLERANCE_DEG
+                ),
+                "do not take lengths from this image: check the scan timing and directions \
+                 (--line-time, --turnaround, --fast), mask steps and defects, or use the other \
+                 pass",
             )
         })
         .collect()

@@ -1,10 +1,15 @@
 //! The `dhct correct` configuration: a TOML file, overridden by command-line flags, and
 //! written back fully resolved (every pipeline option) into the output directory so that
 //! `dhct correct --config OUTDIR/config.toml INPUT -o NEWDIR` repeats the run.
+//!
+//! The `[pipeline]` section is merged key by key onto the very defaults a run without a
+//! config uses (`PipelineOptions::for_lattice` of the chosen lattice): a partial
+//! `[pipeline.features]` changes only the keys it names. Unknown keys anywhere are errors
+//! that list the valid ones and suggest the closest ("did you mean").
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use dhct_features::Polarity;
 use dhct_lattice::{Hexagonal, Honeycomb, Lattice, PlaneGroup, Square, UserLattice};
 use dhct_pipeline::PipelineOptions;
@@ -23,6 +28,11 @@ pub enum Length {
 }
 
 impl Length {
+    /// Whether this is `auto`: the constant is taken from the image (file units).
+    pub fn is_auto(&self) -> bool {
+        matches!(self, Length::Text(t) if t.trim().eq_ignore_ascii_case("auto"))
+    }
+
     pub fn metres(&self) -> Result<f64> {
         match self {
             Length::Metres(m) => Ok(*m),
@@ -39,9 +49,16 @@ pub struct CorrectConfig {
     pub lattice: Option<String>,
     /// Nearest-neighbour distance; replaces the preset's.
     pub nn: Option<Length>,
+    /// The lattice constant is right and the file's pixel size may be wrong by any factor
+    /// (up to ×10): calibrate from the lattice without the plausibility limit.
+    pub calibrate: Option<bool>,
+    /// Skip the checks of the lattice and its constant against the image (and the
+    /// calibration from it): for users who know better.
+    pub trust_inputs: Option<bool>,
     /// bright (atoms are maxima) or dark (minima).
     pub polarity: Option<Polarity>,
-    /// Mask image (PNG, NPY, ...; true above half its range), raw-image pixels.
+    /// Mask file, raw-image pixels: PNG (light or opaque = use), NPY or TIFF (non-zero =
+    /// use); see `dhct_distortion::mask::read_mask`.
     pub mask: Option<PathBuf>,
     /// Mask polygon, vertices in raw-image pixels (x = column, y = row).
     pub mask_polygon: Option<Vec<[f64; 2]>>,
@@ -51,18 +68,71 @@ pub struct CorrectConfig {
     pub colormap: Option<Colormap>,
     /// Scan geometry replacing the file's (SI units).
     pub geometry: GeometryOverrides,
-    /// Every option of the chain (features, model, lattice fit, unit cells).
-    pub pipeline: Option<PipelineOptions>,
+    /// The pipeline options given, as written: merged key by key onto the lattice's
+    /// defaults by [`CorrectConfig::pipeline_options`]. A written `config.toml` holds every
+    /// option.
+    pub pipeline: Option<toml::Table>,
+    /// Replace an output folder holding an earlier run (`--overwrite`; never read from or
+    /// written to a file).
+    #[serde(skip)]
+    pub overwrite: bool,
 }
 
+/// Largest config file read, bytes.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
 impl CorrectConfig {
+    /// Reads a config file (only a regular file: a FIFO or device is refused before it is
+    /// opened) and checks every key and value it can without the data: unknown keys,
+    /// types, and the geometry and pipeline options against their ranges.
     pub fn read(path: &Path) -> Result<CorrectConfig> {
-        let text = std::fs::read_to_string(path)
+        let text = dhct_sm4_io::read_regular_text(path, MAX_CONFIG_BYTES)
             .with_context(|| format!("cannot read config {}", path.display()))?;
-        toml::from_str(&text).with_context(|| format!("config {} is not valid", path.display()))
+        let config: CorrectConfig = toml::from_str(&text)
+            .map_err(|e| anyhow!("{}", with_suggestion(&e.to_string(), None)))
+            .with_context(|| format!("config {} is not valid", path.display()))?;
+        config
+            .check()
+            .with_context(|| format!("config {} is not valid", path.display()))?;
+        Ok(config)
     }
 
-    /// `other`'s set fields replace this one's.
+    /// Checks the geometry overrides and the pipeline section against the plain defaults
+    /// (unknown keys, types, ranges), before any lattice or data is read.
+    pub fn check(&self) -> Result<()> {
+        self.geometry
+            .validate()
+            .map_err(|e| anyhow!("geometry.{e}"))?;
+        if self.pipeline.is_some() {
+            self.merged_onto(PipelineOptions::default())?;
+        }
+        Ok(())
+    }
+
+    /// The pipeline options of a run on `lattice`: the `[pipeline]` keys given, merged one
+    /// by one onto `PipelineOptions::for_lattice(lattice)` (what a run without a config
+    /// uses), then validated.
+    pub fn pipeline_options(&self, lattice: &dyn Lattice) -> Result<PipelineOptions> {
+        self.merged_onto(PipelineOptions::for_lattice(lattice))
+    }
+
+    fn merged_onto(&self, defaults: PipelineOptions) -> Result<PipelineOptions> {
+        let Some(given) = &self.pipeline else {
+            return Ok(defaults);
+        };
+        let mut table = pipeline_table(&defaults)?;
+        merge(&mut table, given);
+        let options: PipelineOptions =
+            toml::Value::Table(table)
+                .try_into()
+                .map_err(|e: toml::de::Error| {
+                    anyhow!("[pipeline]: {}", with_suggestion(e.message(), Some(given)))
+                })?;
+        options.validate().map_err(|e| anyhow!("[pipeline]: {e}"))?;
+        Ok(options)
+    }
+
+    /// `other`'s set fields replace this one's (pipeline keys one by one).
     pub fn overridden_by(mut self, other: CorrectConfig) -> CorrectConfig {
         macro_rules! take {
             ($($field:ident),*) => { $( if other.$field.is_some() { self.$field = other.$field; } )* };
@@ -70,13 +140,19 @@ impl CorrectConfig {
         take!(
             lattice,
             nn,
+            calibrate,
+            trust_inputs,
             polarity,
             mask,
             mask_polygon,
             plane_group,
-            colormap,
-            pipeline
+            colormap
         );
+        if let Some(pipeline) = other.pipeline {
+            let mut table = self.pipeline.take().unwrap_or_default();
+            merge(&mut table, &pipeline);
+            self.pipeline = Some(table);
+        }
         let g = other.geometry;
         macro_rules! geometry {
             ($($field:ident),*) => { $( if g.$field.is_some() { self.geometry.$field = g.$field; } )* };
@@ -90,8 +166,99 @@ impl CorrectConfig {
             trace_fast,
             slow
         );
+        self.overwrite |= other.overwrite;
         self
     }
+}
+
+/// `options` as a TOML table (every option; `None`s are left out).
+pub fn pipeline_table(options: &PipelineOptions) -> Result<toml::Table> {
+    toml::Table::try_from(options).context("cannot write the pipeline options as TOML")
+}
+
+/// Merges `given` into `base` key by key: tables recursively, anything else replaced. A
+/// table whose `kind` differs (a different variant of a tagged option such as
+/// `kernel` or `hysteresis`) replaces the base table whole.
+fn merge(base: &mut toml::Table, given: &toml::Table) {
+    for (key, value) in given {
+        match (base.get_mut(key), value) {
+            (Some(toml::Value::Table(old)), toml::Value::Table(new))
+                if old.get("kind") == new.get("kind") || new.get("kind").is_none() =>
+            {
+                merge(old, new);
+            }
+            _ => {
+                base.insert(key.clone(), value.clone());
+            }
+        }
+    }
+}
+
+/// `message` with "did you mean" added when it reports an unknown field (serde's
+/// "unknown field `x`, expected one of `a`, `b`"), and the field's place in `given`.
+fn with_suggestion(message: &str, given: Option<&toml::Table>) -> String {
+    let Some((unknown, valid)) = unknown_field(message) else {
+        return message.to_string();
+    };
+    let mut text = message.trim_end().to_string();
+    if let Some(path) = given.and_then(|t| key_path(t, &unknown)) {
+        text.push_str(&format!(" (at pipeline.{path})"));
+    }
+    let closest = valid
+        .iter()
+        .map(|v| (edit_distance(&unknown, v), v))
+        .min_by_key(|(d, _)| *d);
+    if let Some((distance, name)) = closest
+        && distance <= (unknown.chars().count() / 3).max(2)
+    {
+        text.push_str(&format!("; did you mean `{name}`?"));
+    }
+    text
+}
+
+/// The unknown field and the valid ones named by a serde error message.
+fn unknown_field(message: &str) -> Option<(String, Vec<String>)> {
+    let rest = message.split("unknown field `").nth(1)?;
+    let unknown = rest.split('`').next()?.to_string();
+    let expected = rest.split("expected ").nth(1).unwrap_or("");
+    let valid = expected
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_string)
+        .collect();
+    Some((unknown, valid))
+}
+
+/// Where `key` occurs in `table`, as a dotted path (first occurrence, depth first).
+fn key_path(table: &toml::Table, key: &str) -> Option<String> {
+    for (name, value) in table {
+        if name == key {
+            return Some(name.clone());
+        }
+        if let toml::Value::Table(inner) = value
+            && let Some(path) = key_path(inner, key)
+        {
+            return Some(format!("{name}.{path}"));
+        }
+    }
+    None
+}
+
+/// Levenshtein distance between two names.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut previous = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let substitution = previous + usize::from(ca != *cb);
+            previous = row[j + 1];
+            row[j + 1] = substitution.min(previous + 1).min(row[j] + 1);
+        }
+    }
+    row[b.len()]
 }
 
 /// The lattice named by `name` (a preset or a file), with its NN distance replaced by
@@ -122,15 +289,19 @@ pub fn build_lattice(name: &str, nn_m: Option<f64>) -> Result<Box<dyn Lattice + 
             Some(nn) => Box::new(Honeycomb::new(nn * 3f64.sqrt())?),
             None => Box::new(Honeycomb::graphene()),
         },
+        "si111-7x7" | "si-7x7" | "7x7" => match nn_m {
+            Some(a) => Box::new(Hexagonal::si111_7x7().with_constant(a)?),
+            None => Box::new(Hexagonal::si111_7x7()),
+        },
         "square" => Box::new(Square::new(
             nn_m.context("--lattice square needs --nn (its lattice constant)")?,
         )?),
         _ => {
             let path = Path::new(name);
-            if !path.exists() {
+            if std::fs::symlink_metadata(path).is_err() {
                 bail!(
-                    "unknown lattice '{name}': use graphite, honeycomb, sam-sqrt3, hexagonal, \
-                     square, or the path of a lattice file (TOML/JSON, see docs)"
+                    "unknown lattice '{name}': use graphite, honeycomb, sam-sqrt3, si111-7x7, \
+                     hexagonal, square, or the path of a lattice file (TOML/JSON, see docs)"
                 );
             }
             let user = UserLattice::from_path(path)
@@ -175,17 +346,140 @@ mod tests {
         assert_eq!(merged.polarity, Some(Polarity::Bright));
         assert_eq!(merged.geometry.line_time, Some(0.5));
         assert!(toml::from_str::<CorrectConfig>("latice = \"x\"").is_err());
-        // The fully resolved config (with every pipeline option) round-trips.
+        // The fully resolved config (with every pipeline option) round-trips exactly.
+        let graphite = Hexagonal::graphite();
+        let options = PipelineOptions::for_lattice(&graphite);
         let full = CorrectConfig {
-            pipeline: Some(PipelineOptions::default()),
+            pipeline: Some(pipeline_table(&options).unwrap()),
             ..merged
         };
         let text = toml::to_string(&full).unwrap();
         let back: CorrectConfig = toml::from_str(&text).unwrap();
-        assert_eq!(back.lattice, full.lattice);
+        assert_eq!(back, full);
+        assert_eq!(back.pipeline_options(&graphite).unwrap(), options);
+    }
+
+    /// The options a config holding only `section` gives for graphite.
+    fn options_from(section: &str) -> Result<PipelineOptions> {
+        let config: CorrectConfig = toml::from_str(section)?;
+        config.check()?;
+        config.pipeline_options(&Hexagonal::graphite())
+    }
+
+    #[test]
+    fn a_partial_section_changes_only_its_keys_in_every_group() {
+        let defaults = PipelineOptions::for_lattice(&Hexagonal::graphite());
+        type Edit = fn(&mut PipelineOptions);
+        let cases: Vec<(&str, Edit)> = vec![
+            ("[pipeline.features]\nthreshold = 0.2", |o| {
+                o.features.threshold = 0.2
+            }),
+            (
+                "[pipeline.features.kernel]\nkind = \"gaussian-sigma\"\nsigma_px = 2.0",
+                |o| {
+                    o.features.kernel = dhct_features::KernelChoice::GaussianSigma { sigma_px: 2.0 }
+                },
+            ),
+            ("[pipeline.dhct.neighbours]\nwindow = 0.3", |o| {
+                o.dhct.neighbours.window = 0.3
+            }),
+            ("[pipeline.dhct.fit]\nrobust_rounds = 2", |o| {
+                o.dhct.fit.robust_rounds = 2
+            }),
+            ("[pipeline.dhct]\nmethod = \"ellipse\"", |o| {
+                o.dhct.method = Some(dhct_lattice::LocalDistortionMethod::Ellipse)
+            }),
+            ("[pipeline.lattice_fit]\ninitial_radius = 6.0", |o| {
+                o.lattice_fit.initial_radius = 6.0
+            }),
+            ("[pipeline.regions]\nmin_features = 12", |o| {
+                o.regions.min_features = 12
+            }),
+            ("[pipeline.unit_cell]\nresolution = 64", |o| {
+                o.unit_cell.resolution = 64
+            }),
+            (
+                "[pipeline.unit_cell.selection]\nexclude_outliers_sigma = 3.0",
+                |o| o.unit_cell.selection.exclude_outliers_sigma = Some(3.0),
+            ),
+            ("[pipeline]\nkeep_correlation = false", |o| {
+                o.keep_correlation = false
+            }),
+        ];
+        for (section, edit) in cases {
+            let mut expected = defaults.clone();
+            edit(&mut expected);
+            assert_ne!(expected, defaults, "{section}: the case changes nothing");
+            let got = options_from(section).unwrap_or_else(|e| panic!("{section}: {e:#}"));
+            assert_eq!(got, expected, "{section}");
+        }
+        // No section at all: exactly the defaults of a run without a config.
+        assert_eq!(options_from("").unwrap(), defaults);
+        // Flags and files merge key by key too.
+        let file: CorrectConfig =
+            toml::from_str("[pipeline.features]\nthreshold = 0.2\nline_correction = \"none\"")
+                .unwrap();
+        let flags: CorrectConfig = toml::from_str("[pipeline.features]\nthreshold = 0.3").unwrap();
+        let merged = file.overridden_by(flags);
+        let options = merged.pipeline_options(&Hexagonal::graphite()).unwrap();
+        assert_eq!(options.features.threshold, 0.3);
         assert_eq!(
-            back.pipeline.unwrap().unit_cell,
-            full.pipeline.unwrap().unit_cell
+            options.features.line_correction,
+            dhct_features::LineCorrection::None
         );
+    }
+
+    #[test]
+    fn unknown_keys_are_errors_with_a_suggestion() {
+        let error = format!(
+            "{:#}",
+            options_from("[pipeline.lattice_fit]\ninitial_radiuss = 3.0").unwrap_err()
+        );
+        assert!(
+            error.contains("initial_radiuss")
+                && error.contains("pipeline.lattice_fit.initial_radiuss")
+                && error.contains("did you mean `initial_radius`"),
+            "{error}"
+        );
+        let error = format!(
+            "{:#}",
+            options_from("[pipeline.features]\nthreshhold = 0.2").unwrap_err()
+        );
+        assert!(error.contains("did you mean `threshold`"), "{error}");
+        let error = format!(
+            "{:#}",
+            options_from("[pipeline.dhct.neighbours]\nrdf_shell = 3").unwrap_err()
+        );
+        assert!(error.contains("did you mean `rdf_shells`"), "{error}");
+        let error = format!(
+            "{:#}",
+            options_from("[pipeline.unitcell]\nresolution = 8").unwrap_err()
+        );
+        assert!(error.contains("did you mean `unit_cell`"), "{error}");
+        let error = with_suggestion(
+            &toml::from_str::<CorrectConfig>("latice = 'graphite'")
+                .unwrap_err()
+                .to_string(),
+            None,
+        );
+        assert!(error.contains("did you mean `lattice`"), "{error}");
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+    }
+
+    #[test]
+    fn out_of_range_values_name_the_key_the_value_and_the_range() {
+        for (section, key) in [
+            ("[geometry]\npixel_period = 1e30", "pixel_period"),
+            (
+                "[pipeline.lattice_fit]\ninitial_radius = nan",
+                "initial_radius",
+            ),
+        ] {
+            let error = format!("{:#}", options_from(section).unwrap_err());
+            assert!(
+                error.contains(key) && error.contains("range"),
+                "{section}: {error}"
+            );
+        }
     }
 }

@@ -3,6 +3,7 @@
 
 mod config;
 pub(crate) mod figures;
+mod inputs;
 pub(crate) mod plots;
 pub(crate) mod render;
 pub(crate) mod report;
@@ -14,8 +15,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use dhct_distortion::mask::{polygon_mask, read_mask};
-use dhct_lattice::Lattice;
-use dhct_pipeline::{Analysis, PipelineOptions, Stage};
+use dhct_pipeline::{Analysis, Stage};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::{WriteError, write_atomically};
@@ -24,6 +24,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 pub use config::{CorrectConfig, Length, build_lattice};
+pub(crate) use inputs::{Resolved, explain, resolve, with_measured_nn};
 pub use summary::RunSummary;
 
 /// What to run.
@@ -110,13 +111,14 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let read_s = start.elapsed().as_secs_f64();
     let geometry = pair.geometry().clone();
 
+    let mask = load_mask(&config, &geometry)?;
     let Resolved {
         lattice_name,
         nn_m,
         lattice,
         options,
-    } = resolve(&config)?;
-    let mask = load_mask(&config, &geometry)?;
+        ..
+    } = with_measured_nn(resolve(&config)?, &pair, mask.as_ref())?;
 
     let analysis = dhct_pipeline::run(
         &pair,
@@ -127,7 +129,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
             bar.set_message(stage.describe());
         },
     )
-    .map_err(|e| anyhow::anyhow!(hint(&e.to_string())))
+    .map_err(|e| anyhow::anyhow!(explain(&e)))
     .with_context(|| format!("analysing {}", request.input.display()))?;
 
     bar.set_message("writing outputs and report");
@@ -180,7 +182,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
         polarity: Some(options.features.polarity),
         colormap: Some(colormap),
         geometry: config.geometry.clone(),
-        pipeline: Some(options.clone()),
+        pipeline: Some(config::pipeline_table(&options)?),
         ..config.clone()
     };
     let toml_text = format!(
@@ -224,61 +226,6 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     write_bytes(&request.output.join("report.html"), html.as_bytes())?;
     bar.finish_and_clear();
     Ok(summary)
-}
-
-/// What a config resolves to before any data is read.
-pub(crate) struct Resolved {
-    /// The lattice as named (preset or file).
-    pub lattice_name: String,
-    /// The nearest-neighbour distance given, if any, metres.
-    pub nn_m: Option<f64>,
-    pub lattice: Box<dyn Lattice + Send + Sync>,
-    /// The config's pipeline options (or the lattice's defaults) with the flags applied.
-    pub options: PipelineOptions,
-}
-
-/// The lattice and pipeline options of `config` (shared by `correct` and `diagnose`).
-pub(crate) fn resolve(config: &CorrectConfig) -> Result<Resolved> {
-    let lattice_name = config.lattice.clone().unwrap_or_else(|| "graphite".into());
-    let nn_m = config
-        .nn
-        .as_ref()
-        .map(Length::metres)
-        .transpose()
-        .context("--nn")?;
-    let lattice = build_lattice(&lattice_name, nn_m)?;
-    let mut options = config
-        .pipeline
-        .clone()
-        .unwrap_or_else(|| PipelineOptions::for_lattice(lattice.as_ref()));
-    if nn_m.is_some() || !options.features.neighbour_distance.is_finite() {
-        options.features.neighbour_distance = lattice.nearest_neighbour_distance();
-    }
-    if let Some(p) = config.polarity {
-        options.features.polarity = p;
-    }
-    if let Some(group) = config.plane_group {
-        options.unit_cell.plane_group = Some(group);
-    }
-    Ok(Resolved {
-        lattice_name,
-        nn_m,
-        lattice,
-        options,
-    })
-}
-
-/// Adds what to try to the pipeline's most common failures.
-fn hint(message: &str) -> String {
-    if message.contains("try --") {
-        message.to_string()
-    } else if message.contains("too few features") || message.contains("only ") {
-        format!(
-            "{message}\nhint: check --lattice and --nn against the image, --polarity, and that the mask covers the atomically resolved part"
-        )
-    } else {
-        message.to_string()
-    }
 }
 
 pub(crate) fn load_mask(
@@ -406,6 +353,7 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
         .iter()
         .map(|p| format!("{} {} ({} indexed)", p.pass, p.features, p.indexed))
         .collect();
+    s.push_str(&calibration_lines(summary));
     let _ = writeln!(s, "features: {}", counts.join(", "));
     for p in &summary.parameters {
         let _ = writeln!(
@@ -442,11 +390,75 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
         "analysis {:.2} s (read {:.2} s, write {:.2} s)",
         summary.timings.total_s, summary.read_s, summary.write_s
     );
-    for w in &summary.warnings {
-        let _ = writeln!(s, "warning: {w}");
-    }
     let _ = writeln!(s, "report: {}", output.join("report.html").display());
     s
+}
+
+/// The calibration and which correction was kept, one line each.
+fn calibration_lines(summary: &RunSummary) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    match (&summary.calibration, &summary.calibration_note) {
+        (Some(found), _) => {
+            for pass in &found.passes {
+                let _ = writeln!(
+                    s,
+                    "{}: the image shows {}",
+                    pass.pass,
+                    pass.lattice.describe()
+                );
+            }
+            let c = &found.calibration;
+            let _ = writeln!(
+                s,
+                "calibration: x scale {:.4} ± {:.4}, y scale {:.4} ± {:.4}, shear {:.2}° ± {:.2}° \
+                 (apparent / true length, from the lattice)",
+                c.scale[0],
+                c.scale_sigma[0],
+                c.scale[1],
+                c.scale_sigma[1],
+                c.shear_deg,
+                c.shear_sigma_deg
+            );
+        }
+        (None, Some(note)) => {
+            let _ = writeln!(s, "calibration: not measured ({note})");
+        }
+        (None, None) => {}
+    }
+    for c in &summary.affine_baseline {
+        let _ = writeln!(
+            s,
+            "region {}: rms deviation {:.1} pm with the drift model, {:.1} pm with a global affine correction",
+            c.region,
+            c.model_rms_m * 1e12,
+            c.affine_rms_m * 1e12
+        );
+    }
+    for check in &summary.corrected_images {
+        let k = &check.calibration;
+        let _ = writeln!(
+            s,
+            "corrected {} checked by FFT: {:.4} × {:.4} of the lattice along x × y, shear {:.2}°",
+            check.pass, k.scale[0], k.scale[1], k.shear_deg
+        );
+    }
+    if summary.correction == dhct_pipeline::CorrectionSource::Affine {
+        let _ = writeln!(
+            s,
+            "correction: the global affine correction (it beat the drift model)"
+        );
+    }
+    s
+}
+
+/// The warnings, for stderr.
+pub fn warning_lines(summary: &RunSummary) -> String {
+    summary
+        .warnings
+        .iter()
+        .map(|w| format!("warning: {w}\n"))
+        .collect()
 }
 
 /// Output directory for an input in batch mode.

@@ -105,6 +105,103 @@ pub(crate) fn figure_html(html: &mut String, figure: &Figure) {
     );
 }
 
+/// What the image shows, the calibration from it, and the affine floor.
+fn calibration_section(html: &mut String, summary: &RunSummary) {
+    html.push_str("<h2>Calibration from the lattice</h2>");
+    let Some(found) = &summary.calibration else {
+        let _ = writeln!(
+            html,
+            "<p>The lattice could not be measured from the image ({}); the file's pixel size \
+             was taken as right and the inputs were not checked.</p>",
+            html_escape(
+                summary
+                    .calibration_note
+                    .as_deref()
+                    .unwrap_or("no reason given")
+            )
+        );
+        return;
+    };
+    html.push_str(
+        "<p>Measured from the Fourier transform of each image before anything else, in the \
+         file's units; the scales are apparent over true lengths (1 = the file's pixel size \
+         is right). A pixel-size error along the slow axis and a constant slow drift look the \
+         same in one frame.</p><table>\n",
+    );
+    header(html, &["", "value"]);
+    for pass in &found.passes {
+        row(
+            html,
+            &[
+                format!("{} shows", pass.pass),
+                html_escape(&pass.lattice.describe()),
+            ],
+        );
+    }
+    let c = &found.calibration;
+    let rows = [
+        (
+            "x scale",
+            format!("{:.4} ± {:.4}", c.scale[0], c.scale_sigma[0]),
+        ),
+        (
+            "y scale",
+            format!("{:.4} ± {:.4}", c.scale[1], c.scale_sigma[1]),
+        ),
+        (
+            "shear",
+            format!("{:.2}° ± {:.2}°", c.shear_deg, c.shear_sigma_deg),
+        ),
+        ("lattice rotation", format!("{:.2}°", c.rotation_deg)),
+    ];
+    for (name, value) in rows {
+        row(html, &[name.into(), value]);
+    }
+    for a in &summary.affine_baseline {
+        row(
+            html,
+            &[
+                format!("region {}: rms from the lattice", a.region),
+                format!(
+                    "{:.1} pm (drift model, {} features) vs {:.1} pm (global affine, {})",
+                    a.model_rms_m * 1e12,
+                    a.model_used,
+                    a.affine_rms_m * 1e12,
+                    a.affine_used
+                ),
+            ],
+        );
+    }
+    for check in &summary.corrected_images {
+        let k = &check.calibration;
+        row(
+            html,
+            &[
+                format!("corrected {}: its lattice by FFT", check.pass),
+                format!(
+                    "{:.4} × {:.4} of the lattice given along x × y, shear {:.2}°{}",
+                    k.scale[0],
+                    k.scale[1],
+                    k.shear_deg,
+                    if check.passes() {
+                        ""
+                    } else {
+                        " (off: see the warning)"
+                    }
+                ),
+            ],
+        );
+    }
+    let kept = match summary.correction {
+        dhct_pipeline::CorrectionSource::DriftModel => "the drift/creep/hysteresis model",
+        dhct_pipeline::CorrectionSource::Affine => {
+            "the global affine correction (it beat the model)"
+        }
+    };
+    row(html, &["correction kept".into(), kept.into()]);
+    html.push_str("</table>\n");
+}
+
 /// The whole page.
 pub fn report_html(
     summary: &RunSummary,
@@ -135,10 +232,13 @@ pub fn report_html(
     for w in &summary.warnings {
         let _ = writeln!(
             html,
-            "<p class='note'><b>Warning:</b> {}</p>",
-            html_escape(w)
+            "<p class='note'><b>Warning ({}):</b> {} <br><b>What to do:</b> {}</p>",
+            w.code.name(),
+            html_escape(&w.message),
+            html_escape(&w.what_to_do)
         );
     }
+    calibration_section(&mut html, summary);
     html.push_str("<h2>Scan and features</h2><table>\n");
     header(&mut html, &["", "value"]);
     row(

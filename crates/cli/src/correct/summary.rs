@@ -1,9 +1,13 @@
 //! The machine-readable results of a run: `model.json` (everything numeric) and the short
 //! summary printed by `--json`.
 
+use dhct_calibrate::PairCalibration;
 use dhct_distortion::{DistortionModel, ExclusionCounts, Parameter, RdfFit};
 use dhct_lattice::{Lattice, PlaneGroup};
-use dhct_pipeline::{Analysis, SkippedRegion, StageTimings};
+use dhct_pipeline::{
+    AffineComparison, Analysis, CorrectedImageCheck, CorrectionSource, SkippedRegion, StageTimings,
+    Warning,
+};
 use dhct_scan::{ScanGeometry, ScanPass};
 use dhct_unitcell::{ConfidenceEllipse, SymmetryResidual};
 use serde::Serialize;
@@ -112,8 +116,22 @@ pub struct RunSummary {
     pub skipped_regions: Vec<SkippedRegion>,
     pub unit_cell: Option<UnitCellSummary>,
     pub unit_cell_note: Option<String>,
-    /// Plausibility warnings (see `dhct_pipeline::Analysis::warnings`).
-    pub warnings: Vec<String>,
+    /// What not to trust and what to do, each with a stable `code` (see
+    /// `dhct_pipeline::WarningCode`).
+    pub warnings: Vec<Warning>,
+    /// The lattice the images show in file units and the calibration it gives (x and y
+    /// scale, shear, rotation), measured before anything else; `null` with
+    /// `calibration_note` saying why when it could not be measured.
+    pub calibration: Option<PairCalibration>,
+    /// Why there is no calibration, if there is none.
+    pub calibration_note: Option<String>,
+    /// Per region: the full model against the global affine correction (same lattice fit).
+    pub affine_baseline: Vec<AffineComparison>,
+    /// Which correction the corrected data come from (`drift-model` or `affine`).
+    pub correction: CorrectionSource,
+    /// Each corrected image's lattice measured by FFT against the lattice given (x and y
+    /// scale, shear): the check an outside user would make.
+    pub corrected_images: Vec<CorrectedImageCheck>,
     pub timings: StageTimings,
     /// Reading the input, seconds.
     pub read_s: f64,
@@ -235,6 +253,11 @@ pub fn summarise(
         }),
         unit_cell_note: analysis.unit_cell_note.clone(),
         warnings: analysis.warnings.clone(),
+        calibration: analysis.calibration.as_ref().ok().cloned(),
+        calibration_note: analysis.calibration.as_ref().err().cloned(),
+        affine_baseline: analysis.affine.clone(),
+        correction: analysis.correction,
+        corrected_images: analysis.corrected_images.clone(),
         timings: analysis.timings,
         read_s,
         write_s: 0.0,
