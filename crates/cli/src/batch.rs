@@ -1,6 +1,12 @@
 //! `dhct batch DIR -o OUTDIR`: `correct` on every image file of a directory, in parallel,
 //! with one summary table; a file that fails is reported and the others go on.
+//!
+//! Each input gets the folder named by its stem; inputs sharing a stem (`a.sm4`, `a.npy`)
+//! get their whole file name instead (`a_sm4`, `a_npy`), so no two write into one folder.
+//! The whole OUTDIR is written through a staging folder and moved into place at the end
+//! (see [`crate::output_dir`]).
 
+use std::collections::{HashMap, HashSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -10,6 +16,41 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::correct::{self, CorrectConfig, CorrectRequest};
+use crate::output_dir::StagedOutput;
+
+/// The output folder (under `root`) of each of `files`, in order: the stem when it is
+/// unique, else the file name with dots as underscores; a number is appended should that
+/// still collide.
+fn output_folders(root: &Path, files: &[PathBuf]) -> Vec<PathBuf> {
+    let stem = |f: &PathBuf| correct::batch_output(root, f);
+    let mut counts: HashMap<PathBuf, usize> = HashMap::new();
+    for file in files {
+        *counts.entry(stem(file)).or_default() += 1;
+    }
+    let mut taken = HashSet::new();
+    files
+        .iter()
+        .map(|file| {
+            let by_stem = stem(file);
+            let base = if counts.get(&by_stem) == Some(&1) {
+                by_stem
+            } else {
+                let name = file
+                    .file_name()
+                    .map(|n| n.to_string_lossy().replace('.', "_"))
+                    .unwrap_or_else(|| "input".into());
+                root.join(name)
+            };
+            let mut candidate = base.clone();
+            let mut k = 2;
+            while !taken.insert(candidate.clone()) {
+                candidate = PathBuf::from(format!("{}-{k}", base.display()));
+                k += 1;
+            }
+            candidate
+        })
+        .collect()
+}
 
 /// One input's outcome.
 #[derive(Serialize)]
@@ -65,8 +106,8 @@ pub fn run(
             dir.display()
         );
     }
-    std::fs::create_dir_all(output)
-        .with_context(|| format!("cannot create {}", output.display()))?;
+    let staged = StagedOutput::prepare(output, config.overwrite)?;
+    let folders = output_folders(staged.path(), &files);
     let bar = if progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
         indicatif::ProgressBar::new(files.len() as u64)
     } else {
@@ -74,13 +115,13 @@ pub fn run(
     };
     let rows: Vec<BatchRow> = files
         .par_iter()
-        .map(|file| {
+        .zip(&folders)
+        .map(|(file, out)| {
             let start = std::time::Instant::now();
-            let out = correct::batch_output(output, file);
             let result = correct::run(CorrectRequest {
                 input: file,
                 retrace: None,
-                output: &out,
+                output: out,
                 config: config.clone(),
                 progress: false,
                 diagnose: false,
@@ -101,7 +142,9 @@ pub fn run(
                         ellipse_major_m: r.map(|r| r.whole_ellipse.sigma_major_m),
                         ellipse_minor_m: r.map(|r| r.whole_ellipse.sigma_minor_m),
                         seconds,
-                        report: Some(out.join("report.html").display().to_string()),
+                        report: out.file_name().map(|name| {
+                            output.join(name).join("report.html").display().to_string()
+                        }),
                     }
                 }
                 Err(e) => BatchRow {
@@ -146,9 +189,10 @@ pub fn run(
                 .replace('\n', " ")
         );
     }
-    write_atomically(&output.join("batch_summary.csv"), |w| {
+    write_atomically(&staged.path().join("batch_summary.csv"), |w| {
         std::io::Write::write_all(w, csv.as_bytes()).map_err(Into::into)
     })?;
+    staged.commit()?;
     if json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
@@ -176,4 +220,26 @@ pub fn run(
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inputs_sharing_a_stem_get_folders_named_with_their_extension() {
+        let root = Path::new("out");
+        let files: Vec<PathBuf> = ["a.sm4", "a.npy", "b.sxm", "a_sm4.gsf", "c.tar.gz"]
+            .iter()
+            .map(|f| Path::new("in").join(f))
+            .collect();
+        let folders = output_folders(root, &files);
+        let names: Vec<String> = folders
+            .iter()
+            .map(|f| f.strip_prefix(root).unwrap().display().to_string())
+            .collect();
+        assert_eq!(names, ["a_sm4", "a_npy", "b", "a_sm4-2", "c.tar"]);
+        let unique: HashSet<_> = folders.iter().collect();
+        assert_eq!(unique.len(), folders.len());
+    }
 }

@@ -23,6 +23,7 @@ use crate::correct::plots::{
 use crate::correct::render::{Canvas, heat_colour};
 use crate::correct::report::{STYLE, figure_html, header, row};
 use crate::correct::{self, CorrectConfig};
+use crate::output_dir::StagedOutput;
 
 /// Runs the diagnosis on already found features (trace first); `mask` (raw-image pixels,
 /// true = use) restricts it as it restricts the correction.
@@ -370,6 +371,10 @@ pub fn run_file(
     config: CorrectConfig,
     json: bool,
 ) -> Result<()> {
+    // Written into a staging folder, moved into place at the end (see `output_dir`).
+    let target = output;
+    let staged = StagedOutput::prepare(target, config.overwrite)?;
+    let output = staged.path();
     let pair = correct::read_pair(input, retrace, &config.geometry)?;
     let geometry = pair.geometry().clone();
     let mask = correct::load_mask(&config, &geometry)?;
@@ -379,8 +384,6 @@ pub fn run_file(
     let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
     let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
     let report = diagnose_features(&refs, &geometry, lattice.as_ref(), mask.as_ref(), &options)?;
-    std::fs::create_dir_all(output)
-        .with_context(|| format!("cannot create {}", output.display()))?;
     correct::write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
     let (section, figures) = diagnosis_section(&report, &geometry);
     correct::write_figure_files(output, &figures)?;
@@ -391,11 +394,12 @@ pub fn run_file(
         html_escape(lattice.name())
     );
     correct::write_bytes(&output.join("diagnosis.html"), page.as_bytes())?;
+    staged.commit()?;
     if json {
         println!("{}", report.to_json());
     } else {
         print!("{report}");
-        println!("report: {}", output.join("diagnosis.html").display());
+        println!("report: {}", target.join("diagnosis.html").display());
     }
     Ok(())
 }
@@ -408,9 +412,10 @@ pub fn run_validation(seeds: Option<usize>, output: Option<&Path>, json: bool) -
     }
     let report = validate(&options);
     if let Some(dir) = output {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let staged = StagedOutput::prepare(dir, false)?;
         let text = serde_json::to_string_pretty(&report)?;
-        correct::write_bytes(&dir.join("validation.json"), text.as_bytes())?;
+        correct::write_bytes(&staged.path().join("validation.json"), text.as_bytes())?;
+        staged.commit()?;
     }
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);

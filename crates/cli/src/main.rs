@@ -8,6 +8,7 @@ mod batch;
 mod correct;
 mod diagnose;
 mod info;
+mod output_dir;
 mod simulate;
 mod units;
 
@@ -150,6 +151,10 @@ struct CorrectArgs {
     /// fitted as its own lattice domain.
     #[arg(long)]
     mask: Option<PathBuf>,
+    /// Replace an output folder that holds an earlier dhct run (never one holding other
+    /// files).
+    #[arg(long)]
+    overwrite: bool,
     /// bright (atoms are maxima, default) or dark (minima).
     #[arg(long, value_parser = parse_polarity)]
     polarity: Option<dhct_features::Polarity>,
@@ -187,6 +192,7 @@ impl CorrectArgs {
             plane_group: self.plane_group,
             colormap: self.colormap,
             geometry: self.geometry.overrides(),
+            overwrite: self.overwrite,
             ..correct::CorrectConfig::default()
         }))
     }

@@ -103,6 +103,13 @@ pub(crate) fn progress_bar(enabled: bool) -> ProgressBar {
 
 /// Runs `dhct correct`; returns the summary (also written as `model.json`).
 pub fn run(request: CorrectRequest) -> Result<RunSummary> {
+    // Everything is written into a staging folder, moved into place at the end.
+    let staged =
+        crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
+    let request = CorrectRequest {
+        output: staged.path(),
+        ..request
+    };
     let config = request.config.clone();
     let bar = progress_bar(request.progress);
     let start = Instant::now();
@@ -134,12 +141,6 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
 
     bar.set_message("writing outputs and report");
     let write_start = Instant::now();
-    std::fs::create_dir_all(request.output).with_context(|| {
-        format!(
-            "cannot create output directory {}",
-            request.output.display()
-        )
-    })?;
     let mut summary = summary::summarise(
         request.input.display().to_string(),
         request.retrace.map(|p| p.display().to_string()),
@@ -224,6 +225,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     };
     let html = report::report_html(&summary, &figures, section.as_deref());
     write_bytes(&request.output.join("report.html"), html.as_bytes())?;
+    staged.commit()?;
     bar.finish_and_clear();
     Ok(summary)
 }
