@@ -65,7 +65,7 @@ pub enum ReadError {
     )]
     UnknownFormat,
     #[error("invalid scan geometry option: {0}")]
-    BadOverride(#[from] crate::overrides::OverrideRangeError),
+    BadOverride(crate::overrides::OverrideRangeError),
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]
     Geometry {
         format: FileFormat,

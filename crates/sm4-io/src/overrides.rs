@@ -9,7 +9,7 @@ use crate::placeholders::{
 
 /// An override outside its plausible range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{key} = {value} {unit} is outside the accepted range {low:e}..={high:e} {unit}")]
+#[error("{key} = {value:e} {unit} is outside the accepted range {low:e}..={high:e} {unit}")]
 pub struct OverrideRangeError {
     /// The option's name (`pitch_x`, `pixel_period`, ...).
     pub key: &'static str,
