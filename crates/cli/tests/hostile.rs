@@ -408,3 +408,90 @@ fn unusable_scan_timing_is_reported_not_silent() {
         "{stdout}"
     );
 }
+
+#[test]
+fn output_folders_are_replaced_only_with_overwrite_and_locked_while_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let example = workspace_file("data/simulated_graphite.sm4");
+    let example = example.to_str().unwrap();
+    let args = ["correct", example, "--quiet", "-o", "out"];
+    let (code, _, stderr) = run_limited(&args, d);
+    assert_eq!(code, Some(0), "{stderr}");
+    std::fs::write(d.join("out/stale_from_an_old_run.csv"), "x").unwrap();
+    // A second run into the same folder: refused without --overwrite …
+    refused(
+        &args,
+        d,
+        &["already holds an earlier dhct run", "--overwrite"],
+    );
+    // … and with it, the folder is replaced whole: the stale file is gone.
+    let (code, _, stderr) = run_limited(&[&args[..], &["--overwrite"]].concat(), d);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(d.join("out/model.json").is_file());
+    assert!(!d.join("out/stale_from_an_old_run.csv").exists());
+    // Nothing but the output is left beside it (no staging folder, lock or temporary).
+    let mut names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["out", "stderr.txt", "stdout.txt"]);
+    // A folder of someone else's files is never replaced.
+    std::fs::create_dir(d.join("photos")).unwrap();
+    std::fs::write(d.join("photos/holiday.jpg"), "x").unwrap();
+    refused(
+        &["correct", example, "--overwrite", "-o", "photos"],
+        d,
+        &["did not write"],
+    );
+    assert!(d.join("photos/holiday.jpg").is_file());
+    // A live lock (held by a running process named dhct…) stops a run; a dead one is taken
+    // over.
+    let mut holder = Command::new("bash")
+        .args(["-c", "exec -a dhct-lock-holder sleep 30"])
+        .spawn()
+        .expect("start a lock holder");
+    std::fs::write(d.join(".locked.dhct-lock"), format!("{}\n", holder.id())).unwrap();
+    std::thread::sleep(Duration::from_millis(200));
+    let (code, _, stderr) = run_limited(&["correct", example, "--quiet", "-o", "locked"], d);
+    let _ = holder.kill();
+    let _ = holder.wait();
+    assert_ne!(code, Some(0));
+    assert!(stderr.contains("another dhct run"), "{stderr}");
+    std::fs::write(d.join(".locked.dhct-lock"), "4294967290\n").unwrap();
+    std::fs::create_dir(d.join(".locked.dhct-staging-4294967290")).unwrap();
+    let (code, _, stderr) = run_limited(&["correct", example, "--quiet", "-o", "locked"], d);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(!d.join(".locked.dhct-staging-4294967290").exists());
+    assert!(!d.join(".locked.dhct-lock").exists());
+}
+
+#[test]
+fn batch_outputs_of_inputs_sharing_a_stem_do_not_collide() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inputs = d.join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    std::fs::copy(
+        workspace_file("data/simulated_graphite.sm4"),
+        inputs.join("a.sm4"),
+    )
+    .unwrap();
+    std::fs::copy(
+        workspace_file("data/simulated_graphite.sm4"),
+        inputs.join("a.tif"),
+    )
+    .unwrap();
+    let (code, stdout, stderr) = run_limited(&["batch", "in", "--quiet", "-o", "out"], d);
+    // a.tif is an SM4 in disguise (read by content), so both succeed.
+    assert_eq!(code, Some(0), "{stdout}\n{stderr}");
+    for folder in ["a_sm4", "a_tif"] {
+        assert!(
+            d.join("out").join(folder).join("model.json").is_file(),
+            "missing {folder}: {stdout}"
+        );
+    }
+    assert!(!d.join("out/a").exists());
+    assert_no_non_finite(&d.join("out"));
+}
