@@ -34,6 +34,9 @@ pub struct Analysis {
     pub affine: Vec<AffineComparison>,
     /// Which correction the results come from.
     pub correction: CorrectionSource,
+    /// The fitted drift/creep/hysteresis model when the global affine correction was kept
+    /// instead (`dhct.model` is then the affine map).
+    pub rejected_model: Option<dhct_distortion::DistortionModel>,
     /// The lattice of each corrected image measured by FFT against the lattice given (an
     /// independent check of the result; empty when the lattice could not be measured).
     pub corrected_images: Vec<CorrectedImageCheck>,

@@ -190,6 +190,9 @@ pub fn run(
     progress(Stage::Correction);
     let t = Instant::now();
     let mut dhct = dhct;
+    // The fitted model's weak spots, whichever correction is kept.
+    let fit_warnings = warnings::fit_warnings(&dhct);
+    let mut rejected_model = None;
     let sets: Vec<&FeatureSet> = found.iter().map(|(s, _)| s).collect();
     let mut corrected_features = correct_sets(&dhct.model, geometry, &sets);
     timings.correction_s = t.elapsed().as_secs_f64();
@@ -211,7 +214,7 @@ pub fn run(
             .is_some_and(AffineComparison::model_is_worse)
             && let Some(model) = affine::affine_model(geometry, c)
         {
-            dhct.model = model;
+            rejected_model = Some(std::mem::replace(&mut dhct.model, model));
             corrected_features = correct_sets(&dhct.model, geometry, &sets);
             (regions, skipped_regions) =
                 fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
@@ -306,7 +309,7 @@ pub fn run(
         .collect();
     let mut warnings = warnings::calibration_warnings(&calibration);
     warnings.extend(warnings::assumption_warnings(geometry));
-    warnings.extend(warnings::fit_warnings(&dhct));
+    warnings.extend(fit_warnings);
     warnings.extend(warnings::affine_warnings(
         &comparisons,
         correction == CorrectionSource::Affine,
@@ -324,6 +327,7 @@ pub fn run(
         calibration,
         affine: comparisons,
         correction,
+        rejected_model,
         corrected_images: image_checks,
         warnings,
         timings,

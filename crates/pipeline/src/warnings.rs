@@ -199,18 +199,22 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
             )
         })
         .collect();
-    warnings.extend(model.diagnostics.degenerate_pairs.iter().map(|p| {
-        Warning::new(
+    let pairs = &model.diagnostics.degenerate_pairs;
+    if !pairs.is_empty() {
+        warnings.push(Warning::new(
             WarningCode::DegenerateParameters,
             format!(
-                "{} and {} are nearly degenerate (correlation {:+.3}): only their combination \
-                 is measured",
-                p.first, p.second, p.correlation
+                "nearly degenerate parameter pairs (only their combinations are measured): {}",
+                pairs
+                    .iter()
+                    .map(|p| format!("{}–{} ({:+.3})", p.first, p.second, p.correlation))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
-            "do not interpret them separately; the correction uses only their combination",
-        )
-    }));
-    warnings.extend(model.parameters.iter().filter_map(uncertain));
+            "do not interpret them separately; the correction uses only their combinations",
+        ));
+    }
+    warnings.extend(uncertain(&model.parameters));
     for pass in &dhct.passes {
         let fit = &pass.used_selection().rdf_fit;
         if !fit.is_plausible() {
@@ -233,26 +237,30 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
     warnings
 }
 
-fn uncertain(p: &Parameter) -> Option<Warning> {
-    let undetermined = !p.sigma.is_finite();
-    if !(undetermined || p.sigma > p.value.abs()) {
-        return None;
-    }
-    Some(Warning::new(
-        WarningCode::UncertainParameter,
-        if undetermined {
+/// One warning for every parameter whose uncertainty exceeds its value or is undetermined.
+fn uncertain(parameters: &[Parameter]) -> Option<Warning> {
+    let listed: Vec<String> = parameters
+        .iter()
+        .filter(|p| !p.sigma.is_finite() || p.sigma > p.value.abs())
+        .map(|p| {
+            if p.sigma.is_finite() {
+                format!("{} = {:.3e} ± {:.1e} {}", p.name, p.value, p.sigma, p.unit)
+            } else {
+                format!("{} = {:.3e} {} (undetermined)", p.name, p.value, p.unit)
+            }
+        })
+        .collect();
+    (!listed.is_empty()).then(|| {
+        Warning::new(
+            WarningCode::UncertainParameter,
             format!(
-                "{} = {:.4e} {} is undetermined by the data",
-                p.name, p.value, p.unit
-            )
-        } else {
-            format!(
-                "{} = {:.4e} ± {:.1e} {}: the uncertainty exceeds the value",
-                p.name, p.value, p.sigma, p.unit
-            )
-        },
-        "read it as consistent with zero; it still enters the correction",
-    ))
+                "parameters whose uncertainty exceeds their value or is undetermined by the \
+                 data: {}",
+                listed.join(", ")
+            ),
+            "read them as consistent with zero; they still enter the correction",
+        )
+    })
 }
 
 /// The full model against the global affine correction.
@@ -492,17 +500,16 @@ mod tests {
             [
                 WarningCode::ParameterAtBound,
                 WarningCode::DegenerateParameters,
-                WarningCode::UncertainParameter,
                 WarningCode::UncertainParameter
             ]
         );
-        assert!(
-            warnings[2].message.contains("C_x") && warnings[2].message.contains("undetermined")
-        );
-        assert!(warnings[3].message.contains("a_x"));
+        assert!(warnings[1].message.contains("v_x–C_x"));
+        let listed = &warnings[2].message;
+        assert!(listed.contains("C_x") && listed.contains("undetermined"));
+        assert!(listed.contains("a_x") && !listed.contains("v_x"));
         assert!(warnings.iter().all(|w| !w.what_to_do.is_empty()));
-        // A well determined parameter says nothing.
-        assert!(uncertain(&parameter("v_y", 1e-9, 1e-11)).is_none());
+        // Well determined parameters say nothing.
+        assert!(uncertain(&[parameter("v_y", 1e-9, 1e-11)]).is_none());
     }
 
     #[test]

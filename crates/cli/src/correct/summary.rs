@@ -129,6 +129,9 @@ pub struct RunSummary {
     pub affine_baseline: Vec<AffineComparison>,
     /// Which correction the corrected data come from (`drift-model` or `affine`).
     pub correction: CorrectionSource,
+    /// The fitted drift/creep/hysteresis model when the affine correction was kept instead
+    /// (`model` and `parameters` then describe the affine map).
+    pub rejected_model: Option<DistortionModel>,
     /// Each corrected image's lattice measured by FFT against the lattice given (x and y
     /// scale, shear): the check an outside user would make.
     pub corrected_images: Vec<CorrectedImageCheck>,
@@ -257,6 +260,7 @@ pub fn summarise(
         calibration_note: analysis.calibration.as_ref().err().cloned(),
         affine_baseline: analysis.affine.clone(),
         correction: analysis.correction,
+        rejected_model: analysis.rejected_model.clone(),
         corrected_images: analysis.corrected_images.clone(),
         timings: analysis.timings,
         read_s,
