@@ -354,15 +354,32 @@ fn hostile_simulator_configs_are_refused() {
 fn an_image_of_only_infinities_and_huge_values_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    for (name, value) in [("inf.npy", f64::INFINITY), ("huge.npy", 1e308)] {
-        let z = Array2::from_shape_fn(
+    let extreme = |value: f64| {
+        Array2::from_shape_fn(
             (64, 64),
-            |(r, c)| if (r + c) % 2 == 0 { value } else { -value },
-        );
+            move |(r, c)| if (r + c) % 2 == 0 { value } else { -value },
+        )
+    };
+    // Mostly an ordinary image with a few values at the ends of the f64 range.
+    let mut mixed = Array2::from_shape_fn((64, 64), |(r, c)| {
+        ((r as f64 * 1.1).sin() + (c as f64 * 0.9).cos()) * 1e-11
+    });
+    mixed[[3, 4]] = 1e308;
+    mixed[[10, 40]] = -1e308;
+    mixed[[20, 20]] = f64::INFINITY;
+    for (name, z) in [
+        ("inf.npy", extreme(f64::INFINITY)),
+        ("huge.npy", extreme(1e308)),
+        ("mixed.npy", mixed),
+    ] {
         let mut bytes = Vec::new();
         dhct_sm4_io::npy::write(&ImageChannel::new("z", "m", z), &mut bytes).unwrap();
         std::fs::write(d.join(name), bytes).unwrap();
-        refused(&["correct", name, "-o", "out"], d, &["error"]);
+        for extra in [None, Some("--trust-inputs")] {
+            let mut args = vec!["correct", name, "-o", "out"];
+            args.extend(extra);
+            refused(&args, d, &["error"]);
+        }
     }
 }
 

@@ -255,6 +255,31 @@ fn every_reader_survives_its_mutation_corpus() {
 }
 
 #[test]
+fn the_png_picture_reader_survives_its_mutation_corpus() {
+    use dhct_sm4_io::png_file::{Picture, read_picture, write_picture};
+    let (columns, rows) = (24, 16);
+    let grey: Vec<f64> = (0..columns * rows).map(|k| (k % 7) as f64 / 6.0).collect();
+    let alpha: Vec<f64> = (0..columns * rows).map(|k| (k % 2) as f64).collect();
+    for (k, with_alpha) in [false, true].into_iter().enumerate() {
+        let picture = Picture {
+            columns,
+            rows,
+            grey: grey.clone(),
+            alpha: with_alpha.then(|| alpha.clone()),
+            bit_depth: 8,
+        };
+        let mut bytes = Vec::new();
+        write_picture(&picture, with_alpha, with_alpha, &mut bytes).unwrap();
+        for (what, mutant) in mutants(&bytes, 77 + k as u64) {
+            let start = Instant::now();
+            let result = catch_unwind(AssertUnwindSafe(|| read_picture(&mutant, &LIMITS)));
+            assert!(result.is_ok(), "PNG {what}: the reader panicked");
+            assert!(start.elapsed() < MAX_READ, "PNG {what}: too slow");
+        }
+    }
+}
+
+#[test]
 fn headers_claiming_huge_images_hit_the_budget_before_allocating() {
     // An NPY header claiming 2^30 u1 pixels in a file that holds them would need 8 GiB of
     // f64; a smaller claim within the file still counts its f64 copy.
