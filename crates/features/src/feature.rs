@@ -68,6 +68,8 @@ pub enum Rejection {
     EdgeCut,
     /// Another fit of the same feature was kept.
     Duplicate,
+    /// Shallower than the options' `min_relative_height` of the deepest features allow.
+    TooShallow,
 }
 
 /// A candidate region that was not accepted, with where it was and why.
@@ -88,6 +90,8 @@ pub struct RejectionCounts {
     pub bad_shape: usize,
     pub edge_cut: usize,
     pub duplicate: usize,
+    #[serde(default)]
+    pub too_shallow: usize,
 }
 
 impl RejectionCounts {
@@ -103,6 +107,7 @@ impl RejectionCounts {
                 Rejection::BadShape => &mut counts.bad_shape,
                 Rejection::EdgeCut => &mut counts.edge_cut,
                 Rejection::Duplicate => &mut counts.duplicate,
+                Rejection::TooShallow => &mut counts.too_shallow,
             } += 1;
         }
         counts
@@ -117,6 +122,7 @@ impl RejectionCounts {
             + self.bad_shape
             + self.edge_cut
             + self.duplicate
+            + self.too_shallow
     }
 }
 
@@ -125,14 +131,15 @@ impl std::fmt::Display for RejectionCounts {
         write!(
             f,
             "{} area too small, {} area too large, {} fit failed, {} centre on bound, \
-             {} bad shape, {} edge-cut, {} duplicate",
+             {} bad shape, {} edge-cut, {} duplicate, {} too shallow",
             self.area_too_small,
             self.area_too_large,
             self.fit_failed,
             self.centre_on_bound,
             self.bad_shape,
             self.edge_cut,
-            self.duplicate
+            self.duplicate,
+            self.too_shallow
         )
     }
 }

@@ -399,6 +399,7 @@ fn find_prepared(
             line_time_s: time.since_line_start,
         });
     }
+    drop_shallow(&mut features, options.min_relative_height, &mut rejected);
     features.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
     for (id, f) in features.iter_mut().enumerate() {
         f.id = id;
@@ -467,6 +468,28 @@ fn subpixel_peak(map: &Array2<f64>, row: usize, col: usize) -> (f64, f64) {
 
 /// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
 /// over regions larger than 10 px.
+/// Drops the features whose amplitude is below `fraction` × the 90th percentile of all
+/// amplitudes (the deepest or brightest kind is kept; `fraction` 0 keeps everything).
+fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<RejectedCandidate>) {
+    if fraction <= 0.0 || features.is_empty() {
+        return;
+    }
+    let mut amplitudes: Vec<f64> = features.iter().map(|f| f.amplitude).collect();
+    let rank = ((amplitudes.len() - 1) as f64 * 0.9).round() as usize;
+    let reference = *amplitudes.select_nth_unstable_by(rank, f64::total_cmp).1;
+    features.retain(|f| {
+        let keep = f.amplitude >= fraction * reference;
+        if !keep {
+            rejected.push(RejectedCandidate {
+                x_px: f.x_px,
+                y_px: f.y_px,
+                reason: Rejection::TooShallow,
+            });
+        }
+        keep
+    });
+}
+
 fn area_filter(
     regions: Vec<Region>,
     enabled: bool,
@@ -505,4 +528,58 @@ fn area_filter(
         }
     }
     kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn feature(amplitude: f64) -> Feature {
+        Feature {
+            id: 0,
+            pass: ScanPass::Trace,
+            x_px: amplitude,
+            y_px: 0.0,
+            x_m: 0.0,
+            y_m: 0.0,
+            x_sigma_px: 0.1,
+            y_sigma_px: 0.1,
+            sigma_major_px: 2.0,
+            sigma_minor_px: 2.0,
+            theta_rad: 0.0,
+            amplitude,
+            height: -amplitude,
+            z0: 0.0,
+            residual_rms: 0.0,
+            pixel_count: 10,
+            ncc_peak: 0.9,
+            status: FitStatus::Converged,
+            fit_iterations: 5,
+            time_s: 0.0,
+            line_time_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn shallow_features_of_another_kind_are_dropped_and_counted() {
+        // One deep corner hole per cell among three shallower minima (half as deep).
+        let mut features: Vec<Feature> = (0..40)
+            .map(|i| {
+                feature(if i % 4 == 0 {
+                    1.5 + 0.01 * i as f64
+                } else {
+                    0.75
+                })
+            })
+            .collect();
+        let mut rejected = Vec::new();
+        drop_shallow(&mut features, 0.6, &mut rejected);
+        assert_eq!(features.len(), 10);
+        assert!(features.iter().all(|f| f.amplitude >= 1.5));
+        assert_eq!(RejectionCounts::of(&rejected).too_shallow, 30);
+        // 0 keeps everything.
+        let mut all: Vec<Feature> = (0..5).map(|i| feature(0.1 + i as f64)).collect();
+        drop_shallow(&mut all, 0.0, &mut rejected);
+        assert_eq!(all.len(), 5);
+    }
 }

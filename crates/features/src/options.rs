@@ -89,6 +89,11 @@ pub struct FeatureOptions {
     /// An image whose accepted features have a median peak NCC below this is rejected as
     /// lattice-free (noise blobs give ≈ 0.2, atoms ≳ 0.5). Set 0 to accept anything.
     pub min_median_ncc: f64,
+    /// Features whose fitted amplitude is below this fraction of the 90th percentile of all
+    /// amplitudes are dropped (0 = keep all): a large cell whose tracked feature is the
+    /// deepest or brightest of several kinds (the Si(111)-7×7 corner holes among shallower
+    /// minima) keeps only that kind. NCC alone cannot tell them apart: it ignores depth.
+    pub min_relative_height: f64,
 }
 
 impl Default for FeatureOptions {
@@ -104,6 +109,7 @@ impl Default for FeatureOptions {
             duplicate_fraction: 0.5,
             fit_radius_fraction: 0.4,
             min_median_ncc: 0.3,
+            min_relative_height: 0.0,
         }
     }
 }
@@ -113,7 +119,8 @@ impl FeatureOptions {
     /// and the range: `neighbour_distance` NaN (the lattice's, filled in by the caller) or
     /// 1 pm..=1 µm; `threshold` −1..=0.99; a Gaussian kernel's `sigma_px` 0.5..=256;
     /// `background` polynomial order 1..=6; `duplicate_fraction` 0..=1;
-    /// `fit_radius_fraction` 0.1..=1; `min_median_ncc` −1..=1.
+    /// `fit_radius_fraction` 0.1..=1; `min_median_ncc` −1..=1; `min_relative_height` 0..=1;
+    /// a kernel's `fraction` 0.02..=1.
     pub fn validate(&self) -> Result<(), crate::FeatureError> {
         let d = self.neighbour_distance;
         if !(d.is_nan() || (1e-12..=1e-6).contains(&d)) {
@@ -128,7 +135,11 @@ impl FeatureOptions {
             ("duplicate_fraction", self.duplicate_fraction, 0.0, 1.0),
             ("fit_radius_fraction", self.fit_radius_fraction, 0.1, 1.0),
             ("min_median_ncc", self.min_median_ncc, -1.0, 1.0),
+            ("min_relative_height", self.min_relative_height, 0.0, 1.0),
         ];
+        if let KernelChoice::FractionOfNeighbourDistance { fraction } = &self.kernel {
+            checks.push(("kernel.fraction", *fraction, 0.02, 1.0));
+        }
         if let KernelChoice::GaussianSigma { sigma_px } = &self.kernel {
             checks.push(("kernel.sigma_px", *sigma_px, 0.5, 256.0));
         }

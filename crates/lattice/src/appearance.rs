@@ -13,4 +13,7 @@ pub struct FeatureAppearance {
     /// `None`: the DHCT kernel (σ ≈ NN/4), right for close-packed atoms but far too wide for
     /// a small feature in a large cell.
     pub width_fraction: Option<f64>,
+    /// Features shallower (or dimmer) than this fraction of the deepest (brightest) are
+    /// another kind and are dropped (0 = keep all).
+    pub min_relative_height: f64,
 }

@@ -76,7 +76,8 @@ impl Hexagonal {
     }
 
     /// The Si(111)-7×7 reconstruction tracked by its corner holes: one dark, narrow feature
-    /// per cell (σ ≈ a/10), a = 2.688 nm (7 × 3.840 Å), plane group p31m. The 12 adatoms and
+    /// per cell (σ ≈ a/10; minima shallower than 0.6 of the deepest are dropped), a = 2.688
+    /// nm (7 × 3.840 Å), plane group p31m. The 12 adatoms and
     /// the dimer rows inside the cell are not tracked, so the neighbour shells (a, √3a, 2a)
     /// cannot lock onto intra-cell distances.
     pub fn si111_7x7() -> Hexagonal {
@@ -88,6 +89,9 @@ impl Hexagonal {
             appearance: FeatureAppearance {
                 dark: true,
                 width_fraction: Some(0.1),
+                // Corner holes are the deepest minima, about twice as deep as those
+                // between the adatoms.
+                min_relative_height: 0.6,
             },
         }
     }

@@ -70,6 +70,7 @@ impl PipelineOptions {
         if let Some(fraction) = appearance.width_fraction {
             options.features.kernel = KernelChoice::FractionOfNeighbourDistance { fraction };
         }
+        options.features.min_relative_height = appearance.min_relative_height;
         options
     }
 
