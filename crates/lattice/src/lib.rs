@@ -125,6 +125,16 @@ pub trait Lattice: std::fmt::Debug + Send + Sync {
         }
     }
 
+    /// Where the plane group's symmetry elements sit, in fractional coordinates: the point
+    /// about which [`Lattice::plane_group`]'s rotations and mirrors act (the origin of the
+    /// group's standard setting). Contract: every operation of the group about this point
+    /// maps the motif onto itself (sites of equal relative height onto each other). The
+    /// default is the cell origin; graphene's honeycomb has its six-fold axis at the hexagon
+    /// centre (2/3, 2/3), not on an atom.
+    fn symmetry_origin(&self) -> [f64; 2] {
+        [0.0, 0.0]
+    }
+
     /// How the tracked features look (bright or dark, how wide): the default is bright
     /// atoms with the DHCT kernel.
     fn feature_appearance(&self) -> FeatureAppearance {

@@ -157,6 +157,11 @@ impl Lattice for Honeycomb {
     fn name(&self) -> &str {
         "honeycomb"
     }
+    /// The hexagon centre: p6mm holds about it, not about an atom (about an atom the
+    /// honeycomb is only p3m1).
+    fn symmetry_origin(&self) -> [f64; 2] {
+        [2.0 / 3.0, 2.0 / 3.0]
+    }
     fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
         hexagonal_vectors(self.a)
     }

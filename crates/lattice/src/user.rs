@@ -60,6 +60,7 @@ pub struct UserLattice {
     vectors: [Vector2<f64>; 2],
     plane_group: PlaneGroup,
     motif: Vec<MotifSite>,
+    symmetry_origin: [f64; 2],
 }
 
 /// The file layout of a [`UserLattice`].
@@ -73,6 +74,9 @@ struct UserLatticeFile {
     a2: [f64; 2],
     #[serde(default = "oblique")]
     plane_group: PlaneGroup,
+    /// Where the plane group's symmetry elements sit, fractional (default the origin).
+    #[serde(default)]
+    symmetry_origin: [f64; 2],
     motif: Vec<MotifSite>,
 }
 
@@ -133,7 +137,20 @@ impl UserLattice {
             vectors: [a1, a2],
             plane_group,
             motif,
+            symmetry_origin: [0.0, 0.0],
         })
+    }
+
+    /// This lattice with its plane group's symmetry elements at `origin` (fractional
+    /// coordinates, each finite; see [`Lattice::symmetry_origin`]).
+    pub fn with_symmetry_origin(mut self, origin: [f64; 2]) -> Result<UserLattice, LatticeError> {
+        if !origin.iter().all(|v| v.is_finite()) {
+            return Err(LatticeError::Parse(format!(
+                "symmetry_origin must be finite fractional coordinates, got {origin:?}"
+            )));
+        }
+        self.symmetry_origin = origin.map(|v| v.rem_euclid(1.0));
+        Ok(self)
     }
 
     /// Parses the TOML layout documented on [`UserLattice`].
@@ -289,13 +306,14 @@ impl TryFrom<UserLatticeFile> for UserLattice {
     fn try_from(file: UserLatticeFile) -> Result<Self, Self::Error> {
         let factor = unit_factor(&file.length_unit)?;
         let vector = |v: [f64; 2]| Vector2::new(v[0], v[1]) * factor;
-        UserLattice::new(
+        let lattice = UserLattice::new(
             file.name,
             vector(file.a1),
             vector(file.a2),
             file.plane_group,
             file.motif,
-        )
+        )?;
+        lattice.with_symmetry_origin(file.symmetry_origin)
     }
 }
 
@@ -308,6 +326,7 @@ impl From<UserLattice> for UserLatticeFile {
             a1: [a1.x, a1.y],
             a2: [a2.x, a2.y],
             plane_group: lattice.plane_group,
+            symmetry_origin: lattice.symmetry_origin,
             motif: lattice.motif,
         }
     }
@@ -325,5 +344,8 @@ impl Lattice for UserLattice {
     }
     fn plane_group(&self) -> PlaneGroup {
         self.plane_group
+    }
+    fn symmetry_origin(&self) -> [f64; 2] {
+        self.symmetry_origin
     }
 }

@@ -35,7 +35,7 @@ fn tabulated(group: PlaneGroup) -> (Vec<[f64; 2]>, bool) {
 }
 
 /// The asymmetric unit of `group` as a polygon in the fractional coordinates `(u, v)` of
-/// `lattice` (position = u·a1 + v·a2). Errors as [`operations`] when the group is not a
+/// `lattice` (position = u·a1 + v·a2), placed at the lattice's symmetry origin. Errors as [`operations`] when the group is not a
 /// symmetry of the lattice.
 pub fn asymmetric_unit(
     group: PlaneGroup,
@@ -44,12 +44,15 @@ pub fn asymmetric_unit(
     // Reject incompatible groups exactly as the averaging does.
     operations(group, lattice)?;
     let (vertices, hexagonal_axes) = tabulated(group);
-    Ok(if hexagonal_axes {
-        // 120° axes (x, y) → dhct's 60° axes (u, v): u = x − y, v = y.
-        vertices.iter().map(|[x, y]| [x - y, *y]).collect()
-    } else {
-        vertices
-    })
+    let [ou, ov] = lattice.symmetry_origin();
+    Ok(vertices
+        .iter()
+        .map(|&[x, y]| {
+            // 120° axes (x, y) → dhct's 60° axes (u, v): u = x − y, v = y.
+            let [u, v] = if hexagonal_axes { [x - y, y] } else { [x, y] };
+            [u + ou, v + ov]
+        })
+        .collect())
 }
 
 #[cfg(test)]

@@ -197,9 +197,15 @@ pub fn operations(
                     lattice: lattice.name().to_string(),
                 });
             }
+            // About the lattice's symmetry origin o: x' = W(x − o) + o + t.
+            let [ou, ov] = lattice.symmetry_origin();
+            let shifted = [
+                translation[0] + ou - (matrix[0][0] as f64 * ou + matrix[0][1] as f64 * ov),
+                translation[1] + ov - (matrix[1][0] as f64 * ou + matrix[1][1] as f64 * ov),
+            ];
             Ok(SymmetryOperation {
                 matrix,
-                translation,
+                translation: shifted.map(|t| t.rem_euclid(1.0)),
             })
         })
         .collect()
