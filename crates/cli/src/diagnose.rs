@@ -4,10 +4,14 @@
 //! report.
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dhct_diagnose::{Bin, DiagnoseOptions, DiagnosisReport, ValidationOptions, diagnose, validate};
+use dhct_diagnose::{
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, ValidationOptions, diagnose,
+    validate,
+};
 use dhct_distortion::PassInput;
 use dhct_features::{Feature, find_features_in_pair};
 use dhct_lattice::Lattice;
@@ -24,6 +28,18 @@ use crate::correct::render::{Canvas, heat_colour};
 use crate::correct::report::{STYLE, figure_html, header, row};
 use crate::correct::{self, CorrectConfig};
 use crate::output_dir::StagedOutput;
+
+/// Writes `text` to a locked stdout and flushes it. A closed pipe (`dhct … --json | head -1`)
+/// is success, not a panic: the reader has all it wanted.
+pub fn write_stdout(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(e).context("writing to standard output")
+        }
+        _ => Ok(()),
+    }
+}
 
 /// Runs the diagnosis on already found features (trace first); `mask` (raw-image pixels,
 /// true = use) restricts it as it restricts the correction.
@@ -73,6 +89,17 @@ fn bin_plot(title: &str, x_label: &str, bins: &[Bin], x_scale: f64, noise: [f64;
         ))
 }
 
+fn floor_source(source: FloorSource) -> &'static str {
+    match source {
+        FloorSource::Localisation => "localisation uncertainty of the feature fits",
+        FloorSource::LocalisationRaisedToSuccessive => {
+            "localisation, raised to the successive differences"
+        }
+        FloorSource::SuccessiveDifferences => "successive differences",
+        FloorSource::ResidualSpread => "residual spread: no independent floor",
+    }
+}
+
 /// The figures and the HTML section of a diagnosis.
 pub fn diagnosis_section(
     report: &DiagnosisReport,
@@ -98,12 +125,14 @@ pub fn diagnosis_section(
         figures.push(Figure::svg(
             "diagnosis_fast_phase",
             "Gap against time since line start (fast phase)",
-            "The same residuals binned by the time since the start of their scan line.".into(),
+            "The same residuals binned by their fast phase: the time since the start of their \
+             scan line as a fraction τ/T of the line scan time (0 = line start, 1 = line end)."
+                .into(),
             &bin_plot(
                 "Gap vs fast phase",
-                "time since line start (ms)",
+                "fast phase τ/T (time since line start / line scan time)",
                 &location.by_fast_phase,
-                1e3,
+                1.0,
                 noise,
             ),
         ));
@@ -223,19 +252,60 @@ pub fn diagnosis_section(
         content: FigureContent::Png(canvas.png(), canvas.preview(1100).map(|p| p.png())),
     });
 
-    let mut html = String::from("<h2>Sim-to-real gap diagnosis</h2>\n<table>\n");
+    let mut html = String::from("<h2>Sim-to-real gap diagnosis</h2>\n");
+    let v = &report.verdict_details;
+    let _ = writeln!(
+        html,
+        "<p class='verdict'><b>Verdict: {}.</b> {}</p>",
+        html_escape(report.verdict.name()),
+        html_escape(&v.summary)
+    );
+    if !v.remaining.is_empty() {
+        html.push_str("<p>Where the remaining gap lies:</p><table>\n");
+        header(
+            &mut html,
+            &["where", "features", "gap / floor", "share of the excess"],
+        );
+        for p in &v.remaining {
+            row(
+                &mut html,
+                &[
+                    p.label.clone(),
+                    p.count.to_string(),
+                    format!("{:.2}", p.gap_to_noise),
+                    format!("{:.0} %", 100.0 * p.share),
+                ],
+            );
+        }
+        html.push_str("</table>\n");
+    }
+    html.push_str("<table>\n");
     header(&mut html, &["", "x", "y", "gap / noise", "χ²/dof"]);
     let n = &report.noise;
     row(
         &mut html,
         &[
-            "noise floor (independent)".into(),
+            format!("noise floor ({})", floor_source(n.source)),
             format!("{:.2} pm", n.sigma_m[0] * 1e12),
             format!("{:.2} pm", n.sigma_m[1] * 1e12),
             "1".into(),
             "—".into(),
         ],
     );
+    for (name, estimate) in [
+        ("localisation (feature fits)", &n.localisation),
+        ("successive differences", &n.successive_differences),
+        ("trace/retrace pairs (not used)", &n.trace_retrace),
+    ] {
+        let (x, y) = match estimate {
+            FloorEstimate::Estimated { sigma_m, .. } => (
+                format!("{:.2} pm", sigma_m[0] * 1e12),
+                format!("{:.2} pm", sigma_m[1] * 1e12),
+            ),
+            FloorEstimate::Unavailable { reason } => (format!("— ({reason})"), "—".into()),
+        };
+        row(&mut html, &[name.into(), x, y, "".into(), "".into()]);
+    }
     for (name, gap) in [
         ("DHCT fit (local distortions)", &report.dhct),
         ("base model (position fit)", &report.base.gap),
@@ -253,22 +323,9 @@ pub fn diagnosis_section(
         );
     }
     html.push_str("</table>\n");
-    let identified = report.identified();
     let _ = writeln!(
         html,
-        "<p><b>{}</b> Gap/noise {:.2} → {} → {:.2} after the greedy set.</p>",
-        if identified.is_empty() {
-            "No unmodelled effect is needed: no candidate improves the out-of-sample prediction and the information criteria together.".to_string()
-        } else {
-            html_escape(&format!(
-                "Identified: {}.",
-                identified
-                    .iter()
-                    .map(|c| c.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        },
+        "<p>Gap/noise {:.2} → {} → {:.2} after the greedy set.</p>",
         report.shrink.before,
         report
             .shrink
@@ -396,12 +453,13 @@ pub fn run_file(
     correct::write_bytes(&output.join("diagnosis.html"), page.as_bytes())?;
     staged.commit()?;
     if json {
-        println!("{}", report.to_json());
+        write_stdout(&format!("{}\n", report.to_json()))
     } else {
-        print!("{report}");
-        println!("report: {}", target.join("diagnosis.html").display());
+        write_stdout(&format!(
+            "{report}report: {}\n",
+            target.join("diagnosis.html").display()
+        ))
     }
-    Ok(())
 }
 
 /// `dhct diagnose --validate`: the withheld-effect validation.
@@ -418,9 +476,9 @@ pub fn run_validation(seeds: Option<usize>, output: Option<&Path>, json: bool) -
         staged.commit()?;
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        write_stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
     } else {
-        print!("{report}");
+        write_stdout(&report.to_string())?;
     }
     if !report.accepted() {
         anyhow::bail!("the validation missed its acceptance targets (see the table above)");

@@ -181,12 +181,12 @@ pub fn run(path: &Path, overrides: &dhct_sm4_io::GeometryOverrides, json: bool) 
     let file =
         dhct_sm4_io::read_path_with(path, overrides).with_context(|| path.display().to_string())?;
     let summary = summarise(path, &file);
+    // Through a locked stdout: a closed pipe (`dhct info --json | head -1`) is not a panic.
     if json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        crate::diagnose::write_stdout(&format!("{}\n", serde_json::to_string_pretty(&summary)?))
     } else {
-        print!("{}", human(&summary));
+        crate::diagnose::write_stdout(&human(&summary))
     }
-    Ok(())
 }
 
 #[cfg(test)]

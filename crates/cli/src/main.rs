@@ -283,9 +283,9 @@ fn main() -> ExitCode {
                 diagnose: *diagnose,
             })?;
             if options.json {
-                println!("{}", serde_json::to_string_pretty(&summary)?);
+                diagnose::write_stdout(&format!("{}\n", serde_json::to_string_pretty(&summary)?))?;
             } else {
-                print!("{}", correct::text_summary(&summary, output));
+                diagnose::write_stdout(&correct::text_summary(&summary, output))?;
             }
             // Warnings go to stderr whatever --quiet and --json say.
             eprint!("{}", correct::warning_lines(&summary));

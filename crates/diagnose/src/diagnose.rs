@@ -19,6 +19,7 @@ use crate::report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
 use crate::select::{Current, CvScheme, Folds, SelectionOptions, round};
+use crate::verdict::decide;
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -306,8 +307,17 @@ pub fn diagnose(
         }
     }
     let final_summary = summary(&current, sigma);
-    let final_location = (options.locate && !added.is_empty())
+    let final_location = options
+        .locate
         .then(|| locate(&observations, &current.residuals, sigma, geometry));
+    let verdict = decide(
+        base_summary.gap.gap_to_noise,
+        final_summary.gap.gap_to_noise,
+        added.iter().map(|a| a.candidate).collect(),
+        final_location.as_ref(),
+        observations.len(),
+        noise.source,
+    );
     // Per-feature residuals (outliers carry the base fit's prediction).
     let mut residuals = Vec::with_capacity(all.len());
     let mut used = 0;
@@ -333,6 +343,8 @@ pub fn diagnose(
         });
     }
     Ok(DiagnosisReport {
+        verdict: verdict.kind,
+        verdict_details: verdict,
         features_in: prepared.input_features,
         features_used: observations.len(),
         unindexed: prepared.unindexed,

@@ -72,6 +72,7 @@ mod spectrum;
 pub mod synth;
 mod terms;
 mod validate;
+mod verdict;
 
 pub use candidates::Candidate;
 pub use data::{MIN_FEATURES, Observation};
@@ -79,7 +80,7 @@ pub use diagnose::{DiagnoseOptions, diagnose};
 pub use error::DiagnoseError;
 pub use fit::FittedParameter;
 pub use location::{Bin, ChangePoint, GapLocation};
-pub use noise::NoiseFloor;
+pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
 pub use report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
@@ -88,3 +89,4 @@ pub use spectrum::{SpectralPeak, Spectrum};
 pub use validate::{
     CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport, validate,
 };
+pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};

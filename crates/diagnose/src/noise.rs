@@ -1,15 +1,23 @@
 //! The noise floor: how far a feature's measured position scatters when nothing
-//! systematic is left, estimated independently of the model being tested.
+//! systematic is left, estimated from what an unmodelled effect cannot absorb.
 //!
-//! * **Successive differences** (used as the floor): features of the same pass acquired one
-//!   after the other within a line (time apart `< 0.3 ×` the line scan time) share any
-//!   smooth systematic displacement, so half the robust variance of the difference of their
-//!   residuals is the localisation variance (per axis, 1.4826·MAD/√2). Signals faster
-//!   than the time between neighbours (vibration above ~1/(4·Δt)) inflate it.
-//! * **Trace/retrace pairs**: the same lattice site imaged in trace and retrace (less than
-//!   two line times apart), same estimator; includes any trace/retrace systematic.
-//! * **Fit uncertainty**: the median 1σ of the feature fits (Cramér–Rao-like, from the
-//!   fit covariance).
+//! * **Localisation (Cramér–Rao)**, the floor: the features' own 1σ position uncertainties
+//!   from their fits (the image noise and the feature's shape set them; metres per axis,
+//!   RMS over the features). A displacement of the whole feature, however it varies in
+//!   time, does not enter them, so no scan distortion can hide in this floor.
+//! * **Successive differences** (cross-check): features of the same pass acquired one
+//!   after the other within a scan line (less than `0.3 ×` the line scan time apart) share
+//!   any smooth systematic displacement, so half the robust variance of the difference of
+//!   their residuals is the localisation variance (per axis, 1.4826·MAD/√2). When it
+//!   exceeds the fits' estimate by more than [`UNDERESTIMATE_RATIO`] the fits understate
+//!   the scatter (correlated noise, a shape the fit does not follow) and the floor takes it.
+//!   A rotated lattice may have no two features on one line: then it is not available.
+//! * **Trace/retrace pairs** (reported only): the same site imaged in trace and retrace.
+//!   Anything that differs between the passes (a vibration's phase, a mis-modelled
+//!   hysteresis) enters it, so it is never the floor.
+//!
+//! Every estimate that cannot be made says why ([`FloorUnavailable`]); the floor itself is
+//! always finite and positive, and [`FloorSource`] says where it came from.
 
 use std::collections::HashMap;
 
@@ -18,22 +26,136 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::Observation;
 
+/// Pairs an estimate from pairs of features needs.
+pub const MIN_PAIRS: usize = 20;
+
+/// Successive differences larger than this many times the fits' uncertainty replace it.
+pub const UNDERESTIMATE_RATIO: f64 = 1.5;
+
+/// Why an estimate of the floor could not be made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "reason", rename_all = "snake_case")]
+pub enum FloorUnavailable {
+    /// The features carry no finite, positive position uncertainty (e.g. centroids).
+    NoFitUncertainty,
+    /// Too few pairs: for successive differences, features acquired one after the other
+    /// within one scan line (a rotated lattice may have none); for trace/retrace, sites
+    /// seen in both passes.
+    TooFewPairs {
+        /// Pairs found.
+        found: usize,
+        /// Pairs needed.
+        needed: usize,
+    },
+    /// Only one pass was given (trace/retrace pairs).
+    SinglePass,
+    /// The estimate came out zero on an axis (identical positions: quantised or copied data).
+    Zero,
+}
+
+impl std::fmt::Display for FloorUnavailable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FloorUnavailable::NoFitUncertainty => {
+                write!(f, "the features carry no position uncertainty")
+            }
+            FloorUnavailable::TooFewPairs { found, needed } => {
+                write!(f, "{found} pairs, {needed} needed")
+            }
+            FloorUnavailable::SinglePass => write!(f, "one pass only"),
+            FloorUnavailable::Zero => write!(f, "zero scatter on an axis"),
+        }
+    }
+}
+
+/// One estimate of the floor: metres per axis `[x, y]` from `count` features or pairs, or
+/// why there is none.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
+pub enum FloorEstimate {
+    /// Estimated.
+    Estimated {
+        /// 1σ per axis, metres.
+        sigma_m: [f64; 2],
+        /// Features or pairs it used.
+        count: usize,
+    },
+    /// Not available.
+    Unavailable {
+        /// Why.
+        #[serde(flatten)]
+        reason: FloorUnavailable,
+    },
+}
+
+impl FloorEstimate {
+    fn of(sigma_m: [f64; 2], count: usize, needed: usize) -> FloorEstimate {
+        if count < needed {
+            FloorEstimate::Unavailable {
+                reason: FloorUnavailable::TooFewPairs {
+                    found: count,
+                    needed,
+                },
+            }
+        } else if !sigma_m.iter().all(|s| s.is_finite() && *s > 0.0) {
+            FloorEstimate::Unavailable {
+                reason: FloorUnavailable::Zero,
+            }
+        } else {
+            FloorEstimate::Estimated { sigma_m, count }
+        }
+    }
+
+    /// The estimate, if there is one.
+    pub fn sigma_m(&self) -> Option<[f64; 2]> {
+        match self {
+            FloorEstimate::Estimated { sigma_m, .. } => Some(*sigma_m),
+            FloorEstimate::Unavailable { .. } => None,
+        }
+    }
+
+    /// `"x × y pm (n)"` or `"— (why)"`.
+    pub fn describe(&self) -> String {
+        match self {
+            FloorEstimate::Estimated { sigma_m, count } => format!(
+                "{:.2} × {:.2} pm ({count})",
+                sigma_m[0] * 1e12,
+                sigma_m[1] * 1e12
+            ),
+            FloorEstimate::Unavailable { reason } => format!("— ({reason})"),
+        }
+    }
+}
+
+/// Where the floor used came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FloorSource {
+    /// The features' localisation uncertainty (Cramér–Rao, from their fits).
+    Localisation,
+    /// The localisation uncertainty, raised on at least one axis to the successive
+    /// differences (the fits understate the scatter).
+    LocalisationRaisedToSuccessive,
+    /// Successive differences (the features carry no uncertainty).
+    SuccessiveDifferences,
+    /// Neither independent estimate exists: the residuals' own robust spread. A gap
+    /// cannot be measured against it (it is 1 by construction).
+    ResidualSpread,
+}
+
 /// The noise floor and its independent estimates, metres per axis `[x, y]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NoiseFloor {
-    /// The floor used for weights, χ² and gap/noise (trace/retrace pairs, else successive
-    /// differences, else the feature fits).
+    /// The floor used for weights, χ² and gap/noise: finite and positive.
     pub sigma_m: [f64; 2],
-    /// Successive-difference estimate.
-    pub successive_difference_m: [f64; 2],
-    /// Pairs it used.
-    pub successive_pairs: usize,
-    /// Trace/retrace same-site estimate, if both passes are present.
-    pub trace_retrace_m: Option<[f64; 2]>,
-    /// Pairs it used.
-    pub trace_retrace_pairs: usize,
-    /// Median feature-fit uncertainty, if the features carry one.
-    pub fit_uncertainty_m: Option<[f64; 2]>,
+    /// Where it came from.
+    pub source: FloorSource,
+    /// The features' localisation uncertainty (RMS of the fits' 1σ).
+    pub localisation: FloorEstimate,
+    /// Successive differences within a line.
+    pub successive_differences: FloorEstimate,
+    /// Trace/retrace pairs of the same site (reported, never used: see the module docs).
+    pub trace_retrace: FloorEstimate,
 }
 
 pub(crate) fn median(values: &mut [f64]) -> f64 {
@@ -66,12 +188,12 @@ fn pair_sigma(diffs: &[[f64; 2]]) -> [f64; 2] {
     ]
 }
 
-/// Estimates the floor from the residuals (metres) of any reasonable model.
-pub(crate) fn estimate(
+/// Residual differences of features acquired one after the other within a line.
+fn successive_diffs(
     observations: &[Observation],
     residuals: &[[f64; 2]],
     geometry: &ScanGeometry,
-) -> NoiseFloor {
+) -> Vec<[f64; 2]> {
     let max_dt = 0.3 * geometry.line_scan_time();
     let mut diffs = Vec::new();
     for pass in ScanPass::BOTH {
@@ -93,18 +215,20 @@ pub(crate) fn estimate(
             }
         }
     }
-    let successive = pair_sigma(&diffs);
-    let mut by_site: HashMap<(usize, i64, i64, usize), [Option<usize>; 2]> = HashMap::new();
+    diffs
+}
+
+/// Residual differences of the same lattice site seen in trace and in retrace.
+fn trace_retrace_diffs(observations: &[Observation], residuals: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut by_site: HashMap<(i64, i64, usize), [Option<usize>; 2]> = HashMap::new();
     for (i, o) in observations.iter().enumerate() {
         let slot = match o.pass {
             ScanPass::Trace => 0,
             ScanPass::Retrace => 1,
         };
-        by_site
-            .entry((0, o.indices.0, o.indices.1, o.indices.2))
-            .or_insert([None, None])[slot] = Some(i);
+        by_site.entry(o.indices).or_insert([None, None])[slot] = Some(i);
     }
-    let tr: Vec<[f64; 2]> = by_site
+    by_site
         .values()
         .filter_map(|pair| match pair {
             [Some(a), Some(b)] => Some([
@@ -113,36 +237,199 @@ pub(crate) fn estimate(
             ]),
             _ => None,
         })
-        .collect();
+        .collect()
+}
+
+/// RMS of the features' finite, positive fit uncertainties per axis (fits more than five
+/// times as uncertain as the median, failed fits on defects, left out).
+fn localisation(observations: &[Observation]) -> FloorEstimate {
     let fit: Vec<[f64; 2]> = observations
         .iter()
         .map(|o| o.fit_sigma_m)
-        .filter(|s| s[0].is_finite() && s[1].is_finite())
+        .filter(|s| s.iter().all(|v| v.is_finite() && *v > 0.0))
         .collect();
-    let fit_uncertainty_m = (!fit.is_empty()).then(|| {
-        let mut x: Vec<f64> = fit.iter().map(|s| s[0]).collect();
-        let mut y: Vec<f64> = fit.iter().map(|s| s[1]).collect();
-        [median(&mut x), median(&mut y)]
+    if fit.is_empty() {
+        return FloorEstimate::Unavailable {
+            reason: FloorUnavailable::NoFitUncertainty,
+        };
+    }
+    let rms = [0, 1].map(|a| {
+        let mut v: Vec<f64> = fit.iter().map(|s| s[a]).collect();
+        let limit = 5.0 * median(&mut v);
+        let kept: Vec<f64> = v.into_iter().filter(|s| *s <= limit).collect();
+        (kept.iter().map(|s| s * s).sum::<f64>() / kept.len().max(1) as f64).sqrt()
     });
-    let trace_retrace_m = (tr.len() >= 10).then(|| pair_sigma(&tr));
-    // Trace/retrace pairs first (validated), then successive differences, then the fits.
-    let sigma_m = if let Some(t) = trace_retrace_m.filter(|t| t.iter().all(|s| *s > 0.0)) {
-        t
-    } else if diffs.len() >= 20 && successive.iter().all(|s| *s > 0.0) {
-        successive
-    } else if let Some(f) = fit_uncertainty_m.filter(|f| f.iter().all(|s| *s > 0.0)) {
-        f
+    FloorEstimate::of(rms, fit.len(), 1)
+}
+
+/// Estimates the floor from the residuals (metres) of any reasonable model.
+pub(crate) fn estimate(
+    observations: &[Observation],
+    residuals: &[[f64; 2]],
+    geometry: &ScanGeometry,
+) -> NoiseFloor {
+    let diffs = successive_diffs(observations, residuals, geometry);
+    let successive_differences = FloorEstimate::of(pair_sigma(&diffs), diffs.len(), MIN_PAIRS);
+    let both = ScanPass::BOTH
+        .iter()
+        .all(|p| observations.iter().any(|o| o.pass == *p));
+    let trace_retrace = if both {
+        let tr = trace_retrace_diffs(observations, residuals);
+        FloorEstimate::of(pair_sigma(&tr), tr.len(), MIN_PAIRS)
     } else {
-        let all: Vec<f64> = residuals.iter().flat_map(|r| *r).collect();
-        let s = robust_sigma(&all).max(1e-15);
-        [s, s]
+        FloorEstimate::Unavailable {
+            reason: FloorUnavailable::SinglePass,
+        }
+    };
+    let localisation = localisation(observations);
+    let (sigma_m, source) = match (localisation.sigma_m(), successive_differences.sigma_m()) {
+        (Some(l), Some(s)) => {
+            let raised = [0, 1].map(|a| s[a] > UNDERESTIMATE_RATIO * l[a]);
+            if raised.iter().any(|r| *r) {
+                let floor = [0, 1].map(|a| if raised[a] { s[a] } else { l[a] });
+                (floor, FloorSource::LocalisationRaisedToSuccessive)
+            } else {
+                (l, FloorSource::Localisation)
+            }
+        }
+        (Some(l), None) => (l, FloorSource::Localisation),
+        (None, Some(s)) => (s, FloorSource::SuccessiveDifferences),
+        (None, None) => {
+            let all: Vec<f64> = residuals.iter().flat_map(|r| *r).collect();
+            let s = robust_sigma(&all);
+            let s = if s.is_finite() && s > 0.0 { s } else { 1e-15 };
+            ([s, s], FloorSource::ResidualSpread)
+        }
     };
     NoiseFloor {
         sigma_m,
-        successive_difference_m: successive,
-        successive_pairs: diffs.len(),
-        trace_retrace_m,
-        trace_retrace_pairs: tr.len(),
-        fit_uncertainty_m,
+        source,
+        localisation,
+        successive_differences,
+        trace_retrace,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use dhct_scan::{ScanDirection, ScanPass};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    use super::*;
+
+    /// A 256² px, 10 pm/px scan; features on a square lattice of 10 px turned by
+    /// `angle_rad`, in trace only, with fit uncertainty `fit_sigma_m`.
+    fn observations(angle_rad: f64, fit_sigma_m: f64) -> (Vec<Observation>, ScanGeometry) {
+        let g = ScanGeometry::new(
+            256,
+            256,
+            1e-11,
+            1e-11,
+            1e-4,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .expect("geometry");
+        let (s, c) = angle_rad.sin_cos();
+        let mut out = Vec::new();
+        for n in -40i64..40 {
+            for m in -40i64..40 {
+                let (u, v) = (10.0 * n as f64, 10.0 * m as f64);
+                let (x, y) = (128.0 + c * u - s * v, 128.0 + s * u + c * v);
+                if !(5.0..250.0).contains(&x) || !(5.0..250.0).contains(&y) {
+                    continue;
+                }
+                let t = g.acquisition_time(ScanPass::Trace, x, y);
+                out.push(Observation {
+                    set: 0,
+                    index: out.len(),
+                    pass: ScanPass::Trace,
+                    controller_m: [x * 1e-11, y * 1e-11],
+                    time_s: t.since_frame_start,
+                    line_time_s: t.since_line_start,
+                    terrace_height_m: 0.0,
+                    apparent_height: 1.0,
+                    fit_sigma_m: [fit_sigma_m; 2],
+                    indices: (n, m, 0),
+                    lattice_vector_m: [u * 1e-11, v * 1e-11],
+                });
+            }
+        }
+        (out, g)
+    }
+
+    fn noise(n: usize, sigma: f64, seed: u64) -> Vec<[f64; 2]> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| {
+                let x: f64 = StandardNormal.sample(&mut rng);
+                let y: f64 = StandardNormal.sample(&mut rng);
+                [x * sigma, y * sigma]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_rotated_lattice_without_line_pairs_still_has_a_finite_floor() {
+        // Rows turned by 20°: neighbours along a row are 3.4 px apart in y, never on one
+        // line (the cause of the NaN × NaN floors of the field tests).
+        let (obs, g) = observations(20f64.to_radians(), 2e-12);
+        let r = noise(obs.len(), 2e-12, 1);
+        let floor = estimate(&obs, &r, &g);
+        assert!(matches!(
+            floor.successive_differences,
+            FloorEstimate::Unavailable {
+                reason: FloorUnavailable::TooFewPairs { .. }
+            }
+        ));
+        assert!(matches!(
+            floor.trace_retrace,
+            FloorEstimate::Unavailable {
+                reason: FloorUnavailable::SinglePass
+            }
+        ));
+        assert_eq!(floor.source, FloorSource::Localisation);
+        assert!(floor.sigma_m.iter().all(|s| (*s - 2e-12).abs() < 1e-15));
+        let json = serde_json::to_string(&floor).expect("serialises");
+        assert!(
+            json.contains("\"too_few_pairs\"") && !json.contains("NaN"),
+            "{json}"
+        );
+    }
+
+    #[test]
+    fn without_any_independent_estimate_the_floor_says_so() {
+        let (obs, g) = observations(20f64.to_radians(), f64::NAN);
+        let r = noise(obs.len(), 3e-12, 2);
+        let floor = estimate(&obs, &r, &g);
+        assert_eq!(floor.source, FloorSource::ResidualSpread);
+        assert!(matches!(
+            floor.localisation,
+            FloorEstimate::Unavailable {
+                reason: FloorUnavailable::NoFitUncertainty
+            }
+        ));
+        assert!(floor.sigma_m.iter().all(|s| s.is_finite() && *s > 0.0));
+    }
+
+    #[test]
+    fn fits_that_understate_the_scatter_are_raised_to_the_successive_differences() {
+        // Aligned rows (pairs along every line); the scatter is 3 pm, the fits claim 1 pm.
+        let (obs, g) = observations(0.0, 1e-12);
+        let r = noise(obs.len(), 3e-12, 3);
+        let floor = estimate(&obs, &r, &g);
+        assert_eq!(floor.source, FloorSource::LocalisationRaisedToSuccessive);
+        assert!(
+            floor
+                .sigma_m
+                .iter()
+                .all(|s| (*s / 3e-12 - 1.0).abs() < 0.25)
+        );
+        // Fits that are right are kept.
+        let (obs, g) = observations(0.0, 3e-12);
+        let floor = estimate(&obs, &r, &g);
+        assert_eq!(floor.source, FloorSource::Localisation);
     }
 }

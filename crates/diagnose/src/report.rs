@@ -8,8 +8,9 @@ use serde::{Deserialize, Serialize};
 use crate::candidates::Candidate;
 use crate::fit::FittedParameter;
 use crate::location::GapLocation;
-use crate::noise::NoiseFloor;
+use crate::noise::{FloorSource, NoiseFloor};
 use crate::select::CandidateScore;
+use crate::verdict::{Verdict, VerdictKind};
 
 /// Size of a gap relative to the noise floor.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -127,6 +128,11 @@ pub struct FeatureResidual {
 /// Everything the diagnosis found.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DiagnosisReport {
+    /// The verdict: `no_gap`, `explained`, `partly_explained` or `unexplained`.
+    pub verdict: VerdictKind,
+    /// The verdict's numbers (gap before/after in units of the floor, the named effects,
+    /// where the remaining gap lies) and its plain-words summary.
+    pub verdict_details: Verdict,
     /// Features given.
     pub features_in: usize,
     /// Features indexed and used.
@@ -182,28 +188,32 @@ impl fmt::Display for DiagnosisReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
+            "verdict: {} — {}",
+            self.verdict.name(),
+            self.verdict_details.summary
+        )?;
+        writeln!(
+            f,
             "features: {} in, {} used, {} not indexed, {} outliers",
             self.features_in, self.features_used, self.unindexed, self.outliers
         )?;
         let n = &self.noise;
         writeln!(
             f,
-            "noise floor: {} × {} pm (from {}); successive differences {} × {} pm ({} pairs); \
-             trace/retrace {}; fit σ {}",
+            "noise floor: {} × {} pm ({}); localisation {}; successive differences {}; \
+             trace/retrace {} (not used)",
             pm(n.sigma_m[0]),
             pm(n.sigma_m[1]),
-            if n.trace_retrace_m.is_some() {
-                format!("{} trace/retrace pairs", n.trace_retrace_pairs)
-            } else {
-                "successive differences".to_string()
+            match n.source {
+                FloorSource::Localisation => "the features' localisation uncertainty",
+                FloorSource::LocalisationRaisedToSuccessive =>
+                    "localisation, raised to the successive differences",
+                FloorSource::SuccessiveDifferences => "successive differences",
+                FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
             },
-            pm(n.successive_difference_m[0]),
-            pm(n.successive_difference_m[1]),
-            n.successive_pairs,
-            n.trace_retrace_m
-                .map_or("—".into(), |s| format!("{} × {} pm", pm(s[0]), pm(s[1]))),
-            n.fit_uncertainty_m
-                .map_or("—".into(), |s| format!("{} × {} pm", pm(s[0]), pm(s[1]))),
+            n.localisation.describe(),
+            n.successive_differences.describe(),
+            n.trace_retrace.describe(),
         )?;
         let g = |s: &GapSummary| {
             format!(
@@ -271,9 +281,6 @@ impl fmt::Display for DiagnosisReport {
                     if s.passes { "yes" } else { "no" }
                 )?;
             }
-        }
-        if self.added.is_empty() {
-            writeln!(f, "verdict: no unmodelled effect needed")?;
         }
         for a in &self.added {
             writeln!(
