@@ -4,18 +4,11 @@
 //! what to try), or in `batch` at least one file failed (the others are still written);
 //! 2 the command line itself was malformed.
 
-mod batch;
-mod correct;
-mod diagnose;
-mod info;
-mod output_dir;
-mod simulate;
-mod units;
-
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
+use dhct_cli::{batch, correct, diagnose, info, simulate, units};
 use dhct_scan::ScanDirection;
 use dhct_sm4_io::GeometryOverrides;
 

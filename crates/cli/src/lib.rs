@@ -1,0 +1,11 @@
+//! The library behind the `dhct` command line: every subcommand (`correct`, `batch`,
+//! `diagnose`, `info`, `simulate`) as functions, so that other front ends (the Python
+//! package `dhct`) resolve options and write outputs exactly as the command line does.
+
+pub mod batch;
+pub mod correct;
+pub mod diagnose;
+pub mod info;
+pub mod output_dir;
+pub mod simulate;
+pub mod units;
