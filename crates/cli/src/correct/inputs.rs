@@ -22,7 +22,7 @@ pub const CALIBRATE_PITCH_TOLERANCE: f64 = 9.0;
 const AUTO_PLACEHOLDER_M: f64 = 1e-9;
 
 /// What a config resolves to before any data is read.
-pub(crate) struct Resolved {
+pub struct Resolved {
     /// The lattice as named (preset or file).
     pub lattice_name: String,
     /// The nearest-neighbour distance given (or measured, for `auto`), metres.
@@ -35,7 +35,7 @@ pub(crate) struct Resolved {
 }
 
 /// The lattice and pipeline options of `config` (shared by `correct` and `diagnose`).
-pub(crate) fn resolve(config: &CorrectConfig) -> Result<Resolved> {
+pub fn resolve(config: &CorrectConfig) -> Result<Resolved> {
     let lattice_name = config.lattice.clone().unwrap_or_else(|| "graphite".into());
     let nn_auto = config.nn.as_ref().is_some_and(Length::is_auto);
     let nn_m = if nn_auto {
@@ -88,7 +88,7 @@ fn apply_check_policy(config: &CorrectConfig, typed: bool, options: &mut Pipelin
 
 /// For `--nn auto`: the lattice rebuilt with the nearest-neighbour distance the image shows
 /// in the file's units (the pixel size taken as right); otherwise `resolved` unchanged.
-pub(crate) fn with_measured_nn(
+pub fn with_measured_nn(
     mut resolved: Resolved,
     pair: &ScanPair,
     mask: Option<&Array2<bool>>,
@@ -110,7 +110,7 @@ pub(crate) fn with_measured_nn(
 }
 
 /// The pipeline's error with what to change on the command line.
-pub(crate) fn explain(error: &PipelineError) -> String {
+pub fn explain(error: &PipelineError) -> String {
     match error {
         PipelineError::Calibration(e) => explain_calibration(e),
         PipelineError::TooFewFeatures { .. } | PipelineError::LatticeMismatch { .. } => format!(

@@ -3,7 +3,7 @@
 
 mod config;
 pub(crate) mod figures;
-mod inputs;
+pub mod inputs;
 pub(crate) mod plots;
 pub(crate) mod render;
 pub(crate) mod report;
@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use dhct_distortion::mask::{polygon_mask, read_mask};
-use dhct_pipeline::{Analysis, Stage};
+use dhct_lattice::Lattice;
+use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::{WriteError, write_atomically};
@@ -24,7 +25,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 pub use config::{CorrectConfig, Length, build_lattice};
-pub(crate) use inputs::{Resolved, explain, resolve, with_measured_nn};
+pub use inputs::{Resolved, explain, resolve, with_measured_nn};
 pub use summary::RunSummary;
 
 /// What to run.
@@ -46,7 +47,7 @@ pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 
 /// The scan pair to analyse: the file's topography (trace and retrace when present), or
 /// the first file's trace with the second file's image as retrace.
-pub(crate) fn read_pair(
+pub fn read_pair(
     input: &Path,
     retrace: Option<&Path>,
     overrides: &dhct_sm4_io::GeometryOverrides,
@@ -101,136 +102,232 @@ pub(crate) fn progress_bar(enabled: bool) -> ProgressBar {
     }
 }
 
-/// Runs `dhct correct`; returns the summary (also written as `model.json`).
-pub fn run(request: CorrectRequest) -> Result<RunSummary> {
-    // Everything is written into a staging folder, moved into place at the end.
-    let staged =
-        crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
-    let request = CorrectRequest {
-        output: staged.path(),
-        ..request
-    };
-    let config = request.config.clone();
-    let bar = progress_bar(request.progress);
-    let start = Instant::now();
-    bar.set_message("reading");
-    let pair = read_pair(request.input, request.retrace, &config.geometry)?;
-    let read_s = start.elapsed().as_secs_f64();
-    let geometry = pair.geometry().clone();
+/// A finished analysis of one scan pair with everything needed to write its outputs
+/// (the same files whichever front end asks for them).
+pub struct Corrected {
+    /// The scan pair analysed (geometry in metres and seconds).
+    pub pair: ScanPair,
+    /// The config the run was resolved from (file + flags).
+    pub config: CorrectConfig,
+    /// The lattice as named (preset or file).
+    pub lattice_name: String,
+    /// The nearest-neighbour distance given or measured (`--nn auto`), metres.
+    pub nn_m: Option<f64>,
+    pub lattice: Box<dyn Lattice + Send + Sync>,
+    /// The pipeline options the run used.
+    pub options: PipelineOptions,
+    /// The analysed area (true = used), if a mask was given.
+    pub mask: Option<Array2<bool>>,
+    /// Every intermediate of the pipeline.
+    pub analysis: Analysis,
+    /// The content of `model.json` (`outputs` and `write_s` are filled when written).
+    pub summary: RunSummary,
+}
 
-    let mask = load_mask(&config, &geometry)?;
+/// Why an analysis stopped, by which stage refused (the message is the command line's).
+#[derive(Debug, thiserror::Error)]
+pub enum CorrectError {
+    /// The lattice, constant, mask or pipeline options could not be resolved.
+    #[error("{0:#}")]
+    Options(anyhow::Error),
+    /// The image does not match the lattice or constant given (with the flag to change).
+    #[error("{0}")]
+    InputMismatch(String),
+    /// The pipeline itself failed (too few features, lattice not found, ...).
+    #[error("{0}")]
+    Analysis(String),
+}
+
+/// Resolves `config` against `pair` and runs the whole pipeline: no file is written.
+/// `input` and `retrace` label the run in the summary; `on_stage` is told each stage.
+pub fn analyse(
+    pair: ScanPair,
+    config: CorrectConfig,
+    input: String,
+    retrace: Option<String>,
+    read_s: f64,
+    on_stage: &(dyn Fn(Stage) + Sync),
+) -> Result<Corrected, CorrectError> {
+    let geometry = pair.geometry().clone();
+    let mask = load_mask(&config, &geometry).map_err(CorrectError::Options)?;
+    let resolved = resolve(&config).map_err(CorrectError::Options)?;
     let Resolved {
         lattice_name,
         nn_m,
         lattice,
         options,
         ..
-    } = with_measured_nn(resolve(&config)?, &pair, mask.as_ref())?;
-
-    let analysis = dhct_pipeline::run(
-        &pair,
-        lattice.as_ref(),
-        mask.as_ref(),
-        &options,
-        &|stage: Stage| {
-            bar.set_message(stage.describe());
-        },
-    )
-    .map_err(|e| anyhow::anyhow!(explain(&e)))
-    .with_context(|| format!("analysing {}", request.input.display()))?;
-
-    bar.set_message("writing outputs and report");
-    let write_start = Instant::now();
-    let mut summary = summary::summarise(
-        request.input.display().to_string(),
-        request.retrace.map(|p| p.display().to_string()),
+    } = with_measured_nn(resolved, &pair, mask.as_ref())
+        .map_err(|e| CorrectError::InputMismatch(format!("{e:#}")))?;
+    let analysis = dhct_pipeline::run(&pair, lattice.as_ref(), mask.as_ref(), &options, on_stage)
+        .map_err(|e| match e {
+        PipelineError::Calibration(_) => CorrectError::InputMismatch(explain(&e)),
+        _ => CorrectError::Analysis(explain(&e)),
+    })?;
+    let summary = summary::summarise(
+        input,
+        retrace,
         lattice.as_ref(),
         &geometry,
         &analysis,
         read_s,
     );
+    Ok(Corrected {
+        pair,
+        config,
+        lattice_name,
+        nn_m,
+        lattice,
+        options,
+        mask,
+        analysis,
+        summary,
+    })
+}
+
+/// Runs `dhct correct`; returns the summary (also written as `model.json`).
+pub fn run(request: CorrectRequest) -> Result<RunSummary> {
+    // Everything is written into a staging folder, moved into place at the end.
+    let staged =
+        crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
+    let bar = progress_bar(request.progress);
+    let start = Instant::now();
+    bar.set_message("reading");
+    let pair = read_pair(request.input, request.retrace, &request.config.geometry)?;
+    let read_s = start.elapsed().as_secs_f64();
+    let corrected = analyse(
+        pair,
+        request.config,
+        request.input.display().to_string(),
+        request.retrace.map(|p| p.display().to_string()),
+        read_s,
+        &|stage: Stage| bar.set_message(stage.describe()),
+    )
+    .map_err(|e| match e {
+        CorrectError::Options(e) => e,
+        CorrectError::InputMismatch(message) => anyhow::anyhow!(message),
+        CorrectError::Analysis(message) => {
+            anyhow::anyhow!(message).context(format!("analysing {}", request.input.display()))
+        }
+    })?;
+    let summary = write_into(staged.path(), &corrected, request.diagnose, &bar)?;
+    staged.commit()?;
+    bar.finish_and_clear();
+    Ok(summary)
+}
+
+/// Writes every output of `corrected` into `output` (through a staging folder, replacing
+/// an earlier run only with `overwrite`), as `dhct correct` does; returns `model.json`'s
+/// content.
+pub fn write(
+    corrected: &Corrected,
+    output: &Path,
+    overwrite: bool,
+    diagnose: bool,
+) -> Result<RunSummary> {
+    let staged = crate::output_dir::StagedOutput::prepare(output, overwrite)?;
+    let summary = write_into(staged.path(), corrected, diagnose, &ProgressBar::hidden())?;
+    staged.commit()?;
+    Ok(summary)
+}
+
+/// Writes the images, figures, feature table, config, `model.json` and report into `dir`.
+fn write_into(
+    dir: &Path,
+    corrected: &Corrected,
+    diagnose: bool,
+    bar: &ProgressBar,
+) -> Result<RunSummary> {
+    let Corrected {
+        pair,
+        config,
+        lattice,
+        analysis,
+        mask,
+        ..
+    } = corrected;
+    bar.set_message("writing outputs and report");
+    let write_start = Instant::now();
+    let mut summary = corrected.summary.clone();
     let colormap = config.colormap.unwrap_or(Colormap::Gold);
     // Figures, data images and the feature table are independent: made and written in
     // parallel.
     let ((figures, images), csv) = rayon::join(
         || {
             rayon::join(
-                || {
-                    figures::make_figures(
-                        &pair,
-                        lattice.as_ref(),
-                        &analysis,
-                        mask.as_ref(),
-                        colormap,
-                    )
-                },
-                || write_data_images(request.output, &pair, &analysis),
+                || figures::make_figures(pair, lattice.as_ref(), analysis, mask.as_ref(), colormap),
+                || write_data_images(dir, pair, analysis),
             )
         },
-        || write_features_csv(request.output, &analysis),
+        || write_features_csv(dir, analysis),
     );
     let mut outputs = images?;
     outputs.push(csv?);
-    outputs.extend(write_figure_files(request.output, &figures)?);
+    outputs.extend(write_figure_files(dir, &figures)?);
+    write_resolved_config(dir, corrected, colormap)?;
+    outputs.extend(["config.toml", "model.json", "report.html"].map(String::from));
+    summary.outputs = outputs;
+    summary.write_s = write_start.elapsed().as_secs_f64();
+    let json = serde_json::to_string_pretty(&summary).context("cannot serialise model.json")?;
+    write_bytes(&dir.join("model.json"), json.as_bytes())?;
+    let section = if diagnose {
+        bar.set_message("diagnosing the sim-to-real gap");
+        Some(write_diagnosis(dir, corrected)?)
+    } else {
+        None
+    };
+    let html = report::report_html(&summary, &figures, section.as_deref());
+    write_bytes(&dir.join("report.html"), html.as_bytes())?;
+    Ok(summary)
+}
 
-    // The resolved config: everything needed to repeat the run.
+/// `config.toml`: the resolved config, everything needed to repeat the run.
+fn write_resolved_config(dir: &Path, corrected: &Corrected, colormap: Colormap) -> Result<()> {
+    let config = &corrected.config;
     let resolved = CorrectConfig {
-        lattice: Some(lattice_name),
+        lattice: Some(corrected.lattice_name.clone()),
         // As given (a preset's own constant is exact; the NN distance derived from its
         // vectors may differ in the last bit), in Rust's shortest round-trip form: the TOML
         // writer prints small floats as long decimals.
-        nn: nn_m.map(|nn| Length::Text(format!("{nn:e}"))),
-        polarity: Some(options.features.polarity),
+        nn: corrected.nn_m.map(|nn| Length::Text(format!("{nn:e}"))),
+        polarity: Some(corrected.options.features.polarity),
         colormap: Some(colormap),
         geometry: config.geometry.clone(),
-        pipeline: Some(config::pipeline_table(&options)?),
+        pipeline: Some(config::pipeline_table(&corrected.options)?),
         ..config.clone()
     };
     let toml_text = format!(
         "# dhct correct: the resolved configuration of this run (use with --config)\n{}",
         toml::to_string(&resolved).context("cannot serialise the resolved config")?
     );
-    write_bytes(&request.output.join("config.toml"), toml_text.as_bytes())?;
-    outputs.push("config.toml".into());
-    outputs.push("model.json".into());
-    outputs.push("report.html".into());
-    summary.outputs = outputs;
-    summary.write_s = write_start.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&summary).context("cannot serialise model.json")?;
-    write_bytes(&request.output.join("model.json"), json.as_bytes())?;
-    let section = if request.diagnose {
-        bar.set_message("diagnosing the sim-to-real gap");
-        let sets: Vec<&[dhct_features::Feature]> = analysis
-            .passes
-            .iter()
-            .map(|p| p.features.features.as_slice())
-            .collect();
-        let diagnosis = crate::diagnose::diagnose_features(
-            &sets,
-            &geometry,
-            lattice.as_ref(),
-            mask.as_ref(),
-            &options,
-        )?;
-        write_bytes(
-            &request.output.join("diagnosis.json"),
-            diagnosis.to_json().as_bytes(),
-        )?;
-        let (section, diagnosis_figures) =
-            crate::diagnose::diagnosis_section(&diagnosis, &geometry);
-        write_figure_files(request.output, &diagnosis_figures)?;
-        Some(section)
-    } else {
-        None
-    };
-    let html = report::report_html(&summary, &figures, section.as_deref());
-    write_bytes(&request.output.join("report.html"), html.as_bytes())?;
-    staged.commit()?;
-    bar.finish_and_clear();
-    Ok(summary)
+    write_bytes(&dir.join("config.toml"), toml_text.as_bytes())?;
+    Ok(())
 }
 
-pub(crate) fn load_mask(
+/// The sim-to-real gap diagnosis (`diagnosis.json` and its figures); returns the report
+/// section.
+fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<String> {
+    let geometry = corrected.pair.geometry();
+    let sets: Vec<&[dhct_features::Feature]> = corrected
+        .analysis
+        .passes
+        .iter()
+        .map(|p| p.features.features.as_slice())
+        .collect();
+    let diagnosis = crate::diagnose::diagnose_features(
+        &sets,
+        geometry,
+        corrected.lattice.as_ref(),
+        corrected.mask.as_ref(),
+        &corrected.options,
+    )?;
+    write_bytes(&dir.join("diagnosis.json"), diagnosis.to_json().as_bytes())?;
+    let (section, diagnosis_figures) = crate::diagnose::diagnosis_section(&diagnosis, geometry);
+    write_figure_files(dir, &diagnosis_figures)?;
+    Ok(section)
+}
+
+pub fn load_mask(
     config: &CorrectConfig,
     geometry: &dhct_scan::ScanGeometry,
 ) -> Result<Option<Array2<bool>>> {
