@@ -5,10 +5,14 @@
 //! cargo run --release -p dhct-diagnose --example diagnose_simulated -- tip-change 1 [images] [dev-2]
 //! ```
 //! (effect: any candidate name, or `none`; seed; `images` = render and find features; the
-//! validation set whose magnitudes are drawn: `tuned` (default), `dev`, `dev-2`, `dev-3` or `held-out`).
+//! validation set whose magnitudes are drawn: `tuned` (default), `dev`, `dev-2`, `dev-3` or `held-out`;
+//! `law=cubic|quartic|exponential|power`: the base model's fast-scan hysteresis law).
 
-use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
+use dhct_diagnose::synth::{
+    BaseLaw, ValidationCase, ValidationSet, simulate_images, simulate_positions,
+};
 use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
+use dhct_simulate::EffectConfig;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -20,10 +24,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .into_iter()
         .find(|set| rest.iter().any(|s| s == set.name()))
         .unwrap_or(ValidationSet::Tuned);
-    let case = match Candidate::ALL.iter().find(|c| c.name() == effect) {
+    let mut case = match Candidate::ALL.iter().find(|c| c.name() == effect) {
         Some(&c) => ValidationCase::single(c, seed, set),
         None => ValidationCase::effect_free(seed, set),
     };
+    let law = rest.iter().find_map(|s| match s.strip_prefix("law=")? {
+        "cubic" => Some(BaseLaw::Cubic),
+        "quartic" => Some(BaseLaw::Quartic),
+        "exponential" => Some(BaseLaw::Exponential),
+        "power" => Some(BaseLaw::Power),
+        _ => None,
+    });
+    if let Some(law) = law {
+        let line_s = case.config.scan.width_m / case.config.scan.fast_speed_m_per_s;
+        for e in &mut case.config.effects {
+            if let EffectConfig::FastHysteresis(h) = e {
+                h.law = law.draw(seed, line_s);
+            }
+        }
+    }
     println!(
         "case {}: {:?}\n{:?}",
         case.name, case.truth, case.config.effects

@@ -9,6 +9,7 @@ use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
+use crate::base::choose_hysteresis;
 use crate::candidates::{Candidate, creep_t0_bounds};
 use crate::data::{MIN_FEATURES, Observation, prepare};
 use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
@@ -174,7 +175,16 @@ pub fn diagnose(
     // Noise floor: first from the DHCT gap, then from the base fit's residuals.
     let mut sigma = estimate(&all, &prepared.dhct_gap, geometry).sigma_m;
     let t0_bounds = creep_t0_bounds(geometry, &all);
-    let first = fit_profiled(start.clone(), geometry, &all, sigma, iterations, t0_bounds)?;
+    // The hysteresis law chosen by the data (BIC), part of the base model from here on.
+    let (first, base_choice) = choose_hysteresis(
+        &start,
+        &d.hysteresis,
+        geometry,
+        &all,
+        sigma,
+        iterations,
+        t0_bounds,
+    )?;
     sigma = estimate(&all, &first.residuals, geometry).sigma_m;
     // Outliers relative to the residuals' own robust spread (not the noise floor), so that
     // a large unmodelled effect is not thrown away as outliers.
@@ -345,6 +355,7 @@ pub fn diagnose(
     Ok(DiagnosisReport {
         verdict: verdict.kind,
         verdict_details: verdict,
+        base_choice,
         features_in: prepared.input_features,
         features_used: observations.len(),
         unindexed: prepared.unindexed,

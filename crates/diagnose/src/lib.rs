@@ -58,6 +58,7 @@
 //! assert_eq!(report.top(), Some(dhct_diagnose::Candidate::TipChange));
 //! ```
 
+mod base;
 mod candidates;
 mod data;
 mod diagnose;
@@ -74,6 +75,7 @@ mod terms;
 mod validate;
 mod verdict;
 
+pub use base::{BaseChoice, LawScore};
 pub use candidates::Candidate;
 pub use data::{MIN_FEATURES, Observation};
 pub use diagnose::{DiagnoseOptions, diagnose};

@@ -5,6 +5,7 @@ use std::fmt;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
+use crate::base::BaseChoice;
 use crate::candidates::Candidate;
 use crate::fit::FittedParameter;
 use crate::location::GapLocation;
@@ -133,6 +134,8 @@ pub struct DiagnosisReport {
     /// The verdict's numbers (gap before/after in units of the floor, the named effects,
     /// where the remaining gap lies) and its plain-words summary.
     pub verdict_details: Verdict,
+    /// The base model's hysteresis law as the data chose it, with every law's BIC.
+    pub base_choice: BaseChoice,
     /// Features given.
     pub features_in: usize,
     /// Features indexed and used.
@@ -225,6 +228,17 @@ impl fmt::Display for DiagnosisReport {
             )
         };
         writeln!(f, "DHCT sim gap (controller frame): {}", g(&self.dhct))?;
+        writeln!(
+            f,
+            "base hysteresis law (BIC): {} ({})",
+            self.base_choice.hysteresis_law,
+            self.base_choice
+                .hysteresis
+                .iter()
+                .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
         writeln!(f, "base position-level fit:        {}", g(&self.base.gap))?;
         if let Some(loc) = &self.location {
             writeln!(f, "where the base gap concentrates:")?;
