@@ -201,3 +201,36 @@ fn scale_errors_up_to_30_percent_and_shear_up_to_10_degrees_are_calibrated_away(
         }
     }
 }
+
+#[test]
+fn a_large_cell_on_a_small_frame_falls_back_to_the_affine_correction() {
+    // 5 cells across: too few corner holes keep a full neighbour shell for the drift model.
+    let mut case = cases().pop().expect("the 7x7-like case");
+    case.width_m = 13e-9;
+    let pair = miscalibrated(&case, [1.2, 0.9], 3.0);
+    let mut options = PipelineOptions::for_lattice(case.lattice.as_ref());
+    options.features.line_correction = dhct_features::LineCorrection::None;
+    options.calibration.check.pitch_tolerance = 0.5;
+    let analysis = run(&pair, case.lattice.as_ref(), None, &options, &|_| {})
+        .unwrap_or_else(|e| panic!("small 7x7-like frame: {e}"));
+    assert_eq!(analysis.correction, dhct_pipeline::CorrectionSource::Affine);
+    assert!(
+        analysis
+            .warnings
+            .iter()
+            .any(|w| w.code == dhct_pipeline::WarningCode::ModelNotFitted)
+    );
+    let measured = measure_lattice(
+        analysis.passes[0].corrected_image.view(),
+        pair.geometry(),
+        None,
+    )
+    .expect("a lattice in the corrected image");
+    for length in measured.lattice.lengths_m {
+        assert!(
+            (length / 2.688e-9 - 1.0).abs() < 0.015,
+            "corrected {}",
+            measured.lattice.describe()
+        );
+    }
+}

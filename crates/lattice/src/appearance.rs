@@ -16,4 +16,8 @@ pub struct FeatureAppearance {
     /// Features shallower (or dimmer) than this fraction of the deepest (brightest) are
     /// another kind and are dropped (0 = keep all).
     pub min_relative_height: f64,
+    /// Radius of the disc each Gaussian fit uses, as a fraction of the nearest-neighbour
+    /// distance; `None`: the default 0.4, which on a large cell reaches the neighbouring
+    /// features of another kind (the adatoms around a 7×7 corner hole) and spoils the fit.
+    pub fit_radius_fraction: Option<f64>,
 }

@@ -92,6 +92,8 @@ impl Hexagonal {
                 // Corner holes are the deepest minima, about twice as deep as those
                 // between the adatoms.
                 min_relative_height: 0.6,
+                // 2.5 σ of the hole; the nearest adatoms sit at about 0.36 a.
+                fit_radius_fraction: Some(0.25),
             },
         }
     }

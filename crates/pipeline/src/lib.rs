@@ -61,8 +61,8 @@ pub use warnings::{
 use std::time::Instant;
 
 use dhct_distortion::{
-    CorrectedFeature, DistortionError, PassInput, Rdf, analyse_seeded, correct_features,
-    correct_image, radial_distribution,
+    CorrectedFeature, DhctResult, DistortionError, PassInput, Rdf, analyse_seeded,
+    correct_features, correct_image, radial_distribution,
 };
 use dhct_features::{Feature, FeatureSet, find_features_in_pair_and_correlation};
 use dhct_lattice::{Lattice, angular_distribution, fit_lattice};
@@ -149,40 +149,29 @@ pub fn run(
         .as_ref()
         .ok()
         .and_then(|found| calibration::seeded_geometry(geometry, found));
-    let dhct = match analyse_seeded(&inputs, geometry, lattice, &options.dhct, seeded.as_ref()) {
-        Ok(dhct) => dhct,
-        Err(DistortionError::TooFewFeatures {
-            found: usable,
-            needed,
-            ..
-        }) => {
-            let features = &found_sets_first(&found).features;
-            let median_nn_m = median_nearest_distance(features);
-            let expected_nn_m = lattice.nearest_neighbour_distance();
-            let ratio = median_nn_m / expected_nn_m;
-            let suggestion = if (0.8..1.25).contains(&ratio) {
-                ": the spacing matches, so check the mask, the lattice type (neighbour count), \
-                 the image quality, and whether the drift is near half the slow-scan speed or \
-                 more (the raw lattice is then squeezed beyond recognition)"
-                    .to_string()
-            } else {
-                format!(
-                    ": if the image is calibrated, try --nn {:.3}A (or check the lattice type; \
-                     a wrong pixel size in the file scales every distance)",
-                    median_nn_m * 1e10
-                )
-            };
-            return Err(PipelineError::LatticeMismatch {
-                found: features.len(),
-                usable,
-                needed,
-                median_nn_m,
-                expected_nn_m,
-                suggestion,
-            });
-        }
-        Err(e) => return Err(e.into()),
-    };
+    // A model that cannot be fitted (too few features with full neighbour shells: a large
+    // cell on a small frame) falls back to the global affine correction when the lattice
+    // was measured: never worse than it.
+    let (dhct, model_failure) =
+        match analyse_seeded(&inputs, geometry, lattice, &options.dhct, seeded.as_ref()) {
+            Ok(dhct) => (dhct, None),
+            Err(e) => {
+                let affine = calibration
+                    .as_ref()
+                    .ok()
+                    .and_then(|found| affine::affine_model(geometry, &found.calibration));
+                match affine {
+                    Some(model) => (
+                        DhctResult {
+                            model,
+                            passes: Vec::new(),
+                        },
+                        Some(model_error(e, &found, lattice).to_string()),
+                    ),
+                    None => return Err(model_error(e, &found, lattice)),
+                }
+            }
+        };
     timings.model_s = t.elapsed().as_secs_f64();
 
     // 3–4. Features corrected by the model and fitted per region; the global affine
@@ -200,9 +189,13 @@ pub fn run(
     let t = Instant::now();
     let (mut regions, mut skipped_regions) =
         fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
-    let mut correction = CorrectionSource::DriftModel;
+    let mut correction = if model_failure.is_some() {
+        CorrectionSource::Affine
+    } else {
+        CorrectionSource::DriftModel
+    };
     let mut comparisons = Vec::new();
-    if let Ok(found) = &calibration {
+    if let (Ok(found), None) = (&calibration, &model_failure) {
         let c = &found.calibration;
         comparisons = regions
             .iter()
@@ -310,6 +303,7 @@ pub fn run(
     let mut warnings = warnings::calibration_warnings(&calibration);
     warnings.extend(warnings::assumption_warnings(geometry));
     warnings.extend(fit_warnings);
+    warnings.extend(model_failure.map(warnings::model_failure_warning));
     warnings.extend(warnings::affine_warnings(
         &comparisons,
         correction == CorrectionSource::Affine,
@@ -343,6 +337,47 @@ fn correct_sets(
     sets.par_iter()
         .map(|set| correct_features(model, geometry, &set.features))
         .collect()
+}
+
+/// The model stage's error, with the spacing the features show when too few of them sit in
+/// the lattice's neighbour pattern.
+fn model_error(
+    error: DistortionError,
+    found: &[(FeatureSet, Array2<f64>)],
+    lattice: &dyn Lattice,
+) -> PipelineError {
+    let DistortionError::TooFewFeatures {
+        found: usable,
+        needed,
+        ..
+    } = error
+    else {
+        return error.into();
+    };
+    let features = &found_sets_first(found).features;
+    let median_nn_m = median_nearest_distance(features);
+    let expected_nn_m = lattice.nearest_neighbour_distance();
+    let ratio = median_nn_m / expected_nn_m;
+    let suggestion = if (0.8..1.25).contains(&ratio) {
+        ": the spacing matches, so check the mask, the lattice type (neighbour count), \
+         the image quality, and whether the drift is near half the slow-scan speed or \
+         more (the raw lattice is then squeezed beyond recognition)"
+            .to_string()
+    } else {
+        format!(
+            ": if the image is calibrated, try --nn {:.3}A (or check the lattice type; \
+             a wrong pixel size in the file scales every distance)",
+            median_nn_m * 1e10
+        )
+    };
+    PipelineError::LatticeMismatch {
+        found: features.len(),
+        usable,
+        needed,
+        median_nn_m,
+        expected_nn_m,
+        suggestion,
+    }
 }
 
 fn found_sets_first(found: &[(FeatureSet, Array2<f64>)]) -> &FeatureSet {

@@ -71,6 +71,9 @@ impl PipelineOptions {
             options.features.kernel = KernelChoice::FractionOfNeighbourDistance { fraction };
         }
         options.features.min_relative_height = appearance.min_relative_height;
+        if let Some(fraction) = appearance.fit_radius_fraction {
+            options.features.fit_radius_fraction = fraction;
+        }
         options
     }
 

@@ -59,6 +59,8 @@ pub enum WarningCode {
     FewIndexed,
     /// A corrected image's lattice, measured by FFT, is not the lattice given.
     CorrectedImageOff,
+    /// The drift model could not be fitted; the global affine correction was used.
+    ModelNotFitted,
 }
 
 /// One warning.
@@ -112,6 +114,7 @@ impl WarningCode {
             WarningCode::LargeDeviation => "large_deviation",
             WarningCode::FewIndexed => "few_indexed",
             WarningCode::CorrectedImageOff => "corrected_image_off",
+            WarningCode::ModelNotFitted => "model_not_fitted",
         }
     }
 }
@@ -261,6 +264,20 @@ fn uncertain(parameters: &[Parameter]) -> Option<Warning> {
             "read them as consistent with zero; they still enter the correction",
         )
     })
+}
+
+/// The drift model could not be fitted (`reason`): the global affine correction stands in.
+pub(crate) fn model_failure_warning(reason: String) -> Warning {
+    Warning::new(
+        WarningCode::ModelNotFitted,
+        format!(
+            "the drift/creep/hysteresis model could not be fitted ({reason}); the image was \
+             corrected by the global affine map measured from its lattice (no time-dependent \
+             distortion removed)"
+        ),
+        "take lengths from the corrected image, not drift values; a larger frame (more \
+         cells) or a mask over the atomically resolved part lets the model be fitted",
+    )
 }
 
 /// The full model against the global affine correction.
