@@ -72,6 +72,15 @@ impl StagedOutput {
     /// holds foreign files, or an earlier run's without `overwrite`, or another run holds
     /// the lock.
     pub fn prepare(target: &Path, overwrite: bool) -> Result<StagedOutput> {
+        // `-o .` or `-o ..` name a folder only once resolved.
+        let resolved;
+        let target = if target.file_name().is_none() {
+            resolved = fs::canonicalize(target)
+                .with_context(|| format!("cannot resolve the output {}", target.display()))?;
+            resolved.as_path()
+        } else {
+            target
+        };
         check_replaceable(target, overwrite)?;
         let lock = take_lock(target)?;
         let staged = StagedOutput {
@@ -354,6 +363,11 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         assert_eq!(names, ["out"]);
+        // The current folder (here holding only `out`, not dhct's marker) is never replaced.
+        let error = StagedOutput::prepare(&dir.path().join("."), true)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("did not write"), "{error}");
         // The output is a file: refused.
         let file = dir.path().join("file");
         fs::write(&file, "x").unwrap();
