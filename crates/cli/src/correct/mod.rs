@@ -138,18 +138,46 @@ pub enum CorrectError {
     Analysis(String),
 }
 
-/// Resolves `config` against `pair` and runs the whole pipeline: no file is written.
-/// `input` and `retrace` label the run in the summary; `on_stage` is told each stage.
+/// What to analyse: a scan pair, the config it is resolved with, and labels for the summary.
+pub struct AnalyseRequest {
+    /// The scan pair (e.g. from [`read_pair`] or built from arrays).
+    pub pair: ScanPair,
+    /// The config file (if any) overridden by the caller's options.
+    pub config: CorrectConfig,
+    /// A mask given as an array (true = use), raw-image pixels; intersected with the
+    /// config's mask file and polygon.
+    pub mask: Option<Array2<bool>>,
+    /// The input's name in the summary (a path, or a note for arrays).
+    pub input: String,
+    /// The retrace file's name in the summary, if it came from its own file.
+    pub retrace: Option<String>,
+    /// Time spent reading the input, seconds.
+    pub read_s: f64,
+}
+
+/// Resolves the request's config against its pair and runs the whole pipeline: no file is
+/// written. `on_stage` is told each stage.
 pub fn analyse(
-    pair: ScanPair,
-    config: CorrectConfig,
-    input: String,
-    retrace: Option<String>,
-    read_s: f64,
+    request: AnalyseRequest,
     on_stage: &(dyn Fn(Stage) + Sync),
 ) -> Result<Corrected, CorrectError> {
+    let AnalyseRequest {
+        pair,
+        config,
+        mask: given_mask,
+        input,
+        retrace,
+        read_s,
+    } = request;
     let geometry = pair.geometry().clone();
-    let mask = load_mask(&config, &geometry).map_err(CorrectError::Options)?;
+    let mask = match (load_mask(&config, &geometry), given_mask) {
+        (Err(e), _) => return Err(CorrectError::Options(e)),
+        (Ok(Some(a)), Some(b)) => Some(
+            dhct_distortion::mask::intersect(&a, &b)
+                .map_err(|e| CorrectError::Options(anyhow::anyhow!("mask: {e}")))?,
+        ),
+        (Ok(a), b) => a.or(b),
+    };
     let resolved = resolve(&config).map_err(CorrectError::Options)?;
     let Resolved {
         lattice_name,
@@ -196,11 +224,14 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let pair = read_pair(request.input, request.retrace, &request.config.geometry)?;
     let read_s = start.elapsed().as_secs_f64();
     let corrected = analyse(
-        pair,
-        request.config,
-        request.input.display().to_string(),
-        request.retrace.map(|p| p.display().to_string()),
-        read_s,
+        AnalyseRequest {
+            pair,
+            config: request.config,
+            mask: None,
+            input: request.input.display().to_string(),
+            retrace: request.retrace.map(|p| p.display().to_string()),
+            read_s,
+        },
         &|stage: Stage| bar.set_message(stage.describe()),
     )
     .map_err(|e| match e {
@@ -543,10 +574,7 @@ fn calibration_lines(summary: &RunSummary) -> String {
         );
     }
     if summary.correction == dhct_pipeline::CorrectionSource::Affine {
-        let _ = writeln!(
-            s,
-            "correction: the global affine correction (it beat the drift model)"
-        );
+        let _ = writeln!(s, "correction: {}", report::affine_reason(summary));
     }
     s
 }

@@ -105,6 +105,16 @@ pub(crate) fn figure_html(html: &mut String, figure: &Figure) {
     );
 }
 
+/// Why the global affine correction was kept: it beat the fitted model, or no model could
+/// be fitted.
+pub fn affine_reason(summary: &RunSummary) -> &'static str {
+    if summary.rejected_model.is_some() {
+        "the global affine correction (it beat the drift model)"
+    } else {
+        "the global affine correction (the drift model could not be fitted)"
+    }
+}
+
 /// What the image shows, the calibration from it, and the affine floor.
 fn calibration_section(html: &mut String, summary: &RunSummary) {
     html.push_str("<h2>Calibration from the lattice</h2>");
@@ -194,9 +204,7 @@ fn calibration_section(html: &mut String, summary: &RunSummary) {
     }
     let kept = match summary.correction {
         dhct_pipeline::CorrectionSource::DriftModel => "the drift/creep/hysteresis model",
-        dhct_pipeline::CorrectionSource::Affine => {
-            "the global affine correction (it beat the model)"
-        }
+        dhct_pipeline::CorrectionSource::Affine => affine_reason(summary),
     };
     row(html, &["correction kept".into(), kept.into()]);
     html.push_str("</table>\n");
