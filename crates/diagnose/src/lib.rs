@@ -89,6 +89,7 @@ pub use report::{
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
 pub use validate::{
-    CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport, validate,
+    CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,
+    validate,
 };
 pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};

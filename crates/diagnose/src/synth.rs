@@ -20,7 +20,8 @@ use dhct_features::{Feature, FeatureOptions, FitStatus, find_features_in_pair};
 use dhct_scan::{ScanDirection, ScanGeometry, ScanPass};
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, HysteresisLaw,
-    LineDrift, LogCreep, ScanCoupling, SlowScanHysteresis, ThermalDrift, TipChange, Vibration,
+    LineDrift, LogCreep, ScanCoupling, SlowScanHysteresis, StrainBubble, TelegraphTip,
+    ThermalDrift, TipChange, Vibration,
 };
 use dhct_simulate::raster::Displacer;
 use dhct_simulate::surface::Terrace;
@@ -43,10 +44,36 @@ pub struct ValidationCase {
     pub name: String,
     /// The withheld effects (empty = effect-free).
     pub truth: Vec<Candidate>,
+    /// Effects outside the library in the scan (their right answer is "unexplained").
+    #[serde(default)]
+    pub foreign: Vec<ForeignEffect>,
     /// The simulation.
     pub config: SimulationConfig,
     /// Which validation set it belongs to.
     pub set: ValidationSet,
+}
+
+/// Effects outside the diagnosis's library.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ForeignEffect {
+    /// A tip switching irregularly between two apexes.
+    TelegraphTip,
+    /// A local radial strain bubble.
+    StrainBubble,
+}
+
+impl ForeignEffect {
+    /// Both.
+    pub const ALL: [ForeignEffect; 2] = [ForeignEffect::TelegraphTip, ForeignEffect::StrainBubble];
+
+    /// Short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ForeignEffect::TelegraphTip => "telegraph-tip",
+            ForeignEffect::StrainBubble => "strain-bubble",
+        }
+    }
 }
 
 /// The validation sets (see [`crate::validate`] for the protocol).
@@ -72,16 +99,23 @@ pub enum ValidationSet {
     /// was final: new seeds, magnitudes 0.7–0.8 or 1.2–1.35 ×, vibration 0.07–0.1 Hz (a
     /// band no other set has).
     HeldOut,
+    /// The held-out set of issue 17, fixed before its first run: a base model that differs
+    /// from dhct's default (fast-scan hysteresis law cubic, quartic, exponential or power by
+    /// seed, see [`BaseLaw::of_seed`]), magnitudes 0.7–0.85 or 1.15–1.3 ×, vibration
+    /// 0.4–0.6 Hz, and effects outside the library (telegraph tip, strain bubble) whose
+    /// right answer is "unexplained".
+    Foreign,
 }
 
 impl ValidationSet {
     /// Every set, in report order.
-    pub const ALL: [ValidationSet; 5] = [
+    pub const ALL: [ValidationSet; 6] = [
         ValidationSet::Tuned,
         ValidationSet::Development,
         ValidationSet::SecondDevelopment,
         ValidationSet::ThirdDevelopment,
         ValidationSet::HeldOut,
+        ValidationSet::Foreign,
     ];
 
     /// Short name.
@@ -92,12 +126,13 @@ impl ValidationSet {
             ValidationSet::SecondDevelopment => "dev-2",
             ValidationSet::ThirdDevelopment => "dev-3",
             ValidationSet::HeldOut => "held-out",
+            ValidationSet::Foreign => "foreign",
         }
     }
 
     /// Whether the set's numbers are evidence (never looked at while the method changed).
     pub fn is_evidence(self) -> bool {
-        self == ValidationSet::HeldOut
+        matches!(self, ValidationSet::HeldOut | ValidationSet::Foreign)
     }
 }
 
@@ -179,6 +214,17 @@ pub enum BaseLaw {
 }
 
 impl BaseLaw {
+    /// The law of seed `seed` in the [`ValidationSet::Foreign`] set (cubic, quartic,
+    /// exponential, power in turn).
+    pub fn of_seed(seed: u64) -> BaseLaw {
+        [
+            BaseLaw::Cubic,
+            BaseLaw::Quartic,
+            BaseLaw::Exponential,
+            BaseLaw::Power,
+        ][(seed % 4) as usize]
+    }
+
     /// Every law.
     pub const ALL: [BaseLaw; 4] = [
         BaseLaw::Power,
@@ -239,6 +285,7 @@ fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
         ValidationSet::SecondDevelopment => ((0.6, 0.75), (1.25, 1.5)),
         ValidationSet::ThirdDevelopment => ((0.65, 0.8), (1.2, 1.4)),
         ValidationSet::HeldOut => ((0.7, 0.8), (1.2, 1.35)),
+        ValidationSet::Foreign => ((0.7, 0.85), (1.15, 1.3)),
     };
     let (lo, hi) = if rng.random::<bool>() { low } else { high };
     uniform(rng, lo, hi)
@@ -274,19 +321,34 @@ fn add_effect(
             start_s: uniform(rng, 0.2, 0.65) * frame,
         }),
         Candidate::AsymmetricHysteresis => {
-            let Some(HysteresisLaw::Power { k, n }) = base_law else {
+            let retrace = match &base_law {
+                Some(HysteresisLaw::Power { k, n }) => HysteresisLaw::Power {
+                    k: k - m * 0.04,
+                    n: n - m * 0.012,
+                },
+                // Other laws: the retrace's excess scale half as large again or half as
+                // small (1.5–4 % of scale at the line start).
+                Some(law) => {
+                    let f = 1.0 + sign(rng) * 0.5 * m;
+                    let p = law.parameters();
+                    let scaled: Vec<f64> = match law {
+                        HysteresisLaw::Exponential { .. } => vec![p[0] * f, p[1]],
+                        _ => p.iter().map(|v| v * f).collect(),
+                    };
+                    let Some(l) = law.with_parameters(&scaled) else {
+                        return false;
+                    };
+                    l
+                }
+                None => return false,
+            };
+            let Some(trace) = base_law else {
                 return false;
             };
             config
                 .effects
                 .retain(|e| !matches!(e, EffectConfig::FastHysteresis(_)));
-            EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis {
-                trace: HysteresisLaw::Power { k, n },
-                retrace: HysteresisLaw::Power {
-                    k: k - m * 0.04,
-                    n: n - m * 0.012,
-                },
-            })
+            EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis { trace, retrace })
         }
         Candidate::SlowHysteresis => EffectConfig::SlowHysteresis(SlowScanHysteresis {
             law: HysteresisLaw::Exponential {
@@ -303,6 +365,7 @@ fn add_effect(
                 ValidationSet::SecondDevelopment => uniform(rng, 0.2, 0.3),
                 ValidationSet::ThirdDevelopment => uniform(rng, 0.1, 0.2),
                 ValidationSet::HeldOut => uniform(rng, 0.07, 0.1),
+                ValidationSet::Foreign => uniform(rng, 0.4, 0.6),
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
             phase_rad: [
@@ -350,7 +413,10 @@ impl ValidationCase {
 
     /// The base scan with `effects` added.
     pub fn with_effects(effects: &[Candidate], seed: u64, set: ValidationSet) -> ValidationCase {
-        let mut config = base_config(seed);
+        let mut config = match set {
+            ValidationSet::Foreign => base_config_with_law(seed, BaseLaw::of_seed(seed)),
+            _ => base_config(seed),
+        };
         let mut rng = Self::rng(seed, 0x5EED);
         let mut truth = Vec::new();
         for &c in effects {
@@ -370,9 +436,42 @@ impl ValidationCase {
         ValidationCase {
             name,
             truth,
+            foreign: Vec::new(),
             config,
             set,
         }
+    }
+
+    /// The base scan plus one effect outside the library (magnitudes from the seed):
+    /// a telegraph tip (jumps 20–35 pm, 0.05–0.15 Hz) or a strain bubble (radius
+    /// 0.5–0.9 nm, amplitude 25–45 pm, centre in the middle half of the image).
+    pub fn out_of_library(effect: ForeignEffect, seed: u64, set: ValidationSet) -> ValidationCase {
+        let mut case = Self::with_effects(&[], seed, set);
+        let mut rng = Self::rng(seed, 0x0FF1);
+        let s = &case.config.scan;
+        let (w, h) = (s.width_m, s.height_m);
+        let entry = match effect {
+            ForeignEffect::TelegraphTip => EffectConfig::TelegraphTip(TelegraphTip {
+                jump_m: [
+                    sign(&mut rng) * uniform(&mut rng, 20e-12, 35e-12),
+                    sign(&mut rng) * uniform(&mut rng, 20e-12, 35e-12),
+                ],
+                rate_hz: uniform(&mut rng, 0.05, 0.15),
+            }),
+            ForeignEffect::StrainBubble => EffectConfig::StrainBubble(StrainBubble {
+                centre_m: [
+                    uniform(&mut rng, 0.25, 0.75) * w,
+                    uniform(&mut rng, 0.25, 0.75) * h,
+                ],
+                radius_m: uniform(&mut rng, 0.5e-9, 0.9e-9),
+                amplitude_m: sign(&mut rng) * uniform(&mut rng, 25e-12, 45e-12),
+            }),
+        };
+        case.config.effects.push(entry);
+        case.name = format!("{} #{seed}", effect.name());
+        case.config.name = case.name.clone();
+        case.foreign = vec![effect];
+        case
     }
 
     /// The base scan plus one effect.

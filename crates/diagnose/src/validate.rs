@@ -46,7 +46,10 @@ use std::fmt;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::synth::{ValidationCase, ValidationSet, simulate_images, simulate_positions};
+use crate::synth::{
+    ForeignEffect, ValidationCase, ValidationSet, simulate_images, simulate_positions,
+};
+use crate::verdict::VerdictKind;
 use crate::{Candidate, DiagnoseOptions, diagnose};
 
 /// The seeds of one validation set.
@@ -60,6 +63,9 @@ pub struct SetSeeds {
     pub null_seeds: Vec<u64>,
     /// Added to every mixture seed, so that each set's mixtures are its own scans.
     pub mixture_offset: u64,
+    /// Seeds of the out-of-library cases (each foreign effect, each seed).
+    #[serde(default)]
+    pub foreign_seeds: Vec<u64>,
 }
 
 /// Options of [`validate`].
@@ -90,6 +96,7 @@ impl ValidationOptions {
         for set in &mut self.sets {
             set.seeds.truncate(n);
             set.null_seeds.truncate(2 * n);
+            set.foreign_seeds.truncate(n);
         }
         self.mixture_seeds.truncate(n);
     }
@@ -119,30 +126,43 @@ impl Default for ValidationOptions {
                     seeds: vec![1, 2, 3],
                     null_seeds: (100..120).collect(),
                     mixture_offset: 0,
+                    foreign_seeds: Vec::new(),
                 },
                 SetSeeds {
                     set: ValidationSet::Development,
                     seeds: vec![3001, 3002],
                     null_seeds: (4001..4021).collect(),
                     mixture_offset: 7000,
+                    foreign_seeds: Vec::new(),
                 },
                 SetSeeds {
                     set: ValidationSet::SecondDevelopment,
                     seeds: vec![5001, 5002, 5003],
                     null_seeds: (6001..6041).collect(),
                     mixture_offset: 9000,
+                    foreign_seeds: Vec::new(),
                 },
                 SetSeeds {
                     set: ValidationSet::ThirdDevelopment,
                     seeds: vec![8001, 8002, 8003, 8004],
                     null_seeds: (8101..8141).collect(),
                     mixture_offset: 11000,
+                    foreign_seeds: Vec::new(),
                 },
                 SetSeeds {
                     set: ValidationSet::HeldOut,
                     seeds: vec![12001, 12002, 12003, 12004],
                     null_seeds: (12101..12141).collect(),
                     mixture_offset: 13000,
+                    foreign_seeds: Vec::new(),
+                },
+                // Issue 17's held-out set: fixed here before its first run.
+                SetSeeds {
+                    set: ValidationSet::Foreign,
+                    seeds: vec![21001, 21002, 21003, 21004],
+                    null_seeds: (22001..22041).collect(),
+                    mixture_offset: 24000,
+                    foreign_seeds: (23001..23006).collect(),
                 },
             ],
             mixtures: vec![
@@ -153,10 +173,7 @@ impl Default for ValidationOptions {
             mixture_seeds: vec![11],
             image_path: false,
             noise_m: 2e-12,
-            diagnose: DiagnoseOptions {
-                locate: false,
-                ..DiagnoseOptions::default()
-            },
+            diagnose: DiagnoseOptions::default(),
         }
     }
 }
@@ -173,6 +190,9 @@ pub enum CaseKind {
     EffectFree,
     /// Two effects.
     Mixture,
+    /// An effect outside the library: right if the verdict is `unexplained`, or
+    /// `partly_explained` with the remaining gap located.
+    OutOfLibrary,
 }
 
 /// One validation case's outcome.
@@ -188,10 +208,18 @@ pub struct CaseResult {
     pub set: ValidationSet,
     /// `"positions"` or `"images"`.
     pub path: String,
+    /// Effects outside the library in the scan.
+    #[serde(default)]
+    pub foreign: Vec<ForeignEffect>,
     /// Effects the diagnosis added, in order.
     pub identified: Vec<Candidate>,
-    /// Single: top = truth; degenerate: none or the truth; effect-free: none; mixture: the
-    /// first two added = the truth (any order).
+    /// The diagnosis's verdict.
+    pub verdict: Option<VerdictKind>,
+    /// Places where the remaining gap lies, as the verdict names them.
+    pub remaining: Vec<String>,
+    /// Single: top = truth; degenerate: none or the truth; effect-free: none added and
+    /// verdict `no_gap`; mixture: the first two added = the truth (any order); out of
+    /// library: `unexplained`, or `partly_explained` with the remainder located.
     pub correct: bool,
     /// Gap/noise of the base model.
     pub gap_before: f64,
@@ -225,6 +253,12 @@ pub struct SetSummary {
     pub mixture_cases: usize,
     /// Of which both effects found.
     pub mixtures_correct: usize,
+    /// Out-of-library cases.
+    #[serde(default)]
+    pub foreign_cases: usize,
+    /// Of which `unexplained`, or `partly_explained` with the remainder located.
+    #[serde(default)]
+    pub foreign_correct: usize,
     /// Correct single cases with gap/noise after ≤ 1.2.
     pub gap_ok: usize,
     /// Largest gap/noise after the identified effect, over correct single cases.
@@ -258,6 +292,10 @@ impl SetSummary {
             .iter()
             .filter(|c| c.kind == CaseKind::Mixture)
             .collect();
+        let foreign: Vec<&&CaseResult> = cases
+            .iter()
+            .filter(|c| c.kind == CaseKind::OutOfLibrary)
+            .collect();
         let mean = |v: Vec<f64>| {
             if v.is_empty() {
                 f64::NAN
@@ -280,6 +318,8 @@ impl SetSummary {
             false_alarms: null.iter().filter(|c| !c.correct).count(),
             mixture_cases: mix.len(),
             mixtures_correct: mix.iter().filter(|c| c.correct).count(),
+            foreign_cases: foreign.len(),
+            foreign_correct: foreign.iter().filter(|c| c.correct).count(),
             gap_ok: correct.iter().filter(|c| c.gap_after <= 1.2).count(),
             worst_gap_after: correct.iter().map(|c| c.gap_after).fold(0.0, f64::max),
             mean_gap_before: mean(single.iter().map(|c| c.gap_before).collect()),
@@ -297,11 +337,29 @@ impl SetSummary {
         self.false_alarms as f64 / self.null_cases.max(1) as f64
     }
 
-    /// Whether the issue's acceptance criteria hold.
+    /// Share of out-of-library cases answered `unexplained` (or `partly_explained`,
+    /// located); 1 when there are none.
+    pub fn foreign_rate(&self) -> f64 {
+        if self.foreign_cases == 0 {
+            1.0
+        } else {
+            self.foreign_correct as f64 / self.foreign_cases as f64
+        }
+    }
+
+    /// Whether the issue's acceptance criteria hold: top-1 ≥ 90 %, false alarms ≤ 5 %
+    /// (≤ 2.5 %, 1 in 40, with 40 or more effect-free cases), gap ≤ 1.2 × floor in ≥ 90 %
+    /// of correct single cases, ≥ 80 % of out-of-library cases unexplained.
     pub fn accepted(&self) -> bool {
+        let alarms = if self.null_cases >= 40 {
+            self.false_alarms * 40 <= self.null_cases
+        } else {
+            self.false_alarm_rate() <= 0.05
+        };
         self.top1_rate() >= 0.9
-            && self.false_alarm_rate() <= 0.05
-            && self.gap_ok == self.top1_correct
+            && alarms
+            && self.gap_ok as f64 >= 0.9 * self.top1_correct as f64
+            && self.foreign_rate() >= 0.8
     }
 }
 
@@ -345,6 +403,7 @@ fn run_case(
     seed: u64,
 ) -> CaseResult {
     let kind = match case.truth.as_slice() {
+        _ if !case.foreign.is_empty() => CaseKind::OutOfLibrary,
         [] => CaseKind::EffectFree,
         [Candidate::ScanCoupling] => CaseKind::Degenerate,
         [_] => CaseKind::Single,
@@ -368,6 +427,9 @@ fn run_case(
         name: case.name.clone(),
         kind,
         truth: case.truth.clone(),
+        foreign: case.foreign.clone(),
+        verdict: None,
+        remaining: Vec::new(),
         set: case.set,
         path: if images { "images" } else { "positions" }.into(),
         identified: Vec::new(),
@@ -382,6 +444,13 @@ fn run_case(
     match result {
         Ok(report) => {
             out.identified = report.identified();
+            out.verdict = Some(report.verdict);
+            out.remaining = report
+                .verdict_details
+                .remaining
+                .iter()
+                .map(|p| p.label.clone())
+                .collect();
             out.gap_before = report.shrink.before;
             out.gap_after_top = report.shrink.after_top;
             out.gap_after = report.shrink.after_greedy;
@@ -396,7 +465,14 @@ fn run_case(
             CaseKind::Degenerate => {
                 out.identified.is_empty() || out.identified.first() == case.truth.first()
             }
-            CaseKind::EffectFree => out.identified.is_empty(),
+            CaseKind::EffectFree => {
+                out.identified.is_empty() && out.verdict == Some(VerdictKind::NoGap)
+            }
+            CaseKind::OutOfLibrary => match out.verdict {
+                Some(VerdictKind::Unexplained) => true,
+                Some(VerdictKind::PartlyExplained) => !out.remaining.is_empty(),
+                _ => false,
+            },
             CaseKind::Mixture => {
                 let mut a: Vec<Candidate> = out.identified.iter().take(2).copied().collect();
                 let mut b = case.truth.clone();
@@ -432,6 +508,13 @@ pub fn validate(options: &ValidationOptions) -> ValidationReport {
                     false,
                     seed,
                 ));
+            }
+        }
+    }
+    for set in &options.sets {
+        for &s in &set.foreign_seeds {
+            for effect in ForeignEffect::ALL {
+                jobs.push((ValidationCase::out_of_library(effect, s, set.set), false, s));
             }
         }
     }
@@ -476,6 +559,12 @@ fn label(c: Option<&Candidate>) -> &'static str {
     c.map_or("none", |c| c.name())
 }
 
+fn truth_label(c: &CaseResult) -> &'static str {
+    c.foreign
+        .first()
+        .map_or_else(|| label(c.truth.first()), |f| f.name())
+}
+
 impl ValidationReport {
     /// Confusion matrix (rows: withheld effect of single/degenerate/effect-free cases;
     /// columns: top identified) of one set, as text.
@@ -487,7 +576,7 @@ impl ValidationReport {
             .collect();
         let mut names: Vec<&'static str> = Vec::new();
         for c in &cases {
-            for n in [label(c.truth.first()), label(c.identified.first())] {
+            for n in [truth_label(c), label(c.identified.first())] {
                 if !names.contains(&n) {
                     names.push(n);
                 }
@@ -499,10 +588,8 @@ impl ValidationReport {
         }
         s.push('\n');
         for row in &names {
-            let members: Vec<&&CaseResult> = cases
-                .iter()
-                .filter(|c| label(c.truth.first()) == *row)
-                .collect();
+            let members: Vec<&&CaseResult> =
+                cases.iter().filter(|c| truth_label(c) == *row).collect();
             if members.is_empty() {
                 continue;
             }
@@ -531,7 +618,7 @@ impl fmt::Display for SetSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
+            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, out of library unexplained {}/{}, gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
             self.top1_correct,
             self.effect_cases,
             100.0 * self.top1_rate(),
@@ -542,6 +629,8 @@ impl fmt::Display for SetSummary {
             100.0 * self.false_alarm_rate(),
             self.mixtures_correct,
             self.mixture_cases,
+            self.foreign_correct,
+            self.foreign_cases,
             self.mean_gap_before,
             self.mean_gap_after,
             self.worst_gap_after,
@@ -560,8 +649,8 @@ impl fmt::Display for ValidationReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<44} {:<9} {:<6} {:<34} {:>6} {:>6} {:>6} ok",
-            "case", "set", "path", "identified", "before", "top", "after"
+            "{:<44} {:<9} {:<6} {:<34} {:>6} {:>6} {:>6} {:<17} ok",
+            "case", "set", "path", "identified", "before", "top", "after", "verdict"
         )?;
         for c in &self.cases {
             let ids = if let Some(e) = &c.error {
@@ -577,7 +666,7 @@ impl fmt::Display for ValidationReport {
             };
             writeln!(
                 f,
-                "{:<44} {:<9} {:<6} {:<34} {:>6.2} {:>6} {:>6.2} {}",
+                "{:<44} {:<9} {:<6} {:<34} {:>6.2} {:>6} {:>6.2} {:<17} {}",
                 c.name,
                 c.set.name(),
                 c.path,
@@ -585,6 +674,7 @@ impl fmt::Display for ValidationReport {
                 c.gap_before,
                 c.gap_after_top.map_or("—".into(), |v| format!("{v:.2}")),
                 c.gap_after,
+                c.verdict.map_or("—", |v| v.name()),
                 if c.correct { "yes" } else { "NO" }
             )?;
         }

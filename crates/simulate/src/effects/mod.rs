@@ -18,6 +18,7 @@ mod coupling;
 mod creep;
 mod drift;
 mod hysteresis;
+mod out_of_library;
 mod tip_change;
 mod vibration;
 
@@ -33,6 +34,7 @@ pub use coupling::{HeightCoupling, ScanCoupling};
 pub use creep::{ExponentialCreep, LogCreep};
 pub use drift::{LineDrift, ThermalDrift};
 pub use hysteresis::{AsymmetricHysteresis, FastScanHysteresis, HysteresisLaw, SlowScanHysteresis};
+pub use out_of_library::{StrainBubble, TelegraphTip};
 pub use tip_change::TipChange;
 pub use vibration::Vibration;
 
@@ -156,6 +158,10 @@ pub enum EffectConfig {
     Vibration(Vibration),
     /// 7: sudden lateral jump, with optional height and contrast change.
     TipChange(TipChange),
+    /// A tip switching irregularly between two apexes (outside the diagnosis library).
+    TelegraphTip(TelegraphTip),
+    /// A local radial strain bubble (outside the diagnosis library).
+    StrainBubble(StrainBubble),
 }
 
 impl EffectConfig {
@@ -177,6 +183,8 @@ impl EffectConfig {
             EffectConfig::HeightCoupling(e) => e,
             EffectConfig::Vibration(e) => e,
             EffectConfig::TipChange(e) => e,
+            EffectConfig::TelegraphTip(e) => e,
+            EffectConfig::StrainBubble(e) => e,
         }
     }
 
@@ -194,6 +202,8 @@ impl EffectConfig {
             EffectConfig::HeightCoupling(e) => e.validate(field),
             EffectConfig::Vibration(e) => e.validate(field),
             EffectConfig::TipChange(e) => e.validate(field),
+            EffectConfig::TelegraphTip(e) => e.validate(field),
+            EffectConfig::StrainBubble(e) => e.validate(field),
         }
     }
 
@@ -212,6 +222,8 @@ impl EffectConfig {
             EffectConfig::HeightCoupling(e) => Box::new(e.clone()),
             EffectConfig::Vibration(e) => Box::new(e.clone()),
             EffectConfig::TipChange(e) => Box::new(e.clone()),
+            EffectConfig::TelegraphTip(e) => Box::new(e.clone()),
+            EffectConfig::StrainBubble(e) => Box::new(e.clone()),
         })
     }
 
