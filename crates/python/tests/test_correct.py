@@ -1,0 +1,245 @@
+"""dhct.correct: the same model as `dhct correct`, arrays and columns, write, errors."""
+
+import json
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+import dhct
+
+REL = 1e-9
+
+
+def cli_json(cli, example, tmp_path, *flags):
+    """`dhct correct EXAMPLE -o DIR --json FLAGS` parsed."""
+    out = tmp_path / "cli"
+    run = subprocess.run(
+        [str(cli), "correct", str(example), "-o", str(out), "--json", *flags],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout), out
+
+
+def assert_same_parameters(a, b):
+    assert [p["name"] for p in a] == [p["name"] for p in b]
+    for p, q in zip(a, b):
+        assert p["unit"] == q["unit"] and p["determined"] == q["determined"], p["name"]
+        assert p["value"] == pytest.approx(q["value"], rel=REL, abs=0), p["name"]
+        if q["sigma"] is None:
+            assert p["sigma"] is None, p["name"]
+        else:
+            assert p["sigma"] == pytest.approx(q["sigma"], rel=REL, abs=0), p["name"]
+
+
+def test_same_model_as_the_command_line(cli, example, result, tmp_path):
+    expected, _ = cli_json(cli, example, tmp_path)
+    model = result.model
+    assert_same_parameters(model["parameters"], expected["parameters"])
+    assert model["passes"] == expected["passes"]
+    assert model["lattice"] == expected["lattice"] == "graphite"
+    assert [w["code"] for w in model["warnings"]] == [w["code"] for w in expected["warnings"]]
+    for mine, theirs in zip(model["regions"], expected["regions"]):
+        assert mine["lattice_constant_m"] == pytest.approx(theirs["lattice_constant_m"], rel=REL)
+
+
+def test_path_input_and_array_input_agree(example, scan, result):
+    from_path = dhct.correct(example)
+    assert_same_parameters(from_path.model["parameters"], result.model["parameters"])
+    g = scan.geometry
+    built = dhct.Scan.from_arrays(
+        scan.trace, scan.retrace, pitch_m=g["pitch_x_m"], pixel_period_s=g["pixel_period_s"]
+    )
+    from_arrays = dhct.correct(built)
+    assert_same_parameters(from_arrays.model["parameters"], result.model["parameters"])
+    assert from_arrays.model["input"] == "<arrays>"
+
+
+def test_same_options_same_model_as_the_command_line(cli, example, tmp_path):
+    expected, _ = cli_json(cli, example, tmp_path, "--nn", "2.46A", "--polarity", "bright")
+    mine = dhct.correct(example, nn="2.46A", polarity="bright")
+    assert_same_parameters(mine.model["parameters"], expected["parameters"])
+    assert mine.model["nearest_neighbour_distance_m"] == expected["nearest_neighbour_distance_m"]
+
+
+def test_corrected_images_have_the_scan_shape(scan, result):
+    for image in (result.corrected_trace, result.corrected_retrace):
+        assert image.dtype == np.float64
+        assert image.shape == scan.shape
+        assert np.isfinite(image).mean() > 0.5
+    # Corrected, not a copy of the raw image.
+    assert not np.array_equal(np.nan_to_num(result.corrected_trace), scan.trace)
+
+
+def test_feature_columns_equal_length_positions_in_metres(scan, result):
+    f = result.features
+    lengths = {name: len(values) for name, values in f.items()}
+    n = sum(p["features"] for p in result.model["passes"])
+    assert set(lengths.values()) == {n}, lengths
+    assert f["x_m"].dtype == np.float64 and f["id"].dtype == np.int64
+    assert f["indexed"].dtype == np.bool_
+    pitch = scan.geometry["pitch_x_m"]
+    np.testing.assert_allclose(f["x_m"], f["x_px"] * pitch, rtol=0, atol=pitch)
+    assert set(f["pass"]) == {"trace", "retrace"}
+    indexed = f["indexed"]
+    assert indexed.sum() == sum(p["indexed"] for p in result.model["passes"])
+    assert (f["region"][~indexed] == -1).all() and np.isnan(f["deviation_x_m"][~indexed]).all()
+    # Deviations from the fitted lattice: picometres, not nanometres.
+    assert np.nanmax(np.abs(f["deviation_x_m"])) < 5e-11
+
+
+def test_feature_columns_match_features_csv(result, tmp_path):
+    result.write(tmp_path / "out")
+    header = (tmp_path / "out" / "features.csv").read_text().splitlines()[0].split(",")
+    columns = list(result.features)
+    assert [c for c in columns if c != "indexed"] == header
+
+
+def test_features_frame(result):
+    pd = pytest.importorskip("pandas")
+    frame = result.features_frame()
+    assert isinstance(frame, pd.DataFrame)
+    assert list(frame.columns) == list(result.features)
+    assert len(frame) == len(result.features["x_m"])
+
+
+def test_lattice_unit_cell_and_warnings(result):
+    lattice = result.lattice
+    assert lattice["primitive_vectors_m"].shape == (2, 2)
+    assert lattice["nearest_neighbour_distance_m"] == pytest.approx(2.46e-10, rel=1e-6)  # graphite: the β sites
+    assert lattice["regions"] and lattice["regions"][0]["lattice_constant_m"][0] > 0
+    cell = result.unit_cell
+    assert cell["averaged"].ndim == 2 and cell["averaged"].dtype == np.float64
+    assert cell["symmetrized"].shape == cell["averaged"].shape
+    assert cell["cells_selected"] <= cell["cells_available"]
+    assert {w["code"] for w in result.warnings} <= {
+        w["code"] for w in result.model["warnings"]
+    }
+    assert set(result.parameters) == {p["name"] for p in result.model["parameters"]}
+    assert result.calibration is not None
+
+
+def test_write_gives_the_command_lines_files(cli, example, result, tmp_path):
+    _, cli_out = cli_json(cli, example, tmp_path)
+    written = result.write(tmp_path / "py")
+    mine = sorted(p.name for p in (tmp_path / "py").iterdir())
+    theirs = sorted(p.name for p in cli_out.iterdir())
+    assert mine == theirs
+    assert sorted(written["outputs"]) == sorted(
+        json.loads((cli_out / "model.json").read_text())["outputs"]
+    )
+    on_disk = json.loads((tmp_path / "py" / "model.json").read_text())
+    assert_same_parameters(on_disk["parameters"], result.model["parameters"])
+    with pytest.raises(dhct.WriteError, match="overwrite"):
+        result.write(tmp_path / "py")
+    result.write(tmp_path / "py", overwrite=True)
+
+
+def test_repr_html(result):
+    page = result._repr_html_()
+    for p in result.model["parameters"]:
+        assert f"<td>{p['name']}</td>" in page
+    assert "graphite" in repr(result)
+
+
+def test_mask_array_limits_the_analysis(scan, result):
+    rows, columns = scan.shape
+    mask = np.zeros(scan.shape, dtype=bool)
+    mask[:, : columns // 2] = True
+    half = dhct.correct(scan, mask=mask)
+    # Features are found everywhere; only those inside the mask are indexed and fitted.
+    n_all = result.features["indexed"].sum()
+    f = half.features
+    x = f["x_px"][f["indexed"]]
+    assert 0 < len(x) < 0.6 * n_all
+    assert x.max() < columns / 2
+    with pytest.raises(dhct.OptionError, match="2-D"):
+        dhct.correct(scan, mask=np.zeros(5))
+    with pytest.raises(dhct.OptionError, match="the mask is 5 x 5"):
+        dhct.correct(scan, mask=np.ones((5, 5)))
+
+
+def test_progress_called_for_each_stage_and_gil_released(scan):
+    counter = [0]
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            counter[0] += 1
+
+    seen = []
+
+    def progress(stage):
+        seen.append((stage, counter[0]))
+
+    thread = threading.Thread(target=spin)
+    thread.start()
+    try:
+        dhct.correct(scan, progress=progress)
+    finally:
+        stop.set()
+        thread.join()
+    stages = [s for s, _ in seen]
+    assert "finding and fitting features" in stages and len(stages) >= 4
+    # Between the first and the last stage the Rust code ran without the GIL: the other
+    # Python thread kept counting (with the GIL held it could not run at all).
+    assert seen[-1][1] - seen[0][1] > 100
+
+
+def test_progress_errors_are_raised(scan):
+    def progress(stage):
+        raise KeyError("from the callback")
+
+    with pytest.raises(KeyError, match="from the callback"):
+        dhct.correct(scan, progress=progress)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, needles",
+    [
+        (dict(nn="1.23A"), dhct.InputMismatchError, ["--calibrate", "pixel size"]),
+        (dict(lattice="square", nn="2.46A"), dhct.InputMismatchError, ["square lattice"]),
+        (dict(lattice="square"), dhct.OptionError, ["needs --nn"]),
+        (dict(lattice="no-such-lattice"), dhct.OptionError, ["no-such-lattice"]),
+        (dict(pipeline={"features": {"no_such_key": 1}}), dhct.OptionError, ["no_such_key"]),
+        (dict(calibrat=True), dhct.OptionError, ["did you mean 'calibrate'"]),
+        (dict(polarity="sideways"), dhct.OptionError, ["sideways"]),
+        (dict(pixel_period=1e30), dhct.OptionError, ["pixel_period"]),
+    ],
+)
+def test_errors_carry_the_command_lines_messages(scan, kwargs, error, needles):
+    with pytest.raises(error) as caught:
+        dhct.correct(scan, **kwargs)
+    for needle in needles:
+        assert needle in str(caught.value)
+
+
+def test_input_mismatch_message_equals_the_command_lines(cli, example, tmp_path):
+    run = subprocess.run(
+        [str(cli), "correct", str(example), "-o", str(tmp_path / "o"), "--nn", "1.23A"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 1
+    with pytest.raises(dhct.InputMismatchError) as caught:
+        dhct.correct(example, nn="1.23A")
+    assert run.stderr.strip() == f"error: {caught.value}"
+
+
+def test_escape_hatches_resolve_as_the_command_line(example):
+    # --nn 1.23A is refused; with --trust-inputs it runs (no check, no calibration).
+    trusted = dhct.correct(example, nn="1.23A", trust_inputs=True)
+    assert trusted.model["nearest_neighbour_distance_m"] == pytest.approx(1.23e-10)
+    assert trusted.calibration is None
+
+
+def test_read_errors_from_correct(tmp_path):
+    with pytest.raises(dhct.ReadError):
+        dhct.correct(tmp_path / "missing.sm4")
+    with pytest.raises(dhct.OptionError):
+        dhct.correct(42)
