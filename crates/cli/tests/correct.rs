@@ -321,7 +321,8 @@ fn correct_real_files() {
         }
         assert!(out.path().join("report.html").is_file());
     }
-    // A wrong NN distance gives a clear error that suggests the right one.
+    // A wrong NN distance gives a clear error that names the distance the image shows and
+    // suggests it (or --calibrate when the constant is right and the pixel size wrong).
     let out = tempfile::tempdir().unwrap();
     let output = dhct()
         .args([
@@ -339,7 +340,12 @@ fn correct_real_files() {
         .unwrap();
     assert_eq!(output.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("try --nn"), "{stderr}");
+    assert!(
+        stderr.contains("in file units")
+            && stderr.contains("use --nn 2.")
+            && stderr.contains("--calibrate"),
+        "{stderr}"
+    );
 }
 
 fn dhct_features_nn(args: &[&str]) -> f64 {

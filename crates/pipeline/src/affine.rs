@@ -88,6 +88,20 @@ pub(crate) fn compare(
     })
 }
 
+/// Largest anisotropy of a calibration the affine correction may stand in for a model that
+/// could not be fitted: beyond it the image is distorted more than drift and a miscalibrated
+/// head commonly do, and a lattice matched that far is not to be trusted without the model.
+pub const ALONE_MAX_ANISOTROPY: f64 = 1.4;
+
+/// Largest shear (degrees) of such a calibration.
+pub const ALONE_MAX_SHEAR_DEG: f64 = 12.0;
+
+/// Whether the affine correction of `calibration` may stand alone (no drift model).
+pub(crate) fn trusted_alone(calibration: &Calibration) -> bool {
+    calibration.anisotropy <= ALONE_MAX_ANISOTROPY
+        && calibration.shear_deg.abs() <= ALONE_MAX_SHEAR_DEG
+}
+
 /// The global affine correction `K⁻¹` as a distortion model, to correct images with when
 /// it beats the full model: the x scale as a constant hysteresis stretch (power law with
 /// `n = 0`, `S = 2 − 1/kx`), the y scale and the shear as constant drift along the slow

@@ -159,6 +159,7 @@ pub fn run(
                 let affine = calibration
                     .as_ref()
                     .ok()
+                    .filter(|found| affine::trusted_alone(&found.calibration))
                     .and_then(|found| affine::affine_model(geometry, &found.calibration));
                 match affine {
                     Some(model) => (
