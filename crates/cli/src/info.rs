@@ -178,8 +178,8 @@ fn human(summary: &FileSummary) -> String {
 
 /// Reads `path` and prints its summary (JSON when `json`).
 pub fn run(path: &Path, overrides: &dhct_sm4_io::GeometryOverrides, json: bool) -> Result<()> {
-    let file =
-        dhct_sm4_io::read_path_with(path, overrides).with_context(|| path.display().to_string())?;
+    let file = dhct_sm4_io::read_path_with_limits(path, overrides, &crate::read_limits::get())
+        .with_context(|| path.display().to_string())?;
     let summary = summarise(path, &file);
     // Through a locked stdout: a closed pipe (`dhct info --json | head -1`) is not a panic.
     if json {

@@ -7,5 +7,6 @@ pub mod correct;
 pub mod diagnose;
 pub mod info;
 pub mod output_dir;
+pub mod read_limits;
 pub mod simulate;
 pub mod units;

@@ -21,6 +21,47 @@ use dhct_sm4_io::GeometryOverrides;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Largest number of bytes a file and the images decoded from it may take, e.g. 8GiB
+    /// (default 2GiB): raise it for truly huge scans.
+    #[arg(long, global = true, value_parser = parse_bytes)]
+    max_read_bytes: Option<u64>,
+    /// Largest number of pixels of all images of one file together (default 2^28).
+    #[arg(long, global = true)]
+    max_read_pixels: Option<u64>,
+}
+
+/// A byte count: a number with an optional B, KiB, MiB, GiB or TiB (also kB, MB, GB, TB).
+fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number
+        .parse()
+        .map_err(|_| format!("'{text}' is not a size (e.g. 8GiB)"))?;
+    let factor = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "kib" => 1024.0,
+        "mib" => 1024.0 * 1024.0,
+        "gib" => 1024.0 * 1024.0 * 1024.0,
+        "tib" => 1024.0 * 1024.0 * 1024.0 * 1024.0,
+        "kb" => 1e3,
+        "mb" => 1e6,
+        "gb" => 1e9,
+        "tb" => 1e12,
+        other => {
+            return Err(format!(
+                "'{other}' is not a size unit (B, KiB, MiB, GiB, TiB)"
+            ));
+        }
+    };
+    let bytes = value * factor;
+    if bytes.is_finite() && (1.0..=1e15).contains(&bytes) {
+        Ok(bytes as u64)
+    } else {
+        Err(format!("'{text}' is not a size between 1 B and 1 PB"))
+    }
 }
 
 #[derive(Subcommand)]
@@ -259,6 +300,11 @@ fn parse_direction(text: &str) -> Result<ScanDirection, String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let defaults = dhct_sm4_io::ReadLimits::default();
+    dhct_cli::read_limits::set(dhct_sm4_io::ReadLimits {
+        max_bytes: cli.max_read_bytes.unwrap_or(defaults.max_bytes),
+        max_pixels: cli.max_read_pixels.unwrap_or(defaults.max_pixels),
+    });
     let result = match &cli.command {
         Command::Correct {
             input,

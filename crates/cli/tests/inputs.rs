@@ -226,3 +226,22 @@ fn assumed_timing_is_a_warning_with_what_to_do() {
     assert!(baseline["model_rms_m"].as_f64().unwrap() > 0.0);
     assert!(baseline["affine_rms_m"].as_f64().unwrap() > 0.0);
 }
+
+#[test]
+fn the_read_budget_is_a_flag() {
+    let info = |args: &[&str]| {
+        dhct()
+            .args(args)
+            .arg("info")
+            .arg(example())
+            .output()
+            .expect("dhct runs")
+    };
+    let refused = info(&["--max-read-bytes", "1KiB"]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("read limit of 1024 bytes"));
+    let refused = info(&["--max-read-pixels", "1000"]);
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("read limit of 1000 pixels"));
+    assert!(info(&["--max-read-bytes", "3GiB"]).status.success());
+    assert!(!info(&["--max-read-bytes", "3XB"]).status.success());
+}

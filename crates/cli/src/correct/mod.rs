@@ -52,7 +52,7 @@ pub fn read_pair(
     retrace: Option<&Path>,
     overrides: &dhct_sm4_io::GeometryOverrides,
 ) -> Result<ScanPair> {
-    let file = dhct_sm4_io::read_path_with(input, overrides)
+    let file = dhct_sm4_io::read_path_with_limits(input, overrides, &crate::read_limits::get())
         .with_context(|| format!("cannot read {}", input.display()))?;
     let pair = file
         .topography()
@@ -61,8 +61,9 @@ pub fn read_pair(
     let Some(retrace_path) = retrace else {
         return Ok(pair);
     };
-    let other = dhct_sm4_io::read_path_with(retrace_path, overrides)
-        .with_context(|| format!("cannot read {}", retrace_path.display()))?;
+    let other =
+        dhct_sm4_io::read_path_with_limits(retrace_path, overrides, &crate::read_limits::get())
+            .with_context(|| format!("cannot read {}", retrace_path.display()))?;
     let other_pair = other
         .topography()
         .with_context(|| format!("{} holds no topography image", retrace_path.display()))?;
