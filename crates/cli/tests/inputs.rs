@@ -3,29 +3,17 @@
 //! a corrupted pixel size; and the explicit ways out (`--calibrate`, `--nn auto`,
 //! `--trust-inputs`) do what they say.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{correct, dhct};
 
 use serde_json::Value;
 
-fn dhct() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_dhct"))
-}
-
 fn example() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/simulated_graphite.sm4")
-}
-
-fn correct(input: &Path, args: &[&str], out: &Path) -> Output {
-    dhct()
-        .arg("correct")
-        .arg(input)
-        .arg("-o")
-        .arg(out)
-        .arg("--quiet")
-        .args(args)
-        .output()
-        .expect("dhct runs")
 }
 
 /// Fails, without a panic, with every `needles` in stderr.

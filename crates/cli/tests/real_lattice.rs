@@ -3,23 +3,14 @@
 //! constant and 1° of the angle; files that cannot support the model stop with a clear
 //! error. Files that may not be redistributed are read from `DHCT_REAL_DATA`.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Output;
+
+use common::correct;
 
 use dhct_calibrate::{CheckOptions, calibrate_pair};
 use dhct_lattice::{Hexagonal, PlaneGroup};
-
-fn correct(input: &Path, args: &[&str], out: &Path) -> Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_dhct"))
-        .arg("correct")
-        .arg(input)
-        .arg("-o")
-        .arg(out)
-        .arg("--quiet")
-        .args(args)
-        .output()
-        .expect("dhct runs")
-}
 
 fn tests_data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
