@@ -84,17 +84,38 @@ enum Command {
         #[command(flatten)]
         options: CorrectArgs,
     },
-    /// Run `correct` on every image file in a directory (in parallel), each into its own
-    /// subdirectory of OUTDIR, and write one summary table (batch_summary.csv). A bad file
-    /// is reported and skipped.
+    /// Run `correct` on every scan file of folders (searched recursively), glob patterns
+    /// and files, --jobs N at once, each into its own folder of OUTDIR (mirroring the
+    /// folders it was found in), and write one table (summary.csv: status, error, lattice
+    /// constant, model parameters ± 1σ, warnings). Files are recognised by content; others
+    /// are skipped with a note. Exits with 1 when any file failed (the others are written).
     Batch {
-        /// Directory of image files.
-        dir: PathBuf,
-        /// Output directory (one subdirectory per input file).
+        /// Folders, glob patterns (quoted, e.g. 'data/**/*.sm4') or files.
+        #[arg(required = true)]
+        inputs: Vec<String>,
+        /// Output directory (one folder per input file, and summary.csv).
         #[arg(short, long)]
         output: PathBuf,
+        /// Files corrected at once (and threads in all); default: the number of CPUs.
+        #[arg(long, short = 'j', value_parser = clap::value_parser!(u16).range(1..))]
+        jobs: Option<u16>,
+        /// Only this part of the sorted file list: i/n takes files i, i+n, i+2n, ...
+        /// (0 <= i < n), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; give
+        /// each shard its own -o and merge the tables with `dhct summarize`.
+        #[arg(long)]
+        shard: Option<batch::Shard>,
         #[command(flatten)]
         options: CorrectArgs,
+    },
+    /// Merge the summary.csv tables of several batch runs (e.g. the shards of a scheduler
+    /// array) into one CSV: the union of their columns, every row once.
+    Summarize {
+        /// summary.csv files, or batch output folders holding one.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged table to write (CSV).
+        #[arg(short, long)]
+        output: PathBuf,
     },
     /// Diagnose the sim-to-real gap: where the fitted DHCT model and the image disagree (in
     /// time, fast-line phase, space, trace vs retrace), which unmodelled effect explains it
@@ -352,12 +373,25 @@ fn main() -> ExitCode {
             }
         }
         Command::Batch {
-            dir,
+            inputs,
             output,
+            jobs,
+            shard,
             options,
-        } => options
-            .config()
-            .and_then(|config| batch::run(dir, output, &config, options.json, !options.quiet)),
+        } => options.config().and_then(|config| {
+            batch::run(&batch::BatchRequest {
+                inputs,
+                output,
+                config: &config,
+                jobs: jobs.map(usize::from),
+                shard: *shard,
+                json: options.json,
+                progress: !options.quiet,
+            })
+        }),
+        Command::Summarize { inputs, output } => {
+            batch::summarize(inputs, output).and_then(|text| diagnose::write_stdout(&text))
+        }
         Command::Info {
             file,
             json,

@@ -410,7 +410,9 @@ fn batch_continues_past_a_bad_file() {
         input.path().join("good.sm4"),
     )
     .unwrap();
-    std::fs::write(input.path().join("bad.sm4"), b"STiMage garbage").unwrap();
+    // An SM4 cut short: recognised by its header, then refused by the reader.
+    let bytes = std::fs::read(workspace_file("data/simulated_graphite.sm4")).unwrap();
+    std::fs::write(input.path().join("bad.sm4"), &bytes[..bytes.len() / 3]).unwrap();
     let out = tempfile::tempdir().unwrap();
     let output = dhct()
         .args(["batch", "--quiet"])
@@ -426,17 +428,17 @@ fn batch_continues_past_a_bad_file() {
         "{stdout}"
     );
     assert!(out.path().join("good/report.html").is_file());
-    let table = std::fs::read_to_string(out.path().join("batch_summary.csv")).unwrap();
+    let table = std::fs::read_to_string(out.path().join("summary.csv")).unwrap();
     assert_eq!(table.lines().count(), 3, "{table}");
     assert!(
         table
             .lines()
-            .any(|l| l.contains("good.sm4") && l.contains(",true,"))
+            .any(|l| l.contains("good.sm4") && l.contains(",ok,"))
     );
     assert!(
         table
             .lines()
-            .any(|l| l.contains("bad.sm4") && l.contains(",false,"))
+            .any(|l| l.contains("bad.sm4") && l.contains(",failed,"))
     );
 }
 
