@@ -347,6 +347,30 @@ impl Correction {
         }
     }
 
+    /// The sim-to-real gap diagnosis of the features found (what `dhct correct --diagnose`
+    /// writes as diagnosis.json), as JSON text.
+    fn diagnose_json(&self, py: Python<'_>) -> PyResult<String> {
+        let c = &self.inner;
+        let report = py.detach(|| {
+            let sets: Vec<&[dhct_features::Feature]> = c
+                .analysis
+                .passes
+                .iter()
+                .map(|p| p.features.features.as_slice())
+                .collect();
+            dhct_cli::diagnose::diagnose_features(
+                &sets,
+                c.pair.geometry(),
+                c.lattice.as_ref(),
+                c.mask.as_ref(),
+                &c.options,
+            )
+        });
+        report
+            .map(|r| r.to_json())
+            .map_err(|e| to_py::<AnalysisError>(&e))
+    }
+
     /// Writes every output `dhct correct` writes into `outdir` (through a staging folder;
     /// an earlier run is replaced only with `overwrite`); returns `model.json`'s text.
     #[pyo3(signature = (outdir, overwrite=false, diagnose=false))]

@@ -243,3 +243,35 @@ def test_read_errors_from_correct(tmp_path):
         dhct.correct(tmp_path / "missing.sm4")
     with pytest.raises(dhct.OptionError):
         dhct.correct(42)
+
+
+def _numbers_close(a, b, path="diagnosis"):
+    """Nested JSON values equal, numbers to 1e-9 relative."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _numbers_close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _numbers_close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) and isinstance(b, (int, float)):
+        assert a == pytest.approx(b, rel=REL, abs=1e-300), path
+    else:
+        assert a == b, path
+
+
+def test_diagnose_equals_the_command_lines_diagnosis(cli, example, result, tmp_path):
+    out = tmp_path / "diag"
+    run = subprocess.run(
+        [str(cli), "correct", str(example), "-o", str(out), "--diagnose", "--quiet"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+    expected = json.loads((out / "diagnosis.json").read_text())
+    mine = result.diagnose()
+    assert mine["verdict"] in {"no_gap", "explained", "partly_explained", "unexplained"}
+    _numbers_close(mine, expected)
+    assert dhct.diagnose(example)["verdict"] == expected["verdict"]

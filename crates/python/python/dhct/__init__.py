@@ -22,7 +22,7 @@ import html
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -52,6 +52,7 @@ __all__ = [
     "WriteError",
     "__version__",
     "correct",
+    "diagnose",
     "presets",
     "read",
     "simulate",
@@ -329,6 +330,13 @@ class Result:
         no cell was averaged (``model["unit_cell_note"]`` says why)."""
         return self._raw.unit_cell()
 
+    def diagnose(self) -> Dict[str, Any]:
+        """The sim-to-real gap diagnosis of this run's features: where the fitted model and
+        the image disagree (in time, fast-line phase, space, trace vs retrace), which
+        unmodelled effect explains it, and the verdict; the content of the diagnosis.json
+        that ``dhct correct --diagnose`` writes."""
+        return json.loads(self._raw.diagnose_json())
+
     def write(self, outdir: PathLike, overwrite: bool = False, diagnose: bool = False) -> Dict[str, Any]:
         """Writes the same files as ``dhct correct ... -o outdir`` (report.html, corrected
         images, features.csv, model.json, config.toml, figures); an earlier run's folder is
@@ -369,6 +377,18 @@ class Result:
         )
 
 
+def diagnose(
+    scan_or_path: Union[Scan, PathLike],
+    lattice: Optional[str] = None,
+    nn: Union[float, str, None] = None,
+    mask: Union[PathLike, np.ndarray, None] = None,
+    **options: Any,
+) -> Dict[str, Any]:
+    """Corrects the scan as :func:`correct` does (same arguments) and diagnoses the
+    sim-to-real gap: the content of diagnosis.json from ``dhct correct --diagnose``."""
+    return correct(scan_or_path, lattice, nn, mask, **options).diagnose()
+
+
 @dataclass(frozen=True)
 class Simulation:
     """A simulated acquisition: the scan (trace and retrace, metres), the ground truth (the
@@ -405,5 +425,3 @@ def simulate(preset_or_config: Union[str, PathLike, Mapping[str, Any]], seed: Op
     scan, truth, config = _dhct.simulate(*args, seed)
     return Simulation(scan=scan, truth=json.loads(truth), config=config)
 
-
-ProgressCallback = Callable[[str], None]
