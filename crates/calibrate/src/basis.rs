@@ -51,6 +51,10 @@ struct Score {
     indices: Vec<Option<[i64; 2]>>,
     indexed_power: f64,
     occupancy: f64,
+    /// Whether two independent first-order reflections (among ±b1, ±b2, ±(b1 ± b2)) are
+    /// observed peaks: a lattice's fundamental reflections are there; a supercell's (whose
+    /// reciprocal lattice holds every true peak too) are fractional and absent.
+    fundamentals: bool,
 }
 
 /// Indexes `peaks` in `basis`; a peak is indexed when it lies within a tolerance of a
@@ -96,10 +100,22 @@ fn score(basis: &Matrix2<f64>, peaks: &[Peak]) -> Option<Score> {
     // Lattice points in the half disc of the indexed peaks, outside the excluded centre.
     let predicted =
         (0.5 * std::f64::consts::PI * (radius * radius - MIN_RADIUS_BINS.powi(2)) / cell).max(1.0);
+    let observed = |h: [i64; 2]| {
+        indices
+            .iter()
+            .any(|i| *i == Some(h) || *i == Some([-h[0], -h[1]]))
+    };
+    let first_order = [[1, 0], [0, 1], [1, 1], [1, -1]];
+    let present: Vec<[i64; 2]> = first_order.into_iter().filter(|&h| observed(h)).collect();
+    let fundamentals = present
+        .iter()
+        .enumerate()
+        .any(|(i, a)| present[i + 1..].iter().any(|b| a[0] * b[1] != a[1] * b[0]));
     Some(Score {
         indices,
         indexed_power: indexed_power / total.max(f64::MIN_POSITIVE),
         occupancy: count as f64 / predicted,
+        fundamentals,
     })
 }
 
@@ -130,7 +146,7 @@ pub fn find_basis(peaks: &[Peak]) -> Option<FittedBasis> {
     let floor = MIN_INDEXED_POWER.min(best_power - 0.03);
     let (basis, chosen) = candidates
         .into_iter()
-        .filter(|(_, s)| s.indexed_power >= floor && s.occupancy >= MIN_OCCUPANCY)
+        .filter(|(_, s)| s.indexed_power >= floor && s.occupancy >= MIN_OCCUPANCY && s.fundamentals)
         .min_by(|(a, sa), (b, sb)| {
             let (ca, cb) = (a.determinant().abs(), b.determinant().abs());
             // Same cell within 2 %: the one indexing more power.

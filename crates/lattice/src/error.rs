@@ -60,6 +60,9 @@ pub enum LatticeError {
     UnknownPlaneGroup(String),
     #[error("cannot parse lattice file: {0}")]
     Parse(String),
+    /// A catalogue lattice without a known constant was asked for without one.
+    #[error("the {name} lattice has no known constant: give its nearest-neighbour distance")]
+    NeedsConstant { name: &'static str },
     #[error("cannot read lattice file {path}")]
     Io {
         path: std::path::PathBuf,

@@ -28,6 +28,7 @@
 //! ```
 
 mod appearance;
+pub mod catalogue;
 mod error;
 mod fit;
 mod motif;
@@ -37,6 +38,7 @@ mod presets;
 mod user;
 
 pub use appearance::FeatureAppearance;
+pub use catalogue::{CATALOGUE, CatalogueEntry, CatalogueLattice};
 pub use error::LatticeError;
 pub use fit::{
     AngularDistribution, IndexedPoint, LatticeFit, LatticeFitError, LatticeFitOptions,

@@ -192,6 +192,15 @@ pub enum LatticeConfig {
     /// Any lattice, in the `dhct-lattice` user-lattice layout (name, length_unit, a1, a2,
     /// plane_group, motif).
     User(UserLattice),
+    /// A lattice of the `dhct-lattice` catalogue by name (the names `dhct correct --lattice`
+    /// takes), with its nearest-neighbour distance replaced by `nn_m` if given.
+    Catalogue {
+        /// The catalogue name, e.g. "si111-7x7".
+        name: String,
+        /// Nearest-neighbour distance, metres (needed by entries without a known constant).
+        #[serde(default)]
+        nn_m: Option<f64>,
+    },
 }
 
 impl LatticeConfig {
@@ -208,6 +217,18 @@ impl LatticeConfig {
             LatticeConfig::Square { a_m } => Box::new(Square::new(*a_m)?),
             LatticeConfig::Rectangular { a_m, b_m } => Box::new(Rectangular::new(*a_m, *b_m)?),
             LatticeConfig::User(lattice) => Box::new(lattice.clone()),
+            LatticeConfig::Catalogue { name, nn_m } => {
+                let entry = dhct_lattice::catalogue::lookup(name).ok_or_else(|| {
+                    SimulationError::InvalidConfig {
+                        field: "surface.lattice.name".into(),
+                        reason: format!(
+                            "unknown catalogue lattice '{name}' (use {})",
+                            dhct_lattice::catalogue::names()
+                        ),
+                    }
+                })?;
+                entry.build(*nn_m)?
+            }
         })
     }
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use dhct_features::Polarity;
-use dhct_lattice::{Hexagonal, Honeycomb, Lattice, PlaneGroup, Square, UserLattice};
+use dhct_lattice::{Lattice, LatticeError, PlaneGroup, UserLattice};
 use dhct_pipeline::PipelineOptions;
 use dhct_sm4_io::GeometryOverrides;
 use dhct_sm4_io::png_file::Colormap;
@@ -271,53 +271,34 @@ pub fn build_lattice(name: &str, nn_m: Option<f64>) -> Result<Box<dyn Lattice + 
             "--nn {nn} m is not a plausible nearest-neighbour distance (expected 0.1–100 nm, e.g. 2.46A)"
         );
     }
-    let lattice: Box<dyn Lattice + Send + Sync> = match name.to_ascii_lowercase().as_str() {
-        "graphite" | "hopg" => match nn_m {
-            Some(a) => Box::new(Hexagonal::new("graphite", a, PlaneGroup::P3m1)?),
-            None => Box::new(Hexagonal::graphite()),
-        },
-        "hexagonal" | "trigonal" => Box::new(Hexagonal::new(
-            "hexagonal",
-            nn_m.context("--lattice hexagonal needs --nn")?,
-            PlaneGroup::P6mm,
-        )?),
-        "sam-sqrt3" | "sam" => match nn_m {
-            Some(a) => Box::new(Hexagonal::new("sam-sqrt3", a, PlaneGroup::P6mm)?),
-            None => Box::new(Hexagonal::sam_sqrt3()),
-        },
-        "honeycomb" | "graphene" => match nn_m {
-            Some(nn) => Box::new(Honeycomb::new(nn * 3f64.sqrt())?),
-            None => Box::new(Honeycomb::graphene()),
-        },
-        "si111-7x7" | "si-7x7" | "7x7" => match nn_m {
-            Some(a) => Box::new(Hexagonal::si111_7x7().with_constant(a)?),
-            None => Box::new(Hexagonal::si111_7x7()),
-        },
-        "square" => Box::new(Square::new(
-            nn_m.context("--lattice square needs --nn (its lattice constant)")?,
-        )?),
-        _ => {
-            let path = Path::new(name);
-            if std::fs::symlink_metadata(path).is_err() {
-                bail!(
-                    "unknown lattice '{name}': use graphite, honeycomb, sam-sqrt3, si111-7x7, \
-                     hexagonal, square, or the path of a lattice file (TOML/JSON, see docs)"
-                );
+    if let Some(entry) = dhct_lattice::catalogue::lookup(name) {
+        return entry.build(nn_m).map_err(|e| match e {
+            LatticeError::NeedsConstant { name } => {
+                anyhow!("--lattice {name} needs --nn (its nearest-neighbour distance, or auto)")
             }
-            let user = UserLattice::from_path(path)
-                .with_context(|| format!("cannot read lattice file {name}"))?;
-            if nn_m.is_some() {
-                bail!("--nn cannot rescale a lattice file; edit its vectors instead");
-            }
-            Box::new(user)
-        }
-    };
+            other => other.into(),
+        });
+    }
+    let path = Path::new(name);
+    if std::fs::symlink_metadata(path).is_err() {
+        bail!(
+            "unknown lattice '{name}': use {}, or the path of a lattice file (TOML/JSON, see docs)",
+            dhct_lattice::catalogue::names()
+        );
+    }
+    let user =
+        UserLattice::from_path(path).with_context(|| format!("cannot read lattice file {name}"))?;
+    if nn_m.is_some() {
+        bail!("--nn cannot rescale a lattice file; edit its vectors instead");
+    }
+    let lattice: Box<dyn Lattice + Send + Sync> = Box::new(user);
     Ok(lattice)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dhct_lattice::Hexagonal;
 
     #[test]
     fn presets_and_nn() {
