@@ -9,8 +9,8 @@
 //!   after the other within a scan line (less than `0.3 ×` the line scan time apart) share
 //!   any smooth systematic displacement, so half the robust variance of the difference of
 //!   their residuals is the localisation variance (per axis, 1.4826·MAD/√2). When it
-//!   exceeds the fits' estimate by more than [`UNDERESTIMATE_RATIO`] the fits understate
-//!   the scatter (correlated noise, a shape the fit does not follow) and the floor takes it.
+//!   exceeds the fits' estimate by more than [`UNDERESTIMATE_RATIO`] (from at least
+//!   [`MIN_RAISE_PAIRS`] pairs) the fits understate the scatter (correlated noise, a shape the fit does not follow) and the floor takes it.
 //!   A rotated lattice may have no two features on one line: then it is not available.
 //! * **Trace/retrace pairs** (reported only): the same site imaged in trace and retrace.
 //!   Anything that differs between the passes (a vibration's phase, a mis-modelled
@@ -31,6 +31,10 @@ pub const MIN_PAIRS: usize = 20;
 
 /// Successive differences larger than this many times the fits' uncertainty replace it.
 pub const UNDERESTIMATE_RATIO: f64 = 1.5;
+
+/// Pairs the successive differences need before they may raise the floor (a few dozen
+/// pairs of a real image are too rough an estimate to let a gap hide in them).
+pub const MIN_RAISE_PAIRS: usize = 100;
 
 /// Why an estimate of the floor could not be made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -282,7 +286,10 @@ pub(crate) fn estimate(
         }
     };
     let localisation = localisation(observations);
-    let (sigma_m, source) = match (localisation.sigma_m(), successive_differences.sigma_m()) {
+    let raising = successive_differences
+        .sigma_m()
+        .filter(|_| diffs.len() >= MIN_RAISE_PAIRS);
+    let (sigma_m, source) = match (localisation.sigma_m(), raising) {
         (Some(l), Some(s)) => {
             let raised = [0, 1].map(|a| s[a] > UNDERESTIMATE_RATIO * l[a]);
             if raised.iter().any(|r| *r) {
@@ -293,8 +300,11 @@ pub(crate) fn estimate(
             }
         }
         (Some(l), None) => (l, FloorSource::Localisation),
-        (None, Some(s)) => (s, FloorSource::SuccessiveDifferences),
-        (None, None) => {
+        (None, _) if successive_differences.sigma_m().is_some() => (
+            successive_differences.sigma_m().unwrap_or([1e-15; 2]),
+            FloorSource::SuccessiveDifferences,
+        ),
+        (None, _) => {
             let all: Vec<f64> = residuals.iter().flat_map(|r| *r).collect();
             let s = robust_sigma(&all);
             let s = if s.is_finite() && s > 0.0 { s } else { 1e-15 };
