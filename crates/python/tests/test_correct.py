@@ -275,3 +275,10 @@ def test_diagnose_equals_the_command_lines_diagnosis(cli, example, result, tmp_p
     assert mine["verdict"] in {"no_gap", "explained", "partly_explained", "unexplained"}
     _numbers_close(mine, expected)
     assert dhct.diagnose(example)["verdict"] == expected["verdict"]
+
+
+def test_progress_true_reports_each_stage_on_stderr_or_tqdm(scan, capsys):
+    dhct.correct(scan, progress=True)
+    err = capsys.readouterr().err
+    # Either tqdm's bar or one line per stage: both name the stages.
+    assert "finding and fitting features" in err or "stage" in err, err

@@ -22,7 +22,7 @@ import html
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -201,7 +201,7 @@ def correct(
     dict shaped like the config's [pipeline] table, e.g.
     ``{"features": {"min_relative_height": 0.5}}``), the geometry ``pitch`` (metres),
     ``pixel_period``, ``line_time``, ``turnaround`` (seconds), ``fast``, ``slow``, and
-    ``progress`` (a callable given each stage's description).
+    ``progress`` (a callable given each stage's description, or True for a tqdm bar).
 
     Raises OptionError (an invalid option, config or mask), ReadError, InputMismatchError
     (the image does not show the lattice or constant given; the message names the option
@@ -226,15 +226,42 @@ def correct(
         )
     retrace = options.get("retrace")
     config_path = options.get("config")
-    raw = _dhct.correct(
-        source,
-        json.dumps(config),
-        os.fspath(config_path) if config_path is not None else None,
-        os.fspath(retrace) if retrace is not None else None,
-        mask_array,
-        options.get("progress"),
-    )
+    progress, done = _progress(options.get("progress"))
+    try:
+        raw = _dhct.correct(
+            source,
+            json.dumps(config),
+            os.fspath(config_path) if config_path is not None else None,
+            os.fspath(retrace) if retrace is not None else None,
+            mask_array,
+            progress,
+        )
+    finally:
+        done()
     return Result(raw)
+
+
+def _progress(progress: Any) -> Tuple[Optional[Callable[[str], Any]], Callable[[], None]]:
+    """The stage callback and what to call at the end: ``progress=True`` shows a tqdm bar
+    when tqdm is installed (else one line per stage on stderr); a callable is called with
+    each stage's description; None or False shows nothing."""
+    if progress is None or progress is False:
+        return None, lambda: None
+    if callable(progress):
+        return progress, lambda: None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        import sys
+
+        return (lambda stage: print(f"dhct: {stage}", file=sys.stderr)), lambda: None
+    bar = tqdm(desc="dhct", unit="stage")
+
+    def update(stage: str) -> None:
+        bar.set_postfix_str(stage)
+        bar.update()
+
+    return update, bar.close
 
 
 class Result:
