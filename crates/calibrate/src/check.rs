@@ -13,7 +13,8 @@ pub struct CheckOptions {
     /// lattice's size in file units may differ from the one given by at most this fraction
     /// (either way) along the fast axis, and by [`SLOW_AXIS_SLACK`] times as much along the
     /// slow axis (where a drift looks the same). Default 0.15; a lattice preset
-    /// whose constant is known (nothing typed) is typically given 0.5.
+    /// whose constant is known (nothing typed) is typically given 0.75 (a
+    /// factor 1.75: a head off by 40 % either way).
     pub pitch_tolerance: f64,
     /// Stop when the image's symmetry contradicts the lattice's (e.g. a square lattice on
     /// a hexagonal image). Off only for users who know better.

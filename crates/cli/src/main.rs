@@ -191,7 +191,7 @@ struct CorrectArgs {
     /// `auto`: the distance the image shows in the file's units. Presets with a known
     /// constant (graphite, sam-sqrt3, honeycomb, si111-7x7) need none. The image is checked
     /// against it: a constant that would need the file's pixel size to be off by more than
-    /// 15 % (50 % for a preset's constant) stops the run.
+    /// 15 % (a factor 1.75 for a preset's constant) stops the run.
     #[arg(long, value_parser = parse_nn)]
     nn: Option<correct::Length>,
     /// The lattice constant is right and the file's pixel size may be wrong by any factor

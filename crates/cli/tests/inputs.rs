@@ -233,3 +233,32 @@ fn the_read_budget_is_a_flag() {
     assert!(info(&["--max-read-bytes", "3GiB"]).status.success());
     assert!(!info(&["--max-read-bytes", "3XB"]).status.success());
 }
+
+#[test]
+fn a_preset_takes_a_head_off_by_40_percent_but_not_by_a_factor_2() {
+    let dir = tempfile::tempdir().unwrap();
+    // The file's pixel size is 15.625 pm: 40 % smaller and 40 % larger pass (calibrated from
+    // the lattice, with a warning), twice as large stops.
+    for (pitch, name) in [("9.375pm", "small"), ("21.875pm", "large")] {
+        let out = dir.path().join(name);
+        let output = correct(&example(), &["--pitch", pitch], &out);
+        assert!(
+            output.status.success(),
+            "{pitch}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let model: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap())
+                .unwrap();
+        let a = model["regions"][0]["lattice_constant_m"][0]
+            .as_f64()
+            .unwrap();
+        assert!((a / 2.46e-10 - 1.0).abs() < 0.01, "{pitch}: a = {a}");
+    }
+    let output = correct(
+        &example(),
+        &["--pitch", "31.25pm"],
+        &dir.path().join("double"),
+    );
+    fails_saying(&output, &["wrong by a factor 2.", "in file units"]);
+}

@@ -11,9 +11,11 @@ use ndarray::Array2;
 use super::{CorrectConfig, Length, build_lattice};
 
 /// The largest pixel-size error accepted for a lattice whose constant the user did not
-/// type (a preset's known constant, e.g. graphite or Si(111)-7×7): real heads are off by
-/// tens of percent; the typed constant's default is `CheckOptions::default()`'s 15 %.
-pub const PRESET_PITCH_TOLERANCE: f64 = 0.5;
+/// type (a preset's known constant, e.g. graphite or Si(111)-7×7): a factor 1.75 either
+/// way along the fast axis, so a head off by 40 % either way (the lattice 1.67× or 0.71× as
+/// long in the file) passes, while a 2 × 2 superstructure taken for the lattice does not.
+/// A constant the user types is held to `CheckOptions::default()`'s 15 %.
+pub const PRESET_PITCH_TOLERANCE: f64 = 0.75;
 
 /// With `--calibrate`: the constant is right, the pixel size may be off by up to ×10.
 pub const CALIBRATE_PITCH_TOLERANCE: f64 = 9.0;
@@ -69,7 +71,7 @@ pub fn resolve(config: &CorrectConfig) -> Result<Resolved> {
     })
 }
 
-/// How far the file's pixel size may be off: 15 % for a typed constant, 50 % for a
+/// How far the file's pixel size may be off: 15 % for a typed constant, a factor 1.75 for a
 /// preset's, ×10 with `--calibrate`; `--trust-inputs` turns the check (and the calibration
 /// from the lattice) off. A tolerance set in a config file is kept.
 fn apply_check_policy(config: &CorrectConfig, typed: bool, options: &mut PipelineOptions) {
