@@ -90,9 +90,7 @@ pub fn calibrate_pair(
     options: &CheckOptions,
 ) -> Result<PairCalibration, CalibrationError> {
     let geometry = pair.geometry();
-    let nn_px =
-        lattice.nearest_neighbour_distance() / (geometry.pitch_x() * geometry.pitch_y()).sqrt();
-    let factor = binning_factor(geometry.columns(), geometry.rows(), nn_px);
+    let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
     let measure = |pass: ScanPass| {
         pair.image(pass)
             .map(|image| measure_lattice_binned(image.z.view(), geometry, mask, factor))

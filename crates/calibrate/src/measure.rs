@@ -181,16 +181,16 @@ pub const MAX_MEASURED_SIDE: usize = 1024;
 /// Fewest pixels per expected nearest-neighbour distance kept when binning.
 pub const MIN_BINNED_NN_PX: f64 = 5.0;
 
-/// The binning factor (a power of 2) for measuring an image of `columns × rows` px whose
-/// lattice is expected at `nn_px` pixels: the image is shrunk to at most
+/// The binning factor (a power of 2) for measuring an image of `geometry` whose lattice has
+/// its nearest neighbours `nn_m` metres apart: the image is shrunk to at most
 /// [`MAX_MEASURED_SIDE`] px a side as long as the lattice keeps [`MIN_BINNED_NN_PX`] px
 /// (the Fourier peaks then cost a sixteenth of the time at 2048² and lose no precision
 /// that the seeds need).
-pub fn binning_factor(columns: usize, rows: usize, nn_px: f64) -> usize {
+pub fn binning_factor(geometry: &ScanGeometry, nn_m: f64) -> usize {
+    let nn_px = nn_m / (geometry.pitch_x() * geometry.pitch_y()).sqrt();
+    let side = geometry.columns().max(geometry.rows());
     let mut factor = 1;
-    while columns.max(rows) / factor > MAX_MEASURED_SIDE
-        && nn_px / (2 * factor) as f64 >= MIN_BINNED_NN_PX
-    {
+    while side / factor > MAX_MEASURED_SIDE && nn_px / (2 * factor) as f64 >= MIN_BINNED_NN_PX {
         factor *= 2;
     }
     factor

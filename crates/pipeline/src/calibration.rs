@@ -134,9 +134,7 @@ pub(crate) fn check_corrected(
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
 ) -> Vec<CorrectedImageCheck> {
-    let nn_px =
-        lattice.nearest_neighbour_distance() / (geometry.pitch_x() * geometry.pitch_y()).sqrt();
-    let factor = binning_factor(geometry.columns(), geometry.rows(), nn_px);
+    let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
     images
         .iter()
         .filter_map(|&(pass, z)| {
