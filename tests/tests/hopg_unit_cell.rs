@@ -11,16 +11,16 @@ use dhct_lattice::{Hexagonal, LatticeFitOptions, PlaneGroup, fit_lattice};
 use dhct_scan::ScanPass;
 use dhct_unitcell::{ConfidenceEllipse, average_unit_cell, local_cells, symmetry_residuals};
 
-/// The clean upper-left terrace, clear of the step (pixels, x = column, y = row).
-const TERRACE: [[f64; 2]; 7] = [
-    [0.0, 0.0],
-    [370.0, 0.0],
-    [320.0, 90.0],
-    [240.0, 180.0],
-    [180.0, 240.0],
-    [110.0, 310.0],
-    [0.0, 400.0],
-];
+/// The HOPG terrace outline (raw-image pixels) of the example config
+/// `tests/data/hopg_terrace.toml`: the step edge and the superstructure next to it left out.
+fn terrace() -> Vec<[f64; 2]> {
+    let config: toml::Value =
+        toml::from_str(include_str!("../data/hopg_terrace.toml")).expect("example config");
+    config["mask_polygon"]
+        .clone()
+        .try_into()
+        .expect("mask_polygon")
+}
 
 /// Runs the chain with the given local-distortion method; returns the fitted x/y scales.
 fn run(method: Option<dhct_lattice::LocalDistortionMethod>) -> [f64; 2] {
@@ -35,7 +35,7 @@ fn run(method: Option<dhct_lattice::LocalDistortionMethod>) -> [f64; 2] {
         ..FeatureOptions::for_neighbour_distance(2.46e-10)
     };
     let set = find_features(image, geometry, ScanPass::Trace, &options, None).unwrap();
-    let mask = polygon_mask(geometry.rows(), geometry.columns(), &TERRACE, true);
+    let mask = polygon_mask(geometry.rows(), geometry.columns(), &terrace(), true);
     let inputs = [PassInput {
         features: &set.features,
         mask: Some(&mask),

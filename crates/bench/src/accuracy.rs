@@ -6,6 +6,7 @@
 //! features are not fitted on a full disc).
 
 use dhct_lattice::Lattice;
+use dhct_numerics::moments::rms_about_mean;
 use dhct_pipeline::Analysis;
 use dhct_scan::{ScanGeometry, ScanPass};
 use dhct_simulate::GroundTruth;
@@ -194,18 +195,6 @@ pub fn match_features(
     (matches, truth_count, found_count)
 }
 
-/// 2-D rms of `d` after removing its mean (one translation).
-pub fn rms_after_translation(d: &[[f64; 2]]) -> f64 {
-    let n = d.len().max(1) as f64;
-    let mx = d.iter().map(|v| v[0]).sum::<f64>() / n;
-    let my = d.iter().map(|v| v[1]).sum::<f64>() / n;
-    (d.iter()
-        .map(|v| (v[0] - mx).powi(2) + (v[1] - my).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt()
-}
-
 /// Accuracy of `analysis` against `truth`.
 pub fn accuracy(
     analysis: &Analysis,
@@ -262,7 +251,7 @@ pub fn accuracy(
             ]
         })
         .collect();
-    let corrected_rms_m = rms_after_translation(&corrected);
+    let corrected_rms_m = rms_about_mean(&corrected);
     let crlb_white_px = white_noise_crlb_px(truth, geometry, lattice);
     let all: usize = analysis
         .passes
@@ -309,7 +298,7 @@ pub fn accuracy(
         crlb_white_px,
         feature_rms_over_crlb_white: feature_rms_px / crlb_white_px,
         noise_floor_m,
-        uncorrected_rms_m: rms_after_translation(&uncorrected),
+        uncorrected_rms_m: rms_about_mean(&uncorrected),
         corrected_rms_m,
         corrected_over_floor: corrected_rms_m / noise_floor_m,
         indexed_fraction: indexed as f64 / all.max(1) as f64,

@@ -275,13 +275,9 @@ fn signed(index: usize, n: usize) -> i64 {
     }
 }
 
-/// The median (upper middle value; 0 for no values).
+/// The median (0 for no values), the shared convention of [`dhct_numerics::robust`].
 fn median(mut values: Vec<f64>) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mid = values.len() / 2;
-    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+    dhct_numerics::robust::median(&mut values).unwrap_or(0.0)
 }
 
 /// Levels, clips and windows `z`; pixels left out become 0.
@@ -332,19 +328,7 @@ fn prepare(
 /// most about 2^18 of them, evenly spaced: plenty for a clipping level).
 fn robust_sigma(z: &Array2<f64>) -> f64 {
     let step = (z.len() >> 18).max(1);
-    let mut values: Vec<f64> = z
-        .iter()
-        .step_by(step)
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mid = values.len() / 2;
-    let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let mut deviations: Vec<f64> = values.iter().map(|v| (v - median).abs()).collect();
-    let mad = *deviations.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let sigma = 1.4826 * mad;
+    let values: Vec<f64> = z.iter().step_by(step).copied().collect();
+    let sigma = dhct_numerics::robust::mad_sigma(&values).unwrap_or(0.0);
     if sigma > 0.0 { sigma } else { f64::INFINITY }
 }

@@ -179,13 +179,9 @@ pub(crate) fn prepare(
     let refs: Vec<&[[f64; 2]]> = corrected.iter().map(|c| c.as_slice()).collect();
     let fit = fit_lattice(lattice, &refs, &LatticeFitOptions::default())?;
     let nn = lattice.nearest_neighbour_distance() * fit.scale[0].abs().max(fit.scale[1].abs());
-    let mut z0: Vec<f64> = sets
-        .iter()
-        .flat_map(|s| s.iter().map(|f| f.z0))
-        .filter(|v| v.is_finite())
-        .collect();
-    z0.sort_by(f64::total_cmp);
-    let z0_median = z0.get(z0.len() / 2).copied().unwrap_or(0.0);
+    let z0_median =
+        dhct_numerics::robust::finite_median(sets.iter().flat_map(|s| s.iter().map(|f| f.z0)))
+            .unwrap_or(0.0);
     let [a1, a2] = lattice.primitive_vectors();
     let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
     let mut observations = Vec::new();

@@ -3,6 +3,8 @@
 //! [`crate::model::Transform`]), analytic ones for the lattice, uncertainties from
 //! `χ²/dof·(JᵀJ)⁻¹` (pseudo-inverse, so degenerate directions get no spurious precision).
 
+use dhct_numerics::linalg::pseudo_inverse_symmetric;
+use dhct_numerics::lm::{LmOptions, ResidualProblem, Residuals, minimise};
 use dhct_scan::ScanGeometry;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -106,31 +108,39 @@ pub(crate) fn jacobian(
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix (relative cut 1e-12).
 pub(crate) fn pinv_sym(a: &DMatrix<f64>) -> DMatrix<f64> {
-    pinv_sym_cut(a, 1e-12)
+    pseudo_inverse_symmetric(a, 1e-12)
 }
 
-/// Pseudo-inverse with eigenvalues below `cut × max` (after unit-diagonal scaling) dropped.
-pub(crate) fn pinv_sym_cut(a: &DMatrix<f64>, cut: f64) -> DMatrix<f64> {
-    let n = a.nrows();
-    // Scale to unit diagonal for conditioning.
-    let d: Vec<f64> = (0..n)
-        .map(|k| {
-            let v = a[(k, k)];
-            if v > 0.0 { 1.0 / v.sqrt() } else { 1.0 }
-        })
-        .collect();
-    let scaled = DMatrix::from_fn(n, n, |r, c| a[(r, c)] * d[r] * d[c]);
-    let eig = scaled.symmetric_eigen();
-    let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
-    let mut inv = DMatrix::zeros(n, n);
-    for k in 0..n {
-        let l = eig.eigenvalues[k];
-        if l > cut * max {
-            let v = eig.eigenvectors.column(k);
-            inv += v * v.transpose() / l;
+/// The model's weighted residuals `r/σ_axis` as a function of its free parameters, for the
+/// shared Levenberg–Marquardt; parameters outside the model's domain give NaN residuals.
+struct ModelResiduals<'a> {
+    model: &'a GlobalModel,
+    geometry: &'a ScanGeometry,
+    observations: &'a [Observation],
+    sigma: [f64; 2],
+}
+
+impl Residuals for ModelResiduals<'_> {
+    fn residuals(&self, u: &[f64], r: &mut [f64]) {
+        match self.model.with_free_vector(u) {
+            Some(model) => {
+                let w = weighted(
+                    &model.residuals(self.geometry, self.observations),
+                    self.sigma,
+                );
+                r.copy_from_slice(w.as_slice());
+            }
+            None => r.fill(f64::NAN),
         }
     }
-    DMatrix::from_fn(n, n, |r, c| inv[(r, c)] * d[r] * d[c])
+
+    fn jacobian(&self, u: &[f64], _r0: &[f64]) -> DMatrix<f64> {
+        let model = self
+            .model
+            .with_free_vector(u)
+            .expect("the driver asks for Jacobians only where the residuals were finite");
+        jacobian(&model, self.geometry, self.observations, self.sigma)
+    }
 }
 
 /// Fits `model` to `observations` (weights `1/σ` per axis).
@@ -158,67 +168,38 @@ pub(crate) fn fit(
             needed: p / 2 + 2,
         });
     }
-    let mut current = model.clone();
-    let mut u = current.free_vector();
-    let mut r = weighted(&current.residuals(geometry, observations), sigma);
-    let mut chi2 = r.norm_squared();
-    if !chi2.is_finite() {
-        return Err(DiagnoseError::FitFailed {
-            model: label(),
-            reason: "non-finite residuals at the start".into(),
-        });
-    }
-    let mut lambda = 1e-3;
-    let mut jac = jacobian(&current, geometry, observations, sigma);
-    let mut small_steps = 0;
-    for _ in 0..max_iterations {
-        let jt = jac.transpose();
-        let a = &jt * &jac;
-        let g = &jt * &r;
-        let mut improved = false;
-        for _ in 0..12 {
-            let mut damped = a.clone();
-            for k in 0..p {
-                damped[(k, k)] += lambda * a[(k, k)].max(1e-12);
-            }
-            let Some(delta) = damped.clone().cholesky().map(|c| c.solve(&(-&g))) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let trial_u: Vec<f64> = u.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
-            if let Some(trial) = current.with_free_vector(&trial_u) {
-                let trial_r = weighted(&trial.residuals(geometry, observations), sigma);
-                let trial_chi2 = trial_r.norm_squared();
-                if trial_chi2.is_finite() && trial_chi2 <= chi2 {
-                    let gain = chi2 - trial_chi2;
-                    current = trial;
-                    u = trial_u;
-                    r = trial_r;
-                    if gain <= 1e-9 * chi2.max(1.0) {
-                        small_steps += 1;
-                    } else {
-                        small_steps = 0;
-                    }
-                    chi2 = trial_chi2;
-                    lambda = (lambda * 0.2).max(1e-9);
-                    improved = small_steps < 3;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-        jac = jacobian(&current, geometry, observations, sigma);
-    }
-    let jt = jac.transpose();
+    let residuals = ModelResiduals {
+        model: &model,
+        geometry,
+        observations,
+        sigma,
+    };
+    let mut problem = ResidualProblem::new(&residuals, n_res, vec![1.0; n_res]);
+    let options = LmOptions {
+        max_iterations,
+        lambda_down: 0.2,
+        min_lambda: 1e-9,
+        relative_decrease: 1e-9,
+        stalled_steps: 3,
+        relative_step: 0.0,
+        ..LmOptions::default()
+    };
+    let failed = |reason: &str| DiagnoseError::FitFailed {
+        model: label(),
+        reason: reason.into(),
+    };
+    let fit = minimise(&mut problem, &model.free_vector(), &options)
+        .ok_or_else(|| failed("non-finite residuals at the start"))?;
+    let current = model
+        .with_free_vector(&fit.params)
+        .ok_or_else(|| failed("the optimum left the model's domain"))?;
+    let jacobian = problem.jacobian_at(&fit.params);
     let dof = (n_res - p) as f64;
-    let covariance = pinv_sym(&(&jt * &jac)) * (chi2 / dof).max(1.0);
+    let covariance = pinv_sym(&fit.normal.jtwj) * (fit.normal.cost / dof).max(1.0);
     Ok(Fitted {
         residuals: current.residuals(geometry, observations),
         model: current,
-        jacobian: jac,
+        jacobian,
         covariance,
     })
 }

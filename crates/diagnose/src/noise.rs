@@ -162,25 +162,14 @@ pub struct NoiseFloor {
     pub trace_retrace: FloorEstimate,
 }
 
+/// The median (NaN for no values), the shared convention of [`dhct_numerics::robust`].
 pub(crate) fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
+    dhct_numerics::robust::median(values).unwrap_or(f64::NAN)
 }
 
-/// 1.4826·MAD.
+/// 1.4826·MAD (NaN for no finite values).
 pub(crate) fn robust_sigma(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    let m = median(&mut v);
-    let mut dev: Vec<f64> = values.iter().map(|x| (x - m).abs()).collect();
-    1.4826 * median(&mut dev)
+    dhct_numerics::robust::mad_sigma(values).unwrap_or(f64::NAN)
 }
 
 fn pair_sigma(diffs: &[[f64; 2]]) -> [f64; 2] {

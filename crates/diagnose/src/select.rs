@@ -30,8 +30,9 @@ use crate::candidates::{
     within_domain,
 };
 use crate::data::Observation;
-use crate::fit::{Fitted, fit_profiled, pinv_sym, pinv_sym_cut, weighted};
+use crate::fit::{Fitted, fit_profiled, pinv_sym, weighted};
 use crate::model::GlobalModel;
+use dhct_numerics::linalg::pseudo_inverse_symmetric;
 
 /// Score of one candidate in one greedy round.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -204,7 +205,7 @@ pub(crate) fn cv_mean_square(a: &DMatrix<f64>, r: &DVector<f64>, fold: &[usize],
     let gt: DMatrix<f64> = g.iter().fold(DMatrix::zeros(q, q), |acc, x| acc + x);
     let ht: DVector<f64> = h.iter().fold(DVector::zeros(q), |acc, x| acc + x);
     let deltas: Vec<DVector<f64>> = (0..k)
-        .map(|f| -pinv_sym_cut(&(&gt - &g[f]), 1e-8) * (&ht - &h[f]))
+        .map(|f| -pseudo_inverse_symmetric(&(&gt - &g[f]), 1e-8) * (&ht - &h[f]))
         .collect();
     let mut sum = 0.0;
     for row in 0..a.nrows() {

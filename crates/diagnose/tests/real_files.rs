@@ -44,17 +44,16 @@ fn run(
     Ok(report)
 }
 
-/// The HOPG terrace (pixels), as in `crates/distortion/tests/hopg.rs`: the step edge and
-/// the superstructure next to it are left out.
-const TERRACE: [[f64; 2]; 7] = [
-    [0.0, 0.0],
-    [370.0, 0.0],
-    [320.0, 90.0],
-    [240.0, 180.0],
-    [180.0, 240.0],
-    [110.0, 310.0],
-    [0.0, 400.0],
-];
+/// The HOPG terrace outline (raw-image pixels) of the example config
+/// `tests/data/hopg_terrace.toml`: the step edge and the superstructure next to it left out.
+fn terrace() -> Vec<[f64; 2]> {
+    let config: toml::Value = toml::from_str(include_str!("../../../tests/data/hopg_terrace.toml"))
+        .expect("example config");
+    config["mask_polygon"]
+        .clone()
+        .try_into()
+        .expect("mask_polygon")
+}
 
 #[test]
 fn hopg_vendored_file_is_diagnosed() {
@@ -64,7 +63,7 @@ fn hopg_vendored_file_is_diagnosed() {
         line_correction: LineCorrection::Median,
         ..FeatureOptions::for_neighbour_distance(2.46e-10)
     };
-    run(&path, &Hexagonal::graphite(), options, Some(&TERRACE)).expect("HOPG terrace");
+    run(&path, &Hexagonal::graphite(), options, Some(&terrace())).expect("HOPG terrace");
 }
 
 #[test]

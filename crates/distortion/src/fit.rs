@@ -13,11 +13,12 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::lm::{Problem, huber_weights, levenberg_marquardt, mad_sigma};
 use crate::model::{
     Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
 };
 use crate::{DistortionError, LocalDistortion};
+use dhct_numerics::lm::{LmOptions, Residuals, fit_residuals};
+use dhct_numerics::robust::{huber_weights, mad_sigma_about};
 
 /// Which hysteresis law to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -251,11 +252,11 @@ fn fit_drift(
     let mut weights = vec![1.0; 2 * m];
     let mut result = None;
     for round in 0..=robust_rounds.max(1) {
-        let fit = levenberg_marquardt(&residuals, 2 * m, &p0, &weights, 200)
+        let fit = fit_residuals(&residuals, 2 * m, &p0, &weights, &iterations(200))
             .ok_or(DistortionError::FitFailed("drift/creep"))?;
         p0.clone_from(&fit.params);
         let (rx, ry) = fit.residuals.split_at(m);
-        let (sx, sy) = (mad_sigma(rx).max(1e-300), mad_sigma(ry).max(1e-300));
+        let (sx, sy) = (robust_scale(rx).max(1e-300), robust_scale(ry).max(1e-300));
         let (hx, hy) = if robust_rounds > 0 && round > 0 {
             (huber_weights(rx, sx), huber_weights(ry, sy))
         } else {
@@ -270,7 +271,8 @@ fn fit_drift(
     }
     let fit = result.ok_or(DistortionError::FitFailed("drift/creep"))?;
     // One more evaluation of the normal matrix with the final weights.
-    let fit = levenberg_marquardt(&residuals, 2 * m, &fit.params, &weights, 0).unwrap_or(fit);
+    let fit =
+        fit_residuals(&residuals, 2 * m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
     let p = &fit.params;
     let chi2: f64 = fit
         .residuals
@@ -401,7 +403,7 @@ impl DriftProblem<'_> {
     }
 }
 
-impl Problem for DriftProblem<'_> {
+impl Residuals for DriftProblem<'_> {
     fn residuals(&self, p: &[f64], r: &mut [f64]) {
         let m = self.t.len();
         let log = self.creep_column(self.t0_map.t0(p[6]));
@@ -538,10 +540,10 @@ fn fit_hysteresis(
     let mut weights = vec![1.0; m];
     let mut last = None;
     for round in 0..=options.robust_rounds.max(1) {
-        let fit = levenberg_marquardt(&residuals, m, &p, &weights, 200)
+        let fit = fit_residuals(&residuals, m, &p, &weights, &iterations(200))
             .ok_or(DistortionError::FitFailed("hysteresis"))?;
         p.clone_from(&fit.params);
-        let sigma = mad_sigma(&fit.residuals).max(1e-300);
+        let sigma = robust_scale(&fit.residuals).max(1e-300);
         let h = if options.robust_rounds > 0 && round > 0 {
             huber_weights(&fit.residuals, sigma)
         } else {
@@ -551,7 +553,7 @@ fn fit_hysteresis(
         last = Some(fit);
     }
     let fit = last.ok_or(DistortionError::FitFailed("hysteresis"))?;
-    let fit = levenberg_marquardt(&residuals, m, &fit.params, &weights, 0).unwrap_or(fit);
+    let fit = fit_residuals(&residuals, m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
     let chi2: f64 = fit
         .residuals
         .iter()
@@ -585,4 +587,17 @@ fn fit_hysteresis(
         ],
     };
     Ok((law, parameters))
+}
+
+/// LM options with at most `max_iterations` steps (0: only the covariance at the start).
+fn iterations(max_iterations: usize) -> LmOptions {
+    LmOptions {
+        max_iterations,
+        ..LmOptions::default()
+    }
+}
+
+/// Robust scale of fit residuals about zero (0 when there are none).
+fn robust_scale(residuals: &[f64]) -> f64 {
+    mad_sigma_about(residuals, 0.0).unwrap_or(0.0)
 }

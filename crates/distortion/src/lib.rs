@@ -55,7 +55,6 @@
 pub mod correction;
 mod error;
 pub mod fit;
-mod lm;
 pub mod local;
 pub mod mask;
 pub mod model;

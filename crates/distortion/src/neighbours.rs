@@ -12,7 +12,7 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
 use crate::DistortionError;
-use crate::lm::levenberg_marquardt;
+use dhct_numerics::lm::{LmOptions, fit_residuals};
 
 /// Options of the neighbour search; [`NeighbourOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -231,8 +231,17 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
             r[i] = model - g;
         }
     };
-    let fit = levenberg_marquardt(&residuals, m, &p0, &vec![1.0; m], 300)
-        .ok_or(DistortionError::FitFailed("RDF"))?;
+    let fit = fit_residuals(
+        &residuals,
+        m,
+        &p0,
+        &vec![1.0; m],
+        &LmOptions {
+            max_iterations: 300,
+            ..LmOptions::default()
+        },
+    )
+    .ok_or(DistortionError::FitFailed("RDF"))?;
     let p = fit.params;
     let a = p[2 * ns] * a0;
     if !(a > 0.5 * a0 && a < 1.5 * a0) {

@@ -14,16 +14,16 @@ use dhct_lattice::{Hexagonal, Lattice};
 use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use ndarray::Array2;
 
-/// The clean upper-left terrace, about 40 px clear of the step (pixels, x = column, y = row).
-const TERRACE: [[f64; 2]; 7] = [
-    [0.0, 0.0],
-    [370.0, 0.0],
-    [320.0, 90.0],
-    [240.0, 180.0],
-    [180.0, 240.0],
-    [110.0, 310.0],
-    [0.0, 400.0],
-];
+/// The HOPG terrace outline (raw-image pixels) of the example config
+/// `tests/data/hopg_terrace.toml`: the step edge and the superstructure next to it left out.
+fn terrace() -> Vec<[f64; 2]> {
+    let config: toml::Value = toml::from_str(include_str!("../../../tests/data/hopg_terrace.toml"))
+        .expect("example config");
+    config["mask_polygon"]
+        .clone()
+        .try_into()
+        .expect("mask_polygon")
+}
 
 fn load() -> ScanPair {
     let path =
@@ -63,7 +63,7 @@ fn hopg_terrace_sharpens_and_time_scale_is_irrelevant() {
         None,
     )
     .expect("features");
-    let mask = polygon_mask(geometry.rows(), geometry.columns(), &TERRACE, true);
+    let mask = polygon_mask(geometry.rows(), geometry.columns(), &terrace(), true);
     let result = analyse_with(&set.features, &geometry, &mask);
     let pass = &result.passes[0];
     eprintln!(

@@ -6,10 +6,12 @@
 //! equivalent to the rotated form `A·exp(−u²/2σ1² − v²/2σ2²) + z0` but stays well
 //! conditioned when σ1 ≈ σ2 (where θ is undetermined). σ1, σ2, θ are derived from it.
 //!
-//! Solver: Levenberg–Marquardt with Marquardt's diagonal scaling, analytic Jacobian,
-//! fixed-size 7×7 normal equations solved by Cholesky, bounds enforced by projection.
+//! Solver: the shared Levenberg–Marquardt ([`dhct_numerics::lm`]) with Marquardt's diagonal
+//! scaling, an analytic Jacobian whose 7×7 normal equations and cost are formed in one pass
+//! over the pixels, bounds enforced by projection.
 
-use nalgebra::{SMatrix, SVector};
+use dhct_numerics::lm::{LmFit, LmOptions, LmProblem, NormalEquations, minimise};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
 type Matrix7 = SMatrix<f64, 7, 7>;
@@ -198,19 +200,99 @@ fn principal_axes(a: f64, b: f64, c: f64) -> (f64, f64, f64) {
     )
 }
 
-/// Fits the model to pixels at `(xs[i], ys[i])` with values `zs[i]`, starting from the centre
-/// `(x0, y0)` and isotropic width `sigma0` (px). Bright features are assumed: flip z for
-/// dark ones before calling.
-pub fn fit_gaussian(
+/// The Gaussian fit as a problem for the shared Levenberg–Marquardt driver: one fused pass
+/// over the pixels gives the cost and, if the step is accepted, the normal equations.
+struct GaussianProblem<'a> {
+    xs: &'a [f64],
+    ys: &'a [f64],
+    /// z scaled to [0, 1].
+    zs: &'a [f64],
+    limits: &'a FitLimits,
+    amplitude_max: f64,
+    circular: bool,
+    /// The last point evaluated and its normal equations (the driver's sign: `JᵀWr` with
+    /// `r = model − z`).
+    cached: Option<(Vector7, NormalEquations)>,
+}
+
+impl GaussianProblem<'_> {
+    fn evaluate(&mut self, p: &[f64]) -> &NormalEquations {
+        let p = Vector7::from_column_slice(p);
+        if self.cached.as_ref().is_none_or(|(at, _)| *at != p) {
+            let (mut jtj, mut jtr, cost) = normal_equations(&p, self.xs, self.ys, self.zs);
+            if self.circular {
+                restrict_to_circle(&mut jtj, &mut jtr);
+            }
+            let normal = NormalEquations {
+                jtwj: DMatrix::from_column_slice(7, 7, jtj.as_slice()),
+                jtwr: -DVector::from_column_slice(jtr.as_slice()),
+                cost,
+            };
+            self.cached = Some((p, normal));
+        }
+        &self.cached.as_ref().expect("evaluated above").1
+    }
+}
+
+impl LmProblem for GaussianProblem<'_> {
+    fn cost(&mut self, p: &[f64]) -> Option<f64> {
+        Some(self.evaluate(p).cost)
+    }
+
+    fn normal_equations(&mut self, p: &[f64]) -> NormalEquations {
+        self.evaluate(p).clone()
+    }
+
+    fn project(&self, p: &mut [f64]) -> bool {
+        let mut v = Vector7::from_column_slice(p);
+        if self.circular {
+            v[QC] = v[QA];
+            v[QB] = 0.0;
+        }
+        let feasible = project(&mut v, self.limits, self.amplitude_max);
+        p.copy_from_slice(v.as_slice());
+        feasible
+    }
+
+    /// Converged when a step moved the centre (what the fit is for) by less than 1e-3 px.
+    /// Near the optimum of a noisy fit, Gauss–Newton converges linearly (each step about half
+    /// the last), so the remaining centre error is of that order: an order of magnitude below
+    /// the best achievable precision (Cramér–Rao ≈ 0.016 px at SNR 50).
+    fn converged(&self, previous: &[f64], next: &[f64]) -> bool {
+        (next[X0] - previous[X0]).abs() < 1e-3 && (next[Y0] - previous[Y0]).abs() < 1e-3
+    }
+}
+
+/// Amplitude and offset for the start: with the shape fixed at the start they are linear
+/// parameters, solved exactly (2 × 2 least squares) so LM starts close to the minimum.
+fn linear_start(
     xs: &[f64],
     ys: &[f64],
-    zs: &[f64],
+    scaled: &[f64],
     (x0, y0): (f64, f64),
-    sigma0: f64,
-    limits: &FitLimits,
-) -> GaussianFit {
-    let n = zs.len();
-    let failed = |status| GaussianFit {
+    q0: f64,
+) -> (f64, f64) {
+    let n = scaled.len() as f64;
+    let (mut sg, mut sgg, mut sz, mut sgz) = (0.0, 0.0, 0.0, 0.0);
+    for ((&x, &y), &z) in xs.iter().zip(ys).zip(scaled) {
+        let g = (-0.5 * q0 * ((x - x0).powi(2) + (y - y0).powi(2))).exp();
+        sg += g;
+        sgg += g * g;
+        sz += z;
+        sgz += g * z;
+    }
+    let determinant = n * sgg - sg * sg;
+    if determinant > 1e-12 * n * sgg {
+        let a = (n * sgz - sg * sz) / determinant;
+        (a, (sz - a * sg) / n)
+    } else {
+        (1.0, 0.0)
+    }
+}
+
+/// A failed fit at the start centre.
+fn failed_fit((x0, y0): (f64, f64), status: FitStatus) -> GaussianFit {
+    GaussianFit {
         amplitude: f64::NAN,
         x0,
         y0,
@@ -223,9 +305,23 @@ pub fn fit_gaussian(
         y0_sigma: f64::NAN,
         iterations: 0,
         status,
-    };
+    }
+}
+
+/// Fits the model to pixels at `(xs[i], ys[i])` with values `zs[i]`, starting from the centre
+/// `(x0, y0)` and isotropic width `sigma0` (px). Bright features are assumed: flip z for
+/// dark ones before calling.
+pub fn fit_gaussian(
+    xs: &[f64],
+    ys: &[f64],
+    zs: &[f64],
+    (x0, y0): (f64, f64),
+    sigma0: f64,
+    limits: &FitLimits,
+) -> GaussianFit {
+    let n = zs.len();
     if n <= 7 || xs.len() != n || ys.len() != n {
-        return failed(FitStatus::Failed);
+        return failed_fit((x0, y0), FitStatus::Failed);
     }
     // Normalise z to [0, 1] so all parameters are of order one.
     let (z_min, z_max) = zs
@@ -235,97 +331,60 @@ pub fn fit_gaussian(
         });
     let span = z_max - z_min;
     if !(span.is_finite() && span > 0.0) {
-        return failed(FitStatus::Failed);
+        return failed_fit((x0, y0), FitStatus::Failed);
     }
     let scaled: Vec<f64> = zs.iter().map(|z| (z - z_min) / span).collect();
-    let amplitude_max = 3.0;
     let q0 = 1.0 / (sigma0 * sigma0);
-    // With the shape fixed at the start, amplitude and offset are linear parameters: solve
-    // them exactly (2 × 2 least squares) so LM starts close to the minimum.
-    let (mut sg, mut sgg, mut sz, mut sgz) = (0.0, 0.0, 0.0, 0.0);
-    for ((&x, &y), &z) in xs.iter().zip(ys).zip(&scaled) {
-        let g = (-0.5 * q0 * ((x - x0).powi(2) + (y - y0).powi(2))).exp();
-        sg += g;
-        sgg += g * g;
-        sz += z;
-        sgz += g * z;
-    }
-    let determinant = n as f64 * sgg - sg * sg;
-    let (amplitude0, offset0) = if determinant > 1e-12 * n as f64 * sgg {
-        let a = (n as f64 * sgz - sg * sz) / determinant;
-        (a, (sz - a * sg) / n as f64)
-    } else {
-        (1.0, 0.0)
+    let (amplitude0, offset0) = linear_start(xs, ys, &scaled, (x0, y0), q0);
+    let mut problem = GaussianProblem {
+        xs,
+        ys,
+        zs: &scaled,
+        limits,
+        amplitude_max: 3.0,
+        circular: limits.shape == FitShape::Circular,
+        cached: None,
     };
-    let mut p = Vector7::from([amplitude0.max(1e-3), x0, y0, q0, 0.0, q0, offset0]);
-    if !project(&mut p, limits, amplitude_max) {
-        return failed(FitStatus::Failed);
-    }
-
-    let mut lambda = 1e-3;
-    let circular = limits.shape == FitShape::Circular;
-    let restrict = |(mut jtj, mut jtr, cost): (Matrix7, Vector7, f64)| {
-        if circular {
-            restrict_to_circle(&mut jtj, &mut jtr);
-        }
-        (jtj, jtr, cost)
+    let options = LmOptions {
+        max_iterations: limits.max_iterations,
+        relative_decrease: 1e-10,
+        relative_step: 0.0,
+        ..LmOptions::default()
     };
-    let (mut jtj, mut jtr, mut current) = restrict(normal_equations(&p, xs, ys, &scaled));
-    let mut iterations = 0;
-    let mut converged = false;
-    while iterations < limits.max_iterations && !converged {
-        iterations += 1;
-        let mut accepted = false;
-        while lambda < 1e12 {
-            let mut damped = jtj;
-            for i in 0..7 {
-                damped[(i, i)] += lambda * jtj[(i, i)].max(1e-12);
-            }
-            let Some(cholesky) = damped.cholesky() else {
-                lambda *= 10.0;
-                continue;
-            };
-            let step = cholesky.solve(&jtr);
-            let mut trial = p + step;
-            if circular {
-                trial[QC] = trial[QA];
-                trial[QB] = 0.0;
-            }
-            if !project(&mut trial, limits, amplitude_max) {
-                lambda *= 10.0;
-                continue;
-            }
-            // One pass gives the trial's cost and, if it is accepted, its normal equations.
-            let (trial_jtj, trial_jtr, trial_cost) =
-                restrict(normal_equations(&trial, xs, ys, &scaled));
-            if trial_cost <= current {
-                let decrease = current - trial_cost;
-                let moved = (trial - p).abs();
-                p = trial;
-                (jtj, jtr, current) = (trial_jtj, trial_jtr, trial_cost);
-                lambda = (lambda * 0.1).max(1e-12);
-                accepted = true;
-                // Converged when the cost no longer falls measurably, or when a step moved
-                // the centre (what the fit is for) by less than 1e-3 px. Near the optimum of
-                // a noisy fit, Gauss–Newton converges linearly (each step about half the
-                // last), so the remaining centre error is of that order: an order of
-                // magnitude below the best achievable precision (Cramér–Rao ≈ 0.016 px at
-                // SNR 50).
-                let relative = decrease / current.max(1e-300);
-                converged = relative <= 1e-10 || (moved[X0] < 1e-3 && moved[Y0] < 1e-3);
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !accepted {
-            // No downhill step exists at any damping: a minimum within the bounds.
-            converged = true;
-        }
-    }
+    let p0 = [amplitude0.max(1e-3), x0, y0, q0, 0.0, q0, offset0];
+    let Some(fit) = minimise(&mut problem, &p0, &options) else {
+        return failed_fit((x0, y0), FitStatus::Failed);
+    };
+    let amplitude_max = problem.amplitude_max;
+    finish_fit(
+        &fit,
+        n,
+        problem.circular,
+        limits,
+        amplitude_max,
+        (span, z_min),
+    )
+}
 
+/// The fit result in the caller's units, with its status and centre uncertainties.
+fn finish_fit(
+    fit: &LmFit,
+    n: usize,
+    circular: bool,
+    limits: &FitLimits,
+    amplitude_max: f64,
+    (span, z_min): (f64, f64),
+) -> GaussianFit {
+    let p = Vector7::from_column_slice(&fit.params);
+    let current = fit.normal.cost;
     let dof = (n - if circular { 5 } else { 7 }) as f64;
     let variance = current / dof;
-    let covariance = jtj.try_inverse().map(|inverse| inverse * variance);
+    let covariance = fit
+        .normal
+        .jtwj
+        .clone()
+        .try_inverse()
+        .map(|inverse| inverse * variance);
     let (x0_sigma, y0_sigma) = covariance
         .map(|c| (c[(X0, X0)].max(0.0).sqrt(), c[(Y0, Y0)].max(0.0).sqrt()))
         .unwrap_or((f64::NAN, f64::NAN));
@@ -339,7 +398,7 @@ pub fn fit_gaussian(
         || p[AMPLITUDE] >= amplitude_max
     {
         FitStatus::BadShape
-    } else if converged {
+    } else if fit.converged {
         FitStatus::Converged
     } else {
         FitStatus::IterationLimit
@@ -355,7 +414,7 @@ pub fn fit_gaussian(
         residual_rms: (current / n as f64).sqrt() * span,
         x0_sigma,
         y0_sigma,
-        iterations,
+        iterations: fit.iterations,
         status,
     }
 }

@@ -157,19 +157,9 @@ pub fn correct_lines_in_place(out: &mut Array2<f64>, fast_axis: Axis, method: Li
     out.mapv_inplace(|v| v + level);
 }
 
+/// The median (0 for no values): the shared convention of [`dhct_numerics::robust::median`].
 fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let n = values.len();
-    let (below, upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
-    let upper = *upper;
-    if n % 2 == 1 {
-        upper
-    } else {
-        // The lower middle value is the largest of the lower half.
-        0.5 * (below.iter().copied().fold(f64::NEG_INFINITY, f64::max) + upper)
-    }
+    dhct_numerics::robust::median(values).unwrap_or(0.0)
 }
 
 /// Applies the chosen background removal.

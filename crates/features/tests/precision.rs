@@ -6,8 +6,8 @@
 //! the pixels the fit uses (the disc of radius 0.4·NN around the feature).
 
 use dhct_features::{Background, FeatureOptions, find_features};
+use dhct_numerics::crlb::{GaussianSpot, centre_variance_x};
 use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPass};
-use nalgebra::{SMatrix, SVector};
 use ndarray::Array2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -63,32 +63,14 @@ fn image_with_noise(seed: u64, noise: f64, size: usize) -> (ImageChannel, Vec<Tr
 /// CRLB of x0 (px²) for the Gaussian at `truth` observed on the disc the fit uses
 /// (radius 0.4·NN, the default `fit_radius_fraction`).
 fn crlb_x(truth: &Truth, noise: f64) -> f64 {
-    let radius = 0.4 * SPACING_PX;
-    let (cx, cy) = (truth.x.round(), truth.y.round());
-    let q = 1.0 / (SIGMA_PX * SIGMA_PX);
-    let mut fisher = SMatrix::<f64, 7, 7>::zeros();
-    let reach = radius.ceil() as i64;
-    for dr in -reach..=reach {
-        for dc in -reach..=reach {
-            if ((dr * dr + dc * dc) as f64) > radius * radius {
-                continue;
-            }
-            let (dx, dy) = (cx + dc as f64 - truth.x, cy + dr as f64 - truth.y);
-            let e = (-0.5 * q * (dx * dx + dy * dy)).exp();
-            let ae = AMPLITUDE * e;
-            let g = SVector::<f64, 7>::from([
-                e,
-                ae * q * dx,
-                ae * q * dy,
-                -0.5 * ae * dx * dx,
-                -ae * dx * dy,
-                -0.5 * ae * dy * dy,
-                1.0,
-            ]);
-            fisher += g * g.transpose() / (noise * noise);
-        }
-    }
-    fisher.try_inverse().unwrap()[(1, 1)]
+    let spot = GaussianSpot {
+        sigma_px: SIGMA_PX,
+        amplitude: AMPLITUDE,
+        noise,
+        radius_px: 0.4 * SPACING_PX,
+    };
+    let offset = [truth.x - truth.x.round(), truth.y - truth.y.round()];
+    centre_variance_x(&spot, offset).unwrap()
 }
 
 #[test]

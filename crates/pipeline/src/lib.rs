@@ -400,11 +400,7 @@ fn median_nearest_distance(features: &[Feature]) -> f64 {
         })
         .filter(|d| d.is_finite())
         .collect();
-    if nearest.is_empty() {
-        return f64::NAN;
-    }
-    nearest.sort_by(f64::total_cmp);
-    nearest[nearest.len() / 2]
+    dhct_numerics::robust::median(&mut nearest).unwrap_or(f64::NAN)
 }
 
 /// RDF of the corrected positions of the features the raw RDF used (those inside the mask,
@@ -602,15 +598,11 @@ fn fit_regions(
 
 /// Median and robust standard deviation (1.4826 × MAD).
 fn robust_location(values: &[f64]) -> (f64, f64) {
-    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
+    use dhct_numerics::robust::{finite_median, mad_sigma_about};
+    match finite_median(values.iter().copied()) {
+        Some(median) => (median, mad_sigma_about(values, median).unwrap_or(f64::NAN)),
+        None => (f64::NAN, f64::NAN),
     }
-    v.sort_by(f64::total_cmp);
-    let median = v[v.len() / 2];
-    let mut deviations: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
-    deviations.sort_by(f64::total_cmp);
-    (median, 1.4826 * deviations[deviations.len() / 2])
 }
 
 /// Whether a cell's corner features pass the selection.

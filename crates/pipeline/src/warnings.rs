@@ -448,11 +448,7 @@ fn deviation_warning(r: &RegionFit, passes: &[PassOutput]) -> Option<Warning> {
         }));
     }
     sigmas.retain(|s| s.is_finite() && *s > 0.0);
-    if sigmas.is_empty() {
-        return None;
-    }
-    sigmas.sort_by(f64::total_cmp);
-    let localisation = sigmas[sigmas.len() / 2];
+    let localisation = dhct_numerics::robust::median(&mut sigmas)?;
     let ratio = r.whole_ellipse.sigma_major_m / localisation;
     (ratio > DEVIATION_WARNING).then(|| {
         Warning::new(

@@ -173,15 +173,7 @@ fn simulate_to_sm4(pixels: usize, dir: &Path) -> Result<(SimulationOutput, PathB
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    dhct_numerics::robust::median(&mut v).unwrap_or(f64::NAN)
 }
 
 /// Per-stage minimum and median over repeated runs.

@@ -7,6 +7,7 @@ use dhct_distortion::{
 };
 use dhct_features::{FeatureOptions, FeatureSet, find_features_in_pair};
 use dhct_lattice::Lattice;
+use dhct_numerics::moments::rms_about_mean;
 use dhct_scan::{ScanGeometry, ScanPass};
 use dhct_simulate::{Simulation, SimulationConfig, SimulationOutput};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -60,17 +61,6 @@ pub struct Residuals {
     pub corrected_nn_m: f64,
     /// Mean uncorrected NN distance, metres.
     pub uncorrected_nn_m: f64,
-}
-
-fn rms_after_translation(d: &[[f64; 2]]) -> f64 {
-    let n = d.len().max(1) as f64;
-    let mx = d.iter().map(|v| v[0]).sum::<f64>() / n;
-    let my = d.iter().map(|v| v[1]).sum::<f64>() / n;
-    (d.iter()
-        .map(|v| (v[0] - mx).powi(2) + (v[1] - my).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt()
 }
 
 fn affine_rms(from: &[[f64; 2]], to: &[[f64; 2]]) -> f64 {
@@ -177,9 +167,9 @@ pub fn residuals(run: &Run, margin_px: f64) -> Residuals {
             let n = noise.len().max(1) as f64;
             (noise.iter().map(|v| v[0] * v[0] + v[1] * v[1]).sum::<f64>() / n).sqrt()
         },
-        uncorrected: rms_after_translation(&unc),
+        uncorrected: rms_about_mean(&unc),
         affine: (affine_sse / total.max(1) as f64).sqrt(),
-        dhct: rms_after_translation(&dh),
+        dhct: rms_about_mean(&dh),
         corrected_nn_m: mean(&nn_corr),
         uncorrected_nn_m: mean(&nn_unc),
     }
