@@ -130,7 +130,10 @@ fn print_warnings(path: &Path, summary: &RunSummary) {
     let text: String = summary
         .warnings
         .iter()
-        .map(|w| format!("warning: {}: {w}\n", path.display()))
+        .map(|w| {
+            let line = crate::flags::warning_line(w);
+            format!("warning: {}: {line}\n", path.display())
+        })
         .collect();
     let _ = std::io::stderr().lock().write_all(text.as_bytes());
 }

@@ -5,6 +5,7 @@
 pub mod batch;
 pub mod correct;
 pub mod diagnose;
+pub mod flags;
 pub mod info;
 pub mod output_dir;
 pub mod read_limits;

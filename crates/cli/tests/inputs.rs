@@ -203,11 +203,11 @@ fn assumed_timing_is_a_warning_with_what_to_do() {
         .iter()
         .find(|w| w["code"] == "assumed_timing")
         .expect("an assumed-timing warning");
+    // model.json names the inputs (not a flag); stderr adds the flags.
+    assert_eq!(timing["inputs"][0], "line_time", "{timing}");
     assert!(
-        timing["what_to_do"]
-            .as_str()
-            .unwrap()
-            .contains("--line-time")
+        stderr.contains("[options: --line-time, --pixel-period]"),
+        "{stderr}"
     );
     // The affine floor is reported with the same measure as the model.
     let baseline = &m["affine_baseline"][0];

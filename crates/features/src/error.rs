@@ -6,7 +6,7 @@ pub enum FeatureError {
     #[error("invalid parameter: {0}")]
     BadParameter(String),
     #[error(
-        "the image is {columns} x {rows} px, smaller than the {kernel} px kernel: check --nn and the pixel pitch"
+        "the image is {columns} x {rows} px, smaller than the {kernel} px kernel: check the nearest-neighbour distance and the pixel size"
     )]
     ImageTooSmall {
         columns: usize,

@@ -56,8 +56,8 @@ pub enum PipelineError {
     Lattice(#[from] LatticeError),
     /// No region could be indexed by the whole-image lattice fit.
     #[error(
-        "lattice fit: no region could be indexed ({0}); check the lattice type and --nn, \
-         or restrict the analysis to one domain with a mask"
+        "lattice fit: no region could be indexed ({0}); check the lattice type and its \
+         nearest-neighbour distance, or restrict the analysis to one domain with a mask"
     )]
     LatticeFit(LatticeFitError),
     /// The unit-cell analysis failed.

@@ -55,7 +55,8 @@ pub use error::PipelineError;
 pub use options::{CellSelection, PipelineOptions, RegionOptions, UnitCellOptions};
 pub use regions::label_regions;
 pub use warnings::{
-    CALIBRATION_WARNING, DEVIATION_WARNING, INDEXED_WARNING, SCALE_WARNING, Warning, WarningCode,
+    CALIBRATION_WARNING, DEVIATION_WARNING, INDEXED_WARNING, SCALE_WARNING, UserInput, Warning,
+    WarningCode,
 };
 
 use std::time::Instant;
@@ -366,8 +367,8 @@ fn model_error(
             .to_string()
     } else {
         format!(
-            ": if the image is calibrated, try --nn {:.3}A (or check the lattice type; \
-             a wrong pixel size in the file scales every distance)",
+            ": if the image is calibrated, try a nearest-neighbour distance of {:.3} Å (or \
+             check the lattice type; a wrong pixel size in the file scales every distance)",
             median_nn_m * 1e10
         )
     };

@@ -65,6 +65,30 @@ pub enum WarningCode {
     ModelNotFitted,
 }
 
+/// An input the user can give to change a result. Each front end spells it its own way
+/// (the command line as a flag, Python as a keyword), so the library's texts name the
+/// quantity and list these values rather than an option's spelling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UserInput {
+    /// Which lattice the image shows.
+    Lattice,
+    /// The lattice's nearest-neighbour distance.
+    NearestNeighbourDistance,
+    /// The time per scan line.
+    LineTime,
+    /// The time per pixel along the fast axis.
+    PixelPeriod,
+    /// The pixel size.
+    PixelSize,
+    /// The time at each line end.
+    Turnaround,
+    /// The fast and slow scan directions.
+    ScanDirections,
+    /// A mask restricting the analysis.
+    Mask,
+}
+
 /// One warning.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Warning {
@@ -72,8 +96,11 @@ pub struct Warning {
     pub code: WarningCode,
     /// What was found, with the numbers.
     pub message: String,
-    /// What the user can do about it.
+    /// What the user can do about it (naming quantities, not option spellings).
     pub what_to_do: String,
+    /// The inputs [`Warning::what_to_do`] refers to, for front ends to name their options.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<UserInput>,
 }
 
 impl Warning {
@@ -82,7 +109,14 @@ impl Warning {
             code,
             message,
             what_to_do: what_to_do.to_string(),
+            inputs: Vec::new(),
         }
+    }
+
+    /// The same warning, naming the inputs its advice refers to.
+    fn with_inputs(mut self, inputs: &[UserInput]) -> Warning {
+        self.inputs = inputs.to_vec();
+        self
     }
 }
 
@@ -126,16 +160,23 @@ pub(crate) fn calibration_warnings(found: &Result<PairCalibration, String>) -> V
     let found = match found {
         Ok(found) => found,
         Err(reason) => {
-            return vec![Warning::new(
-                WarningCode::LatticeNotMeasured,
-                format!(
-                    "the lattice could not be measured from the image's Fourier transform \
+            return vec![
+                Warning::new(
+                    WarningCode::LatticeNotMeasured,
+                    format!(
+                        "the lattice could not be measured from the image's Fourier transform \
                      ({reason}): the lattice and its constant were not checked against the \
                      image, and the file's pixel size is taken as right"
-                ),
-                "check that the lattice and --nn describe the image; a mask over the \
-                 atomically resolved area helps the measurement",
-            )];
+                    ),
+                    "check that the lattice and its nearest-neighbour distance describe the \
+                 image; a mask over the atomically resolved area helps the measurement",
+                )
+                .with_inputs(&[
+                    UserInput::Lattice,
+                    UserInput::NearestNeighbourDistance,
+                    UserInput::Mask,
+                ]),
+            ];
         }
     };
     let c = &found.calibration;
@@ -143,43 +184,52 @@ pub(crate) fn calibration_warnings(found: &Result<PairCalibration, String>) -> V
     if !(off(c.scale[0]) || off(c.scale[1]) || off(c.mean_scale)) {
         return Vec::new();
     }
-    vec![Warning::new(
-        WarningCode::PixelSizeCalibrated,
-        format!(
-            "the lattice looks {:.1} % × {:.1} % as long along x × y in the file as the \
+    vec![
+        Warning::new(
+            WarningCode::PixelSizeCalibrated,
+            format!(
+                "the lattice looks {:.1} % × {:.1} % as long along x × y in the file as the \
              lattice given (shear {:.1}°): the file's pixel size is likely off (a constant \
              drift or the piezo hysteresis stretch a frame too, by less); the lattice was \
              taken as the standard",
-            100.0 * c.scale[0],
-            100.0 * c.scale[1],
-            c.shear_deg
-        ),
-        "if the lattice constant given is right, nothing: the corrected data are calibrated \
-         by it; otherwise give the right one (--nn)",
-    )]
+                100.0 * c.scale[0],
+                100.0 * c.scale[1],
+                c.shear_deg
+            ),
+            "if the lattice constant given is right, nothing: the corrected data are calibrated \
+         by it; otherwise give the right one",
+        )
+        .with_inputs(&[UserInput::NearestNeighbourDistance]),
+    ]
 }
 
 /// The scan timing or pixel size that the file did not state.
 pub(crate) fn assumption_warnings(geometry: &ScanGeometry) -> Vec<Warning> {
     let mut warnings = Vec::new();
     if geometry.timing_source() != ValueSource::Stated {
-        warnings.push(Warning::new(
-            WarningCode::AssumedTiming,
-            format!(
-                "the scan timing was not read from the file but assumed ({:.4} ms per pixel): \
+        warnings.push(
+            Warning::new(
+                WarningCode::AssumedTiming,
+                format!(
+                    "the scan timing was not read from the file but assumed ({:.4} ms per pixel): \
                  drift velocities, accelerations and times are in assumed units (the \
                  correction itself does not depend on them)",
-                geometry.pixel_period() * 1e3
-            ),
-            "give the real timing with --line-time or --pixel-period",
-        ));
+                    geometry.pixel_period() * 1e3
+                ),
+                "give the real line time or pixel period",
+            )
+            .with_inputs(&[UserInput::LineTime, UserInput::PixelPeriod]),
+        );
     }
     if geometry.scale_source() != ValueSource::Stated {
-        warnings.push(Warning::new(
-            WarningCode::AssumedPixelSize,
-            "the pixel size was not read from the file but assumed".into(),
-            "give it with --pitch, or rely on the lattice (see the calibration)",
-        ));
+        warnings.push(
+            Warning::new(
+                WarningCode::AssumedPixelSize,
+                "the pixel size was not read from the file but assumed".into(),
+                "give the pixel size, or rely on the lattice (see the calibration)",
+            )
+            .with_inputs(&[UserInput::PixelSize]),
+        );
     }
     warnings
 }
@@ -224,20 +274,28 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
     for pass in &dhct.passes {
         let fit = &pass.used_selection().rdf_fit;
         if !fit.is_plausible() {
-            warnings.push(Warning::new(
-                WarningCode::ImplausibleRdf,
-                format!(
-                    "{}: the RDF fit is degenerate (shell widths {}): the neighbour window \
+            warnings.push(
+                Warning::new(
+                    WarningCode::ImplausibleRdf,
+                    format!(
+                        "{}: the RDF fit is degenerate (shell widths {}): the neighbour window \
                      stayed at the lattice's nominal spacing",
-                    pass.pass,
-                    fit.widths_m
-                        .iter()
-                        .map(|w| dhct_calibrate::length(*w))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-                "check the lattice and --nn; mask defects and other domains",
-            ));
+                        pass.pass,
+                        fit.widths_m
+                            .iter()
+                            .map(|w| dhct_calibrate::length(*w))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                    "check the lattice and its nearest-neighbour distance; mask defects and \
+                 other domains",
+                )
+                .with_inputs(&[
+                    UserInput::Lattice,
+                    UserInput::NearestNeighbourDistance,
+                    UserInput::Mask,
+                ]),
+            );
         }
     }
     warnings
@@ -340,10 +398,15 @@ pub(crate) fn corrected_image_warnings(
                     100.0 * CORRECTED_SCALE_TOLERANCE,
                     CORRECTED_ANGLE_TOLERANCE_DEG
                 ),
-                "do not take lengths from this image: check the scan timing and directions \
-                 (--line-time, --turnaround, --fast), mask steps and defects, or use the other \
-                 pass",
+                "do not take lengths from this image: check the scan timing and directions, \
+                 mask steps and defects, or use the other pass",
             )
+            .with_inputs(&[
+                UserInput::LineTime,
+                UserInput::Turnaround,
+                UserInput::ScanDirections,
+                UserInput::Mask,
+            ])
         })
         .collect()
 }
@@ -397,9 +460,10 @@ fn scale_warning(lattice: &dyn Lattice, r: &RegionFit) -> Option<Warning> {
                 r.fit.scale[0],
                 r.fit.scale[1]
             ),
-            "check the lattice constant (--nn) and the drift model (a drift near the \
-             slow-scan speed is not recoverable)",
+            "check the lattice constant and the drift model (a drift near the slow-scan \
+             speed is not recoverable)",
         )
+        .with_inputs(&[UserInput::NearestNeighbourDistance])
     })
 }
 
@@ -420,8 +484,9 @@ fn offset_warning(lattice: &dyn Lattice, r: &RegionFit) -> Option<Warning> {
                 r.region,
                 offset * 1e12
             ),
-            "check the turnaround time and the scan directions (--turnaround, --fast)",
+            "check the turnaround time and the scan directions",
         )
+        .with_inputs(&[UserInput::Turnaround, UserInput::ScanDirections])
     })
 }
 
@@ -543,7 +608,7 @@ mod tests {
         .with_timing_source(ValueSource::Assumed);
         let warnings = assumption_warnings(&geometry);
         assert_eq!(codes(&warnings), [WarningCode::AssumedTiming]);
-        assert!(warnings[0].what_to_do.contains("--line-time"));
+        assert!(warnings[0].inputs.contains(&UserInput::LineTime));
         assert!(
             assumption_warnings(&geometry.clone().with_timing_source(ValueSource::Stated))
                 .is_empty()

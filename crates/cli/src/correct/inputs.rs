@@ -119,6 +119,13 @@ pub fn explain(error: &PipelineError) -> String {
             "{error}\nhint: check --lattice and --nn against the image, --polarity, and that \
              the mask covers the atomically resolved part"
         ),
+        PipelineError::LatticeFit(_) => format!(
+            "{error}\nhint: check --lattice and --nn against the image, or give a --mask over \
+             one domain"
+        ),
+        PipelineError::Features(dhct_features::FeatureError::ImageTooSmall { .. }) => {
+            format!("{error}\nhint: check --nn and the pixel size (--pitch)")
+        }
         _ => error.to_string(),
     }
 }

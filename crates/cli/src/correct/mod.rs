@@ -585,7 +585,7 @@ pub fn warning_lines(summary: &RunSummary) -> String {
     summary
         .warnings
         .iter()
-        .map(|w| format!("warning: {w}\n"))
+        .map(|w| format!("warning: {}\n", crate::flags::warning_line(w)))
         .collect()
 }
 
