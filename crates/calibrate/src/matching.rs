@@ -195,8 +195,10 @@ fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
     (k, row2.x.atan2(row2.y))
 }
 
+/// The lattice's translation cell as columns: what the image's spectrum shows (the
+/// primitive cell of a centred lattice, not its conventional one).
 fn lattice_matrix(lattice: &dyn Lattice) -> Matrix2<f64> {
-    let [a1, a2] = lattice.primitive_vectors();
+    let [a1, a2] = lattice.translation_cell();
     Matrix2::from_columns(&[a1, a2])
 }
 

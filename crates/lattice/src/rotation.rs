@@ -16,7 +16,7 @@ const REFINE_REACH_RAD: f64 = 10.0 * PI / 180.0;
 
 /// Distinct undirected directions of `vectors` (radians in `[0, π)`, ascending); two
 /// directions within `tolerance_rad` are one.
-pub(crate) fn undirected_directions(
+pub fn undirected_directions(
     vectors: impl IntoIterator<Item = [f64; 2]>,
     tolerance_rad: f64,
 ) -> Vec<f64> {
@@ -40,7 +40,7 @@ pub(crate) fn undirected_directions(
 /// The smallest rotation `π/k` (k = 1..=12) that maps the undirected `directions` (radians)
 /// onto themselves within `tolerance_rad`: π/3 for hexagonal bonds, π/2 for square, π for
 /// oblique ones.
-pub(crate) fn direction_period(directions: &[f64], tolerance_rad: f64) -> f64 {
+pub fn direction_period(directions: &[f64], tolerance_rad: f64) -> f64 {
     (1..=12usize)
         .rev()
         .map(|k| PI / k as f64)
