@@ -71,12 +71,30 @@ fn kagome_sites_have_four_neighbours_in_site_dependent_directions() {
     assert_eq!(lattice.neighbour_counts(), vec![4]);
     // Site A bonds along a1 and a2 (0°, 60°); site B along a1 and a2 − a1 (0°, 120°).
     let direction = |v: &nalgebra::Vector2<f64>| v.y.atan2(v.x).rem_euclid(PI).to_degrees();
-    let mut a: Vec<f64> = lattice.nearest_neighbours(0).iter().map(direction).collect();
-    let mut b: Vec<f64> = lattice.nearest_neighbours(1).iter().map(direction).collect();
+    let mut a: Vec<f64> = lattice
+        .nearest_neighbours(0)
+        .iter()
+        .map(direction)
+        .collect();
+    let mut b: Vec<f64> = lattice
+        .nearest_neighbours(1)
+        .iter()
+        .map(direction)
+        .collect();
     a.sort_by(f64::total_cmp);
     b.sort_by(f64::total_cmp);
-    assert!(a.iter().zip([0.0, 0.0, 60.0, 60.0]).all(|(x, y)| (x - y).abs() < 1e-9), "{a:?}");
-    assert!(b.iter().zip([0.0, 0.0, 120.0, 120.0]).all(|(x, y)| (x - y).abs() < 1e-9), "{b:?}");
+    assert!(
+        a.iter()
+            .zip([0.0, 0.0, 60.0, 60.0])
+            .all(|(x, y)| (x - y).abs() < 1e-9),
+        "{a:?}"
+    );
+    assert!(
+        b.iter()
+            .zip([0.0, 0.0, 120.0, 120.0])
+            .all(|(x, y)| (x - y).abs() < 1e-9),
+        "{b:?}"
+    );
     assert!(close(lattice.bond_direction_period(), PI / 3.0, 1e-12));
     // The next shell is √3·a/2, 73 % farther: the window is the DHCT maximum, 35 %.
     assert!(close(lattice.neighbour_window(), 0.35, 1e-12));
@@ -88,7 +106,11 @@ fn a_centred_rectangle_repeats_with_its_rhombic_cell_and_has_unequal_bond_angles
     let [t1, t2] = lattice.translation_cell();
     let area = (t1.x * t2.y - t1.y * t2.x).abs();
     assert!(close(area, 0.5 * 1.25e-18, 1e-9));
-    assert!(close(t1.norm(), (1.0f64 + 1.5625).sqrt() / 2.0 * 1e-9, 1e-9));
+    assert!(close(
+        t1.norm(),
+        (1.0f64 + 1.5625).sqrt() / 2.0 * 1e-9,
+        1e-9
+    ));
     // Bonds at ±atan(1.25) = ±51.34°: not equally spaced, period π.
     let directions = lattice.bond_directions();
     assert_eq!(directions.len(), 2);
@@ -104,5 +126,31 @@ fn a_rectangle_has_neighbours_at_a_and_b_and_a_window_from_the_diagonal() {
     // The diagonal √3 is the nearest other shell: window (√3 − √2)/√2 / 2.
     let expected = 0.5 * (3f64.sqrt() - 2f64.sqrt()) / 2f64.sqrt();
     assert!(close(lattice.neighbour_window(), expected, 1e-9));
-    assert!(close(lattice.first_shell_window(), 0.5 * (2f64.sqrt() - 1.0), 1e-9));
+    assert!(close(
+        lattice.first_shell_window(),
+        0.5 * (2f64.sqrt() - 1.0),
+        1e-9
+    ));
+}
+
+#[test]
+fn a_lieb_lattice_has_sites_of_different_neighbour_counts() {
+    // docs/lattices.md's worked example, as a lattice file: the corner has 4 neighbours at
+    // a/2; an edge site 2 at a/2 (collinear), so its neighbours extend to the 4 edge sites
+    // of the other orientation at √2·a/2.
+    let text = "name = 'lieb'\nlength_unit = 'A'\na1 = [4.0, 0.0]\na2 = [0.0, 4.0]\n\
+                plane_group = 'p4mm'\nmotif = [{ fractional = [0.0, 0.0] }, \
+                { fractional = [0.5, 0.0] }, { fractional = [0.0, 0.5] }]\n";
+    let lieb = UserLattice::from_toml(text).unwrap();
+    assert_eq!(lieb.neighbour_count(0), 4);
+    assert_eq!(lieb.neighbour_count(1), 6);
+    assert_eq!(lieb.neighbour_counts(), vec![4, 6]);
+    let distances = lieb.nearest_neighbour_distances();
+    assert!(close(distances[0], 2e-10, 1e-9) && close(distances[1], 2f64.sqrt() * 2e-10, 1e-9));
+    let expected = 0.5 * (1.0 - 0.5 * 2f64.sqrt()) / (0.5 * 2f64.sqrt());
+    assert!(
+        close(lieb.neighbour_window(), expected, 1e-6),
+        "{}",
+        lieb.neighbour_window()
+    );
 }
