@@ -57,7 +57,10 @@ fn a_lattice_file_that_disagrees_with_its_plane_group_names_the_problem() {
         &dir.path().join("out"),
     );
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(!output.status.success() && !stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !output.status.success() && !stderr.contains("panicked"),
+        "{stderr}"
+    );
     assert!(
         stderr.contains("p6mm needs |a1| = |a2| at 60° or 120°") && stderr.contains("2.47"),
         "{stderr}"

@@ -365,8 +365,7 @@ pub fn select_features(
             .into_iter()
             .filter(|n| {
                 let d = n.distance.sqrt();
-                n.item as usize != k
-                    && nn_distances_m.iter().any(|r| (d - r).abs() < window * r)
+                n.item as usize != k && nn_distances_m.iter().any(|r| (d - r).abs() < window * r)
             })
             .map(|n| used[n.item as usize])
             .collect();

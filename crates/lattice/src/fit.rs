@@ -431,7 +431,11 @@ type Affine = (Vector2<f64>, Matrix2<f64>);
 impl Indexing<'_> {
     /// Indexes the features within `radius` of the seed with the model `(origin, b)` and
     /// refits it to those within the deviation limit.
-    fn disc_step(&self, (origin, b): Affine, radius: f64) -> Result<(Affine, f64), LatticeFitError> {
+    fn disc_step(
+        &self,
+        (origin, b): Affine,
+        radius: f64,
+    ) -> Result<(Affine, f64), LatticeFitError> {
         let diverged = |fraction: f64| LatticeFitError::Diverged {
             radius_m: radius,
             fraction_ok: 100.0 * fraction,
@@ -472,7 +476,12 @@ impl Indexing<'_> {
     /// Coarse-to-fine indexing from the seed taken as motif site `site`, the lattice
     /// rotated by `angle` and scaled by `scale`: the final affine model and its mean
     /// squared deviation.
-    fn from_seed(&self, angle: f64, scale: f64, site: usize) -> Result<(f64, Affine), LatticeFitError> {
+    fn from_seed(
+        &self,
+        angle: f64,
+        scale: f64,
+        site: usize,
+    ) -> Result<(f64, Affine), LatticeFitError> {
         let b = transform(angle, [scale, scale]);
         let mut model = (self.seed - b * self.lattice.site_position(site), b);
         let mut radius = self.options.initial_radius * self.nn;
@@ -606,7 +615,13 @@ pub fn fit_lattice(
         })
         .collect();
     let max_deviation = options.max_deviation_fraction * adf.median_nn_m;
-    let fit = refine(lattice, &indexed, (origin, b), max_deviation, adf.median_nn_m);
+    let fit = refine(
+        lattice,
+        &indexed,
+        (origin, b),
+        max_deviation,
+        adf.median_nn_m,
+    );
     reindex(lattice, fit, &indexed).ok_or(LatticeFitError::Diverged {
         radius_m: farthest,
         fraction_ok: 0.0,

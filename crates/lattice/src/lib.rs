@@ -58,7 +58,9 @@ pub use plane_group::PlaneGroup;
 pub use presets::{
     CentredRectangular, Hexagonal, Honeycomb, Kagome, Oblique, Rectangular, SI111_7X7_A, Square,
 };
-pub use rotation::{direction_period, estimate_rotation, mean_bond_rotation, undirected_directions};
+pub use rotation::{
+    direction_period, estimate_rotation, mean_bond_rotation, undirected_directions,
+};
 pub use sites::{LatticeSite, MAX_REGION_CELLS, lattice_sites};
 pub use user::UserLattice;
 

@@ -163,7 +163,10 @@ mod tests {
         let error = exact_cell(a1, Vector2::new(1.25, 2.1304), PlaneGroup::P6mm, 1e-4)
             .unwrap_err()
             .to_string();
-        assert!(error.contains("p6mm") && error.contains("|a1| = |a2|"), "{error}");
+        assert!(
+            error.contains("p6mm") && error.contains("|a1| = |a2|"),
+            "{error}"
+        );
         assert!(exact_cell(a1, a2, PlaneGroup::P2mm, 1e-4).is_err());
     }
 

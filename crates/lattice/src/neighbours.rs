@@ -101,9 +101,7 @@ pub(crate) fn nearest_neighbour_vectors(
     let mut index = 0;
     while index < candidates.len() {
         let shell = candidates[index].norm();
-        while index < candidates.len()
-            && candidates[index].norm() <= shell * (1.0 + tolerance)
-        {
+        while index < candidates.len() && candidates[index].norm() <= shell * (1.0 + tolerance) {
             chosen.push(candidates[index]);
             index += 1;
         }
@@ -149,7 +147,6 @@ pub(crate) fn shell_distances(
     }
     shells
 }
-
 
 /// Clusters `distances` into shells (ascending): a distance within the relative
 /// `tolerance` of its cluster's smallest joins it; each shell is its cluster's mean.

@@ -71,12 +71,12 @@ mod tests {
     fn four_decimal_vectors_get_a_tolerance_near_1e_4() {
         let t = file_tolerance([[2.46, 0.0], [1.23, 2.1304]], &[[0.0, 0.0]]);
         assert!((t - 4.0 * 0.5e-4 / 2.46).abs() < 1e-8, "{t}");
-        let exact = file_tolerance(
-            [[2.46, 0.0], [1.23, 2.130_422_493_309_719]],
-            &[[0.0, 0.0]],
-        );
+        let exact = file_tolerance([[2.46, 0.0], [1.23, 2.130_422_493_309_719]], &[[0.0, 0.0]]);
         assert!(exact < 1e-6 * 1.01, "{exact}");
         // Coarse numbers are capped.
-        assert_eq!(file_tolerance([[3.0, 0.0], [0.0, 3.0]], &[]), MAX_FILE_TOLERANCE);
+        assert_eq!(
+            file_tolerance([[3.0, 0.0], [0.0, 3.0]], &[]),
+            MAX_FILE_TOLERANCE
+        );
     }
 }

@@ -203,8 +203,8 @@ mod tests {
         let period = direction_period(&directions, 1e-6);
         assert!((period - PI).abs() < 1e-12, "{period}");
         for phi in [0.0, 0.2, 1.0, 2.9] {
-            let found = estimate_rotation(bonds_at(&directions, phi, 0.02), &directions, period)
-                .unwrap();
+            let found =
+                estimate_rotation(bonds_at(&directions, phi, 0.02), &directions, period).unwrap();
             assert!(circular_gap(found, phi, period) < 2e-3, "{phi}: {found}");
         }
     }
@@ -214,8 +214,8 @@ mod tests {
         let directions: Vec<f64> = (0..3).map(|k| k as f64 * PI / 3.0 + 0.1).collect();
         let period = direction_period(&directions, 1e-6);
         assert!((period - PI / 3.0).abs() < 1e-12);
-        let found = estimate_rotation(bonds_at(&directions, 0.3, 0.03), &directions, period)
-            .unwrap();
+        let found =
+            estimate_rotation(bonds_at(&directions, 0.3, 0.03), &directions, period).unwrap();
         assert!(circular_gap(found, 0.3, period) < 2e-3, "{found}");
         assert!(estimate_rotation(Vec::<[f64; 2]>::new(), &directions, period).is_none());
     }
