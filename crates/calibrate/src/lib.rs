@@ -44,6 +44,7 @@ mod error;
 mod matching;
 mod measure;
 mod spectrum;
+mod structure;
 
 pub use check::{CheckOptions, SLOW_AXIS_SLACK, check_inputs};
 pub use error::CalibrationError;

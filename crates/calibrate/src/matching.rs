@@ -16,6 +16,7 @@ use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::measure::{LatticeMeasurement, real_basis};
+use crate::structure::predicted_strong;
 
 /// How the file's frame relates to the sample's, measured against a known lattice.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -195,8 +196,10 @@ fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
     (k, row2.x.atan2(row2.y))
 }
 
+/// The lattice's translation cell as columns: what the image's spectrum shows (the
+/// primitive cell of a centred lattice, not its conventional one).
 fn lattice_matrix(lattice: &dyn Lattice) -> Matrix2<f64> {
-    let [a1, a2] = lattice.primitive_vectors();
+    let [a1, a2] = lattice.translation_cell();
     Matrix2::from_columns(&[a1, a2])
 }
 
@@ -239,6 +242,17 @@ fn best_basis(cell: &Matrix2<f64>, ideal: &Matrix2<f64>) -> (f64, Matrix2<f64>) 
     best
 }
 
+/// The index of frequency `g` (file units) in the reciprocal basis of `cell`, if it is
+/// (nearly) an integer one other than zero.
+fn integer_index(cell: &Matrix2<f64>, g: Vector2<f64>) -> Option<[i64; 2]> {
+    let h = cell.transpose() * g;
+    let rounded = h.map(f64::round);
+    if (h - rounded).abs().max() > 0.15 || rounded == Vector2::zeros() {
+        return None;
+    }
+    Some([rounded.x as i64, rounded.y as i64])
+}
+
 /// Whether the image's strongest peak (frequency `g`, file units) is a reflection of the
 /// first shell of the lattice `target` placed on `cell`.
 fn strongest_in_first_shell(cell: &Matrix2<f64>, target: &Matrix2<f64>, g: Vector2<f64>) -> bool {
@@ -269,7 +283,11 @@ pub fn match_lattice(measurement: &LatticeMeasurement, lattice: &dyn Lattice) ->
     let strongest = measurement.strongest_frequency();
     let plain = best_basis(&measured, &ideal);
     let mut chosen = (Matrix2::identity(), plain);
-    for s in supercells() {
+    // A strongest peak the lattice's own motif predicts (a kagome's second order) is no
+    // sign of a superstructure.
+    let own_reflection = integer_index(&measured, strongest)
+        .is_some_and(|index| predicted_strong(lattice, &(ideal * plain.1), index));
+    for s in supercells().into_iter().filter(|_| !own_reflection) {
         let Some(finer) = s.try_inverse().map(|inverse| measured * inverse) else {
             continue;
         };

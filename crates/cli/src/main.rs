@@ -183,14 +183,15 @@ struct CorrectArgs {
     /// A TOML config (e.g. the config.toml a previous run wrote); flags override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// graphite (default), honeycomb, sam-sqrt3, si111-7x7, hexagonal, square, or a lattice
-    /// file (TOML/JSON).
+    /// A catalogue lattice: graphite (default), honeycomb, hexagonal, sam-sqrt3, si111-7x7,
+    /// square, rectangular, centred-rectangular, oblique, kagome (docs/lattices.md); or a
+    /// lattice file (TOML/JSON; its numbers may be rounded).
     #[arg(long)]
     lattice: Option<String>,
     /// Nearest-neighbour distance, e.g. 2.46A or 0.246nm (a bare number is metres), or
     /// `auto`: the distance the image shows in the file's units. Presets with a known
-    /// constant (graphite, sam-sqrt3, honeycomb, si111-7x7) need none. The image is checked
-    /// against it: a constant that would need the file's pixel size to be off by more than
+    /// constant (graphite, sam-sqrt3, honeycomb, si111-7x7) need none; for the others it
+    /// sets the size of the catalogue's shape. The image is checked against it: a constant that would need the file's pixel size to be off by more than
     /// 15 % (a factor 1.75 for a preset's constant) stops the run.
     #[arg(long, value_parser = parse_nn)]
     nn: Option<correct::Length>,

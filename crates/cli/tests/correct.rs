@@ -382,7 +382,7 @@ fn bad_input_fails_clearly() {
     assert!(!String::from_utf8_lossy(&output.stderr).contains("panicked"));
 
     let output = dhct()
-        .args(["correct", "--lattice", "kagome"])
+        .args(["correct", "--lattice", "lieb"])
         .arg(workspace_file("data/simulated_graphite.sm4"))
         .arg("-o")
         .arg(out.path().join("o2"))

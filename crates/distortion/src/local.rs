@@ -33,7 +33,9 @@
 //! `r0` is the lattice's *nominal* NN distance: it calibrates the corrected image.
 
 use dhct_features::Feature;
-use dhct_lattice::{Lattice, LocalDistortionMethod, mean_bond_rotation};
+use dhct_lattice::{
+    Lattice, LocalDistortionMethod, direction_period, estimate_rotation, undirected_directions,
+};
 use dhct_scan::{ScanGeometry, ScanPass};
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -75,22 +77,24 @@ pub struct LocalDistortion {
 }
 
 /// Lattice orientation (radians, display frame, from +x towards +y) estimated from the NN
-/// vectors of the selected features, assuming the ideal NN directions are equally spaced.
+/// vectors of the selected features against the ideal NN directions of every motif site
+/// (not necessarily equally spaced), modulo their symmetry period.
 pub fn estimate_lattice_angle(
     points_m: &[[f64; 2]],
     selected: &[SelectedFeature],
     lattice: &dyn Lattice,
 ) -> f64 {
-    let directions = ideal_directions(lattice, 0.0);
-    let period = 2.0 * std::f64::consts::PI / directions.len().max(1) as f64;
-    let base = directions.first().map_or(0.0, |u| u.y.atan2(u.x));
+    let tolerance = 1e-6;
+    let ideal = ideal_directions(lattice, 0.0);
+    let directions = undirected_directions(ideal.iter().map(|u| [u.x, u.y]), tolerance);
+    let period = direction_period(&directions, tolerance);
     let bonds = selected.iter().flat_map(|s| {
         let c = points_m[s.index];
         s.neighbours
             .iter()
             .map(move |&j| [points_m[j][0] - c[0], points_m[j][1] - c[1]])
     });
-    mean_bond_rotation(bonds, base, period).unwrap_or(0.0)
+    estimate_rotation(bonds, &directions, period).unwrap_or(0.0)
 }
 
 /// The ideal NN vectors of every motif site and their negatives (deduplicated), rotated by

@@ -260,15 +260,10 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
     })
 }
 
-/// The distinct nearest-neighbour distances of `lattice` (metres), ascending.
+/// The distinct nearest-neighbour distances of `lattice` (metres), ascending
+/// ([`Lattice::nearest_neighbour_distances`]).
 pub fn nn_distances(lattice: &dyn Lattice) -> Vec<f64> {
-    let mut d: Vec<f64> = (0..lattice.motif().len())
-        .flat_map(|s| lattice.nearest_neighbours(s))
-        .map(|v| v.norm())
-        .collect();
-    d.sort_by(f64::total_cmp);
-    d.dedup_by(|a, b| (*a - *b).abs() <= 1e-6 * *b);
-    d
+    lattice.nearest_neighbour_distances()
 }
 
 /// Whether each point (pixels, x = column, y = row) lies where `mask` is true.
@@ -342,8 +337,11 @@ pub fn select_features(
         1.0
     };
     let nn_distances_m: Vec<f64> = nn_distances(lattice).iter().map(|d| d * scale).collect();
-    let reach = nn_distances_m.last().copied().unwrap_or(a_nominal) * (1.0 + options.window);
-    let expected = lattice.nearest_neighbours(0).len();
+    // The window never reaches another shell of this lattice.
+    let window = options.window.min(lattice.neighbour_window());
+    let reach = nn_distances_m.last().copied().unwrap_or(a_nominal) * (1.0 + window);
+    // Motif sites may differ in neighbour count: a feature with any site's count is kept.
+    let counts = lattice.neighbour_counts();
     let (width, height) = (
         (geometry.columns() as f64 - 1.0) * px,
         (geometry.rows() as f64 - 1.0) * py,
@@ -376,20 +374,19 @@ pub fn select_features(
             .into_iter()
             .filter(|n| {
                 let d = n.distance.sqrt();
-                n.item as usize != k
-                    && nn_distances_m
-                        .iter()
-                        .any(|r| (d - r).abs() < options.window * r)
+                n.item as usize != k && nn_distances_m.iter().any(|r| (d - r).abs() < window * r)
             })
             .map(|n| used[n.item as usize])
             .collect();
-        match neighbours.len().cmp(&expected) {
-            std::cmp::Ordering::Less => exclusions.too_few_neighbours += 1,
-            std::cmp::Ordering::Greater => exclusions.too_many_neighbours += 1,
-            std::cmp::Ordering::Equal => selected.push(SelectedFeature {
+        if counts.contains(&neighbours.len()) {
+            selected.push(SelectedFeature {
                 index: used[k],
                 neighbours,
-            }),
+            });
+        } else if counts.last().is_some_and(|&most| neighbours.len() > most) {
+            exclusions.too_many_neighbours += 1;
+        } else {
+            exclusions.too_few_neighbours += 1;
         }
     }
     Ok(NeighbourSelection {
@@ -403,10 +400,11 @@ pub fn select_features(
 
 /// Fallback for raw positions too distorted for the NN window of [`select_features`] (a
 /// drift of more than ~30 % of the slow-scan speed): each feature's `k` nearest features
-/// are its neighbours (`k` = the lattice's NN count), without a distance window. A feature
-/// is kept if its `k`-th neighbour is at most `1.6 ×` as far as its nearest (vacancies and
-/// borders give a second-shell neighbour) and it is farther than twice that from the image
-/// border. Good enough to fit a first model, whose corrected frame then gives the windowed
+/// are its neighbours (`k` = the smallest neighbour count of the lattice's sites), without
+/// a distance window. A feature is kept if its `k`-th neighbour is at most `1.6 ×` (or
+/// 1.2 × the lattice's own spread of nearest-neighbour distances, if larger) as far as
+/// its nearest (vacancies and borders give a second-shell neighbour) and it is farther
+/// than twice that from the image border. Good enough to fit a first model, whose corrected frame then gives the windowed
 /// selection (see [`crate::analyse`]).
 pub fn select_nearest(
     points_px: &[[f64; 2]],
@@ -417,8 +415,14 @@ pub fn select_nearest(
     let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
     let inside = inside_mask(points_px, mask);
     let used: Vec<usize> = (0..points_px.len()).filter(|&i| inside[i]).collect();
-    let k = lattice.nearest_neighbours(0).len();
-    if used.len() <= k {
+    let k = lattice.neighbour_counts().first().copied().unwrap_or(0);
+    let distances = lattice.nearest_neighbour_distances();
+    let spread = match (distances.first(), distances.last()) {
+        (Some(first), Some(last)) if *first > 0.0 => last / first,
+        _ => 1.0,
+    };
+    let max_ratio = (1.2 * spread).max(1.6);
+    if k == 0 || used.len() <= k {
         return Ok(Vec::new());
     }
     let points_m: Vec<[f64; 2]> = used
@@ -448,7 +452,7 @@ pub fn select_nearest(
         }
         let (first, last) = (neighbours[0].0, neighbours[k - 1].0);
         let margin = 2.0 * last;
-        if !(first > 0.0 && last <= 1.6 * first)
+        if !(first > 0.0 && last <= max_ratio * first)
             || p[0] < margin
             || p[1] < margin
             || p[0] > width - margin

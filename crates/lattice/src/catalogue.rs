@@ -5,7 +5,10 @@
 //! [`CatalogueEntry`] line to [`CATALOGUE`]; the contract tests (`tests/tests/
 //! lattice_contract.rs` and `crates/unitcell/tests/motif_symmetry.rs`) then run on it.
 
-use crate::{Hexagonal, Honeycomb, Lattice, LatticeError, PlaneGroup, Square};
+use crate::{
+    CentredRectangular, Hexagonal, Honeycomb, Kagome, Lattice, LatticeError, Oblique, PlaneGroup,
+    Rectangular, Square,
+};
 
 /// A lattice built from the catalogue.
 pub type CatalogueLattice = Box<dyn Lattice + Send + Sync>;
@@ -78,6 +81,59 @@ fn square(nn: Option<f64>) -> Result<CatalogueLattice, LatticeError> {
     Ok(Box::new(Square::new(a)?))
 }
 
+/// A lattice of fixed shape whose size is set by its nearest-neighbour distance `nn`
+/// (metres): `make` is called with the cell constant that gives that distance.
+fn with_nn<L: Lattice + 'static>(
+    name: &'static str,
+    nn: Option<f64>,
+    make: fn(f64) -> Result<L, LatticeError>,
+) -> Result<CatalogueLattice, LatticeError> {
+    let nn = nn.ok_or(LatticeError::NeedsConstant { name })?;
+    if !(nn.is_finite() && nn > 0.0) {
+        return Err(LatticeError::BadLength {
+            what: "nearest-neighbour distance",
+            value: nn,
+        });
+    }
+    let unit = make(1e-10)?;
+    let constant = 1e-10 * nn / unit.nearest_neighbour_distance();
+    Ok(Box::new(make(constant)?))
+}
+
+/// The b/a ratio of the `rectangular` entry: the fcc(110) surface cell (a = NN along
+/// [1-10], b = √2·a along [001]).
+pub const RECTANGULAR_ASPECT: f64 = std::f64::consts::SQRT_2;
+
+/// The b/a ratio of the conventional cell of the `centred-rectangular` entry.
+pub const CENTRED_RECTANGULAR_ASPECT: f64 = 1.25;
+
+/// The `oblique` entry's |a2|/|a1|, angle between a1 and a2 (degrees) and the centre
+/// site's relative height.
+pub const OBLIQUE_SHAPE: (f64, f64, f64) = (1.15, 78.0, 0.6);
+
+fn rectangular(nn: Option<f64>) -> Result<CatalogueLattice, LatticeError> {
+    with_nn("rectangular", nn, |a| {
+        Rectangular::new(a, RECTANGULAR_ASPECT * a)
+    })
+}
+
+fn centred_rectangular(nn: Option<f64>) -> Result<CatalogueLattice, LatticeError> {
+    with_nn("centred-rectangular", nn, |a| {
+        CentredRectangular::new(a, CENTRED_RECTANGULAR_ASPECT * a)
+    })
+}
+
+fn oblique(nn: Option<f64>) -> Result<CatalogueLattice, LatticeError> {
+    with_nn("oblique", nn, |a| {
+        let (ratio, gamma_deg, height) = OBLIQUE_SHAPE;
+        Oblique::new(a, ratio * a, gamma_deg.to_radians(), height)
+    })
+}
+
+fn kagome(nn: Option<f64>) -> Result<CatalogueLattice, LatticeError> {
+    with_nn("kagome", nn, Kagome::new)
+}
+
 /// Every built-in lattice.
 pub static CATALOGUE: &[CatalogueEntry] = &[
     CatalogueEntry {
@@ -123,6 +179,38 @@ pub static CATALOGUE: &[CatalogueEntry] = &[
         known_constant: false,
         build: square,
     },
+    CatalogueEntry {
+        name: "rectangular",
+        aliases: &["fcc110"],
+        summary: "one feature per a × √2·a cell (the fcc(110) surface), p2mm; the constant \
+                  given is a, the nearest-neighbour distance",
+        known_constant: false,
+        build: rectangular,
+    },
+    CatalogueEntry {
+        name: "centred-rectangular",
+        aliases: &["centered-rectangular", "c-rectangular"],
+        summary: "features at the corners and centre of an a × 1.25·a cell, c2mm (give the \
+                  nearest-neighbour distance, the half-diagonal)",
+        known_constant: false,
+        build: centred_rectangular,
+    },
+    CatalogueEntry {
+        name: "oblique",
+        aliases: &[],
+        summary: "two sites of heights 1 and 0.6 at the corner and centre of an oblique cell \
+                  (|a2| = 1.15·|a1|, 78°), p2 (give the nearest-neighbour distance)",
+        known_constant: false,
+        build: oblique,
+    },
+    CatalogueEntry {
+        name: "kagome",
+        aliases: &[],
+        summary: "three sites per hexagonal cell, 4 neighbours each at a/2, p6mm about the \
+                  hexagon centre (give the nearest-neighbour distance)",
+        known_constant: false,
+        build: kagome,
+    },
 ];
 
 /// The catalogue entry called `name` (or one of its aliases), if any.
@@ -166,7 +254,8 @@ mod tests {
                 assert!(std::ptr::eq(lookup(alias).unwrap(), entry));
             }
         }
-        assert!(lookup("kagome").is_none());
+        assert!(CATALOGUE.len() >= 10);
+        assert!(lookup("lieb").is_none());
         assert!(matches!(
             lookup("square").unwrap().build(None),
             Err(LatticeError::NeedsConstant { name: "square" })

@@ -7,8 +7,9 @@
 //! point set `k` (e.g. retrace relative to trace; `Δ_0 = 0`).
 //!
 //! Procedure: the angular distribution of nearest-neighbour bonds gives θ (modulo the
-//! lattice's bond symmetry; every candidate is tried), the median NN distance the scale, and
-//! the feature nearest the centroid the origin. Indices are then assigned coarse-to-fine:
+//! lattice's bond symmetry, [`Lattice::bond_direction_period`]; every candidate is tried),
+//! the median NN distance the scale, and the feature nearest the centroid the origin (as
+//! each motif site in turn). Indices are then assigned coarse-to-fine:
 //! within a disc of a few lattice constants, an affine lattice is fitted by linear least
 //! squares and the disc doubles until it covers every feature, each time checking that the
 //! current model predicts the included features to better than half a lattice constant
@@ -16,43 +17,74 @@
 //! of (o, θ, s_x, s_y, Δ_k) to all sets follows.
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::{Lattice, mean_bond_rotation};
+use crate::fit_refine::{refine, reindex};
+use crate::{Lattice, estimate_rotation};
 
 /// Why a lattice could not be fitted.
 #[derive(Debug, Error)]
 pub enum LatticeFitError {
+    /// Too few points to fit.
     #[error("{found} features are too few for a lattice fit (at least {needed} are needed)")]
-    TooFewPoints { found: usize, needed: usize },
+    TooFewPoints {
+        /// Points given.
+        found: usize,
+        /// Points needed.
+        needed: usize,
+    },
+    /// No bond lies within the nearest-neighbour window.
     #[error(
         "no nearest-neighbour bonds were found (median NN distance {median_nn_m:e} m): the features \
          do not form a lattice, or the lattice does not match"
     )]
-    NoBonds { median_nn_m: f64 },
+    NoBonds {
+        /// Median distance to the nearest point, metres.
+        median_nn_m: f64,
+    },
+    /// The indexing lost the lattice.
     #[error(
         "the lattice fit diverged: within {radius_m:e} m of the seed only {fraction_ok:.0} % of the \
          features lie within half a lattice constant of a site. Check the lattice type and constant, \
          or fit one domain (mask region) at a time"
     )]
-    Diverged { radius_m: f64, fraction_ok: f64 },
+    Diverged {
+        /// Radius of the indexing disc, metres.
+        radius_m: f64,
+        /// Per cent of the features in the disc within the deviation limit.
+        fraction_ok: f64,
+    },
+    /// A point has a NaN or infinite coordinate.
     #[error("a point is not finite: set {set}, index {index}")]
-    NotFinite { set: usize, index: usize },
+    NotFinite {
+        /// Point set.
+        set: usize,
+        /// Index in the set.
+        index: usize,
+    },
+    /// An option is outside its range.
     #[error("lattice_fit.{key} = {value} is outside its range {range}")]
     BadOption {
+        /// The option's key.
         key: &'static str,
+        /// The value given.
         value: f64,
+        /// Its range.
         range: &'static str,
     },
+    /// The indexing disc never covered every feature.
     #[error(
         "the lattice fit did not converge: the indexing disc reached {radius_m:e} m after \
          {iterations} doublings without covering every feature ({farthest_m:e} m from the seed)"
     )]
     NotConverged {
+        /// Radius reached, metres.
         radius_m: f64,
+        /// Distance of the farthest feature from the seed, metres.
         farthest_m: f64,
+        /// Doublings made.
         iterations: usize,
     },
 }
@@ -60,6 +92,12 @@ pub enum LatticeFitError {
 /// Most doublings of the indexing disc (from `initial_radius` NN distances, 40 doublings
 /// cover 10^12 NN distances: any image).
 pub const MAX_DISC_DOUBLINGS: usize = 40;
+
+/// Largest RMS deviation of the features used in an indexing disc, as a fraction of the
+/// nearest-neighbour distance: points scattered at random lie within half a lattice
+/// constant of some site of a hexagonal lattice 90 % of the time, but with an RMS deviation
+/// of about a third of it; a lattice's features deviate by a few per cent.
+pub const MAX_RMS_DEVIATION_FRACTION: f64 = 0.2;
 
 /// Gauss–Newton iterations of the final fit.
 pub const MAX_GAUSS_NEWTON_ITERATIONS: usize = 20;
@@ -203,12 +241,13 @@ impl LatticeFit {
 }
 
 /// Cell indices `(n, m)` and motif site of a feature.
-type SiteIndex = (i64, i64, usize);
+pub(crate) type SiteIndex = (i64, i64, usize);
 
 /// A position (metres) with its site.
-type IndexedPosition = (Vector2<f64>, SiteIndex);
+pub(crate) type IndexedPosition = (Vector2<f64>, SiteIndex);
 
-fn transform(angle: f64, scale: [f64; 2]) -> Matrix2<f64> {
+/// The map `D·R(θ)` of scales `scale` and rotation `angle`.
+pub(crate) fn transform(angle: f64, scale: [f64; 2]) -> Matrix2<f64> {
     let (sin, cos) = angle.sin_cos();
     Matrix2::new(
         scale[0] * cos,
@@ -218,7 +257,8 @@ fn transform(angle: f64, scale: [f64; 2]) -> Matrix2<f64> {
     )
 }
 
-fn lattice_vector(lattice: &dyn Lattice, n: i64, m: i64, site: usize) -> Vector2<f64> {
+/// The lattice-frame position (metres) of site `site` in cell `(n, m)`.
+pub(crate) fn lattice_vector(lattice: &dyn Lattice, n: i64, m: i64, site: usize) -> Vector2<f64> {
     let [a1, a2] = lattice.primitive_vectors();
     a1 * n as f64 + a2 * m as f64 + lattice.site_position(site)
 }
@@ -228,25 +268,9 @@ fn median(values: &mut [f64]) -> f64 {
     *values.select_nth_unstable_by(middle, f64::total_cmp).1
 }
 
-/// Bond-direction histogram of `points` (metres) and the lattice angle it implies.
-pub fn angular_distribution(
-    lattice: &dyn Lattice,
-    points: &[[f64; 2]],
-    nn_window: f64,
-    bins: usize,
-) -> Result<AngularDistribution, LatticeFitError> {
-    if points.len() < 3 {
-        return Err(LatticeFitError::TooFewPoints {
-            found: points.len(),
-            needed: 3,
-        });
-    }
-    let tree: ImmutableKdTree<f64, 2> =
-        ImmutableKdTree::new_from_slice(points).map_err(|_| LatticeFitError::TooFewPoints {
-            found: points.len(),
-            needed: 3,
-        })?;
-    let mut nearest: Vec<f64> = points
+/// Distance from each point to its nearest other point (metres; infinite when alone).
+fn nearest_distances(tree: &ImmutableKdTree<f64, 2>, points: &[[f64; 2]]) -> Vec<f64> {
+    points
         .iter()
         .map(|p| {
             tree.query(p)
@@ -255,22 +279,17 @@ pub fn angular_distribution(
                 .get(1)
                 .map_or(f64::INFINITY, |n| n.distance.sqrt())
         })
-        .collect();
-    let median_nn = median(&mut nearest);
-    // Ideal bond directions modulo π and their period.
-    let mut ideal: Vec<f64> = (0..lattice.motif().len())
-        .flat_map(|s| lattice.nearest_neighbours(s))
-        .filter(|v| (v.norm() - lattice.nearest_neighbour_distance()).abs() < 1e-6 * v.norm())
-        .map(|v| v.y.atan2(v.x).rem_euclid(std::f64::consts::PI))
-        .collect();
-    ideal.sort_by(f64::total_cmp);
-    ideal.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
-    let period = std::f64::consts::PI / ideal.len().max(1) as f64;
-    let reference = ideal.first().copied().unwrap_or(0.0);
-    let (lo, hi) = ((1.0 - nn_window) * median_nn, (1.0 + nn_window) * median_nn);
-    let mut counts = vec![0usize; bins.max(1)];
-    let mut bond_vectors = Vec::new();
-    let mut lengths = Vec::new();
+        .collect()
+}
+
+/// Every bond (vector and length, metres) between points at a distance in `(lo, hi]`.
+fn bonds_between(
+    tree: &ImmutableKdTree<f64, 2>,
+    points: &[[f64; 2]],
+    lo: f64,
+    hi: f64,
+) -> Vec<([f64; 2], f64)> {
+    let mut bonds = Vec::new();
     for (i, p) in points.iter().enumerate() {
         for neighbour in tree
             .query(p)
@@ -280,41 +299,70 @@ pub fn angular_distribution(
         {
             let j = neighbour.item as usize;
             let d = neighbour.distance.sqrt();
-            if j <= i || d <= lo {
-                continue;
+            if j > i && d > lo {
+                let q = points[j];
+                bonds.push(([q[0] - p[0], q[1] - p[1]], d));
             }
-            let q = points[j];
-            let bond = [q[0] - p[0], q[1] - p[1]];
-            let angle = bond[1].atan2(bond[0]).rem_euclid(std::f64::consts::PI);
-            let last = counts.len() - 1;
-            let bin = ((angle / std::f64::consts::PI) * counts.len() as f64) as usize;
-            counts[bin.min(last)] += 1;
-            bond_vectors.push(bond);
-            lengths.push(d);
         }
     }
-    let bonds = bond_vectors.len();
-    let Some(rotation) = mean_bond_rotation(bond_vectors, reference, period) else {
-        return Err(LatticeFitError::NoBonds {
-            median_nn_m: median_nn,
-        });
+    bonds
+}
+
+/// Bond-direction histogram of `points` (metres) and the lattice angle it implies. Bonds
+/// count within `(1 ± w)` of the median nearest-point distance, with `w` the smaller of
+/// `nn_window` and the lattice's [`Lattice::first_shell_window`]; the angle is measured
+/// against [`Lattice::bond_directions`] modulo [`Lattice::bond_direction_period`].
+pub fn angular_distribution(
+    lattice: &dyn Lattice,
+    points: &[[f64; 2]],
+    nn_window: f64,
+    bins: usize,
+) -> Result<AngularDistribution, LatticeFitError> {
+    let too_few = LatticeFitError::TooFewPoints {
+        found: points.len(),
+        needed: 3,
     };
-    let lattice_angle = rotation.rem_euclid(period);
+    if points.len() < 3 {
+        return Err(too_few);
+    }
+    let tree: ImmutableKdTree<f64, 2> =
+        ImmutableKdTree::new_from_slice(points).map_err(|_| too_few)?;
+    let median_nn = median(&mut nearest_distances(&tree, points));
+    let window = nn_window.min(lattice.first_shell_window());
+    let (lo, hi) = ((1.0 - window) * median_nn, (1.0 + window) * median_nn);
+    let bonds = bonds_between(&tree, points, lo, hi);
+    let mut counts = vec![0usize; bins.max(1)];
+    let last = counts.len() - 1;
+    for (bond, _) in &bonds {
+        let angle = bond[1].atan2(bond[0]).rem_euclid(std::f64::consts::PI);
+        let bin = ((angle / std::f64::consts::PI) * counts.len() as f64) as usize;
+        counts[bin.min(last)] += 1;
+    }
+    let period = lattice.bond_direction_period();
+    let rotation = estimate_rotation(
+        bonds.iter().map(|(b, _)| *b),
+        &lattice.bond_directions(),
+        period,
+    )
+    .ok_or(LatticeFitError::NoBonds {
+        median_nn_m: median_nn,
+    })?;
     let width = std::f64::consts::PI / counts.len() as f64;
+    let mut lengths: Vec<f64> = bonds.iter().map(|(_, d)| *d).collect();
     Ok(AngularDistribution {
         angles_rad: (0..counts.len())
             .map(|k| (k as f64 + 0.5) * width)
             .collect(),
         counts,
-        bonds,
-        lattice_angle_rad: lattice_angle,
+        bonds: bonds.len(),
+        lattice_angle_rad: rotation.rem_euclid(period),
         period_rad: period,
         median_nn_m: median(&mut lengths),
     })
 }
 
 /// The site nearest to `p` under the affine model `p ≈ o + B·v`: indices and squared error.
-fn nearest_site(
+pub(crate) fn nearest_site(
     lattice: &dyn Lattice,
     origin: Vector2<f64>,
     b: &Matrix2<f64>,
@@ -362,13 +410,132 @@ fn fit_affine(
     ))
 }
 
-/// Fits one lattice to one or more point sets (metres; e.g. trace and retrace features in
-/// the sample frame) and indexes every point.
-pub fn fit_lattice(
-    lattice: &dyn Lattice,
-    sets: &[&[[f64; 2]]],
-    options: &LatticeFitOptions,
-) -> Result<LatticeFit, LatticeFitError> {
+/// What the coarse-to-fine indexing of the seed set works with.
+struct Indexing<'a> {
+    lattice: &'a dyn Lattice,
+    points: &'a [[f64; 2]],
+    options: &'a LatticeFitOptions,
+    /// The feature nearest the centroid, metres.
+    seed: Vector2<f64>,
+    /// Its distance to the farthest feature, metres.
+    farthest: f64,
+    /// Measured nearest-neighbour distance, metres.
+    nn: f64,
+    /// Features needed in every disc.
+    needed: usize,
+}
+
+/// An affine lattice `p ≈ o + B·v`: origin (metres) and map.
+type Affine = (Vector2<f64>, Matrix2<f64>);
+
+impl Indexing<'_> {
+    /// Indexes the features within `radius` of the seed with the model `(origin, b)` and
+    /// refits it to those within the deviation limit.
+    fn disc_step(
+        &self,
+        (origin, b): Affine,
+        radius: f64,
+    ) -> Result<(Affine, f64), LatticeFitError> {
+        let diverged = |fraction: f64| LatticeFitError::Diverged {
+            radius_m: radius,
+            fraction_ok: 100.0 * fraction,
+        };
+        let inverse = b.try_inverse().ok_or(diverged(0.0))?;
+        let max_deviation = self.options.max_deviation_fraction * self.nn;
+        let mut pairs = Vec::new();
+        let mut included = 0usize;
+        for p in self.points.iter().map(|p| Vector2::from(*p)) {
+            if (p - self.seed).norm() > radius {
+                continue;
+            }
+            included += 1;
+            let (n, m, site, error) = nearest_site(self.lattice, origin, &b, &inverse, p);
+            if error.sqrt() <= max_deviation {
+                pairs.push((p, (n, m, site)));
+            }
+        }
+        let fraction = pairs.len() as f64 / included.max(1) as f64;
+        if included < self.needed || fraction < self.options.min_fraction_ok {
+            return Err(diverged(fraction));
+        }
+        let (origin, b) = fit_affine(self.lattice, &pairs).ok_or(diverged(fraction))?;
+        let mean_square = pairs
+            .iter()
+            .map(|(p, (n, m, s))| {
+                (p - origin - b * lattice_vector(self.lattice, *n, *m, *s)).norm_squared()
+            })
+            .sum::<f64>()
+            / pairs.len() as f64;
+        if mean_square.sqrt() > MAX_RMS_DEVIATION_FRACTION * self.nn {
+            return Err(diverged(fraction));
+        }
+        // Prefer more points at equal cost.
+        Ok(((origin, b), mean_square - pairs.len() as f64 * 1e-30))
+    }
+
+    /// Coarse-to-fine indexing from the seed taken as motif site `site`, the lattice
+    /// rotated by `angle` and scaled by `scale`: the final affine model and its mean
+    /// squared deviation.
+    fn from_seed(
+        &self,
+        angle: f64,
+        scale: f64,
+        site: usize,
+    ) -> Result<(f64, Affine), LatticeFitError> {
+        let b = transform(angle, [scale, scale]);
+        let mut model = (self.seed - b * self.lattice.site_position(site), b);
+        let mut radius = self.options.initial_radius * self.nn;
+        for doublings in 0.. {
+            let (refitted, cost) = self.disc_step(model, radius)?;
+            model = refitted;
+            if radius >= self.farthest {
+                return Ok((cost, model));
+            }
+            if doublings >= MAX_DISC_DOUBLINGS || !radius.is_finite() {
+                return Err(LatticeFitError::NotConverged {
+                    radius_m: radius,
+                    farthest_m: self.farthest,
+                    iterations: doublings,
+                });
+            }
+            radius *= 2.0;
+        }
+        unreachable!("the loop returns")
+    }
+
+    /// The best affine model over every candidate rotation (one per bond-direction period
+    /// in a full turn) and every motif site the seed may be.
+    fn best(&self, adf: &AngularDistribution, scale: f64) -> Result<Affine, LatticeFitError> {
+        let candidates = (2.0 * std::f64::consts::PI / adf.period_rad)
+            .round()
+            .max(1.0) as usize;
+        let mut best: Option<(f64, Affine)> = None;
+        let mut last_error = None;
+        for k in 0..candidates {
+            let angle = adf.lattice_angle_rad + k as f64 * adf.period_rad;
+            for site in 0..self.lattice.motif().len() {
+                match self.from_seed(angle, scale, site) {
+                    Ok((cost, model))
+                        if best.as_ref().is_none_or(|(c, _)| cost < *c * (1.0 - 1e-9)) =>
+                    {
+                        best = Some((cost, model));
+                    }
+                    Ok(_) => {}
+                    Err(error) => last_error = Some(error),
+                }
+            }
+        }
+        best.map(|(_, model)| model).ok_or_else(|| {
+            last_error.unwrap_or(LatticeFitError::Diverged {
+                radius_m: 0.0,
+                fraction_ok: 0.0,
+            })
+        })
+    }
+}
+
+/// Checks the options and that every point is finite.
+fn check_inputs(sets: &[&[[f64; 2]]], options: &LatticeFitOptions) -> Result<(), LatticeFitError> {
     options.validate()?;
     for (set, points) in sets.iter().enumerate() {
         if let Some(index) = points
@@ -378,6 +545,35 @@ pub fn fit_lattice(
             return Err(LatticeFitError::NotFinite { set, index });
         }
     }
+    Ok(())
+}
+
+/// The point nearest the centroid of `points` (not empty) and its distance to the farthest.
+fn central_point(points: &[[f64; 2]]) -> (Vector2<f64>, f64) {
+    let centroid = points
+        .iter()
+        .fold(Vector2::zeros(), |acc, p| acc + Vector2::from(*p))
+        / points.len() as f64;
+    let seed = points
+        .iter()
+        .map(|p| Vector2::from(*p))
+        .min_by(|a, b| (a - centroid).norm().total_cmp(&(b - centroid).norm()))
+        .unwrap_or(centroid);
+    let farthest = points
+        .iter()
+        .map(|p| (Vector2::from(*p) - seed).norm())
+        .fold(0.0, f64::max);
+    (seed, farthest)
+}
+
+/// Fits one lattice to one or more point sets (metres; e.g. trace and retrace features in
+/// the sample frame) and indexes every point.
+pub fn fit_lattice(
+    lattice: &dyn Lattice,
+    sets: &[&[[f64; 2]]],
+    options: &LatticeFitOptions,
+) -> Result<LatticeFit, LatticeFitError> {
+    check_inputs(sets, options)?;
     let seed_set = sets.first().copied().unwrap_or_default();
     let needed = 4 * lattice.motif().len() + 3;
     if seed_set.len() < needed {
@@ -387,126 +583,25 @@ pub fn fit_lattice(
         });
     }
     let adf = angular_distribution(lattice, seed_set, options.nn_window, 180)?;
-    let scale0 = adf.median_nn_m / lattice.nearest_neighbour_distance();
-    let centroid = seed_set
-        .iter()
-        .fold(Vector2::zeros(), |acc, p| acc + Vector2::from(*p))
-        / seed_set.len() as f64;
-    let seed = seed_set
-        .iter()
-        .map(|p| Vector2::from(*p))
-        .min_by(|a, b| (a - centroid).norm().total_cmp(&(b - centroid).norm()))
-        .expect("the seed set is not empty");
-    let nn = adf.median_nn_m;
-    let max_deviation = options.max_deviation_fraction * nn;
-    let farthest = seed_set
-        .iter()
-        .map(|p| (Vector2::from(*p) - seed).norm())
-        .fold(0.0, f64::max);
-
-    // Coarse-to-fine indexing for every candidate angle; keep the best.
-    let candidates = (2.0 * std::f64::consts::PI / adf.period_rad)
-        .round()
-        .max(1.0) as usize;
-    let mut best: Option<(f64, Vector2<f64>, Matrix2<f64>)> = None;
-    let mut last_error = None;
-    for k in 0..candidates {
-        let angle = adf.lattice_angle_rad + k as f64 * adf.period_rad;
-        let mut b = transform(angle, [scale0, scale0]);
-        let mut origin = seed - b * lattice.site_position(0);
-        let mut radius = options.initial_radius * nn;
-        let mut doublings = 0;
-        let outcome = loop {
-            let Some(inverse) = b.try_inverse() else {
-                break Err(LatticeFitError::Diverged {
-                    radius_m: radius,
-                    fraction_ok: 0.0,
-                });
-            };
-            let mut pairs = Vec::new();
-            let mut included = 0usize;
-            for p in seed_set.iter().map(|p| Vector2::from(*p)) {
-                if (p - seed).norm() > radius {
-                    continue;
-                }
-                included += 1;
-                let (n, m, site, error) = nearest_site(lattice, origin, &b, &inverse, p);
-                if error.sqrt() <= max_deviation {
-                    pairs.push((p, (n, m, site)));
-                }
-            }
-            let fraction = pairs.len() as f64 / included.max(1) as f64;
-            if included < needed || fraction < options.min_fraction_ok {
-                break Err(LatticeFitError::Diverged {
-                    radius_m: radius,
-                    fraction_ok: 100.0 * fraction,
-                });
-            }
-            match fit_affine(lattice, &pairs) {
-                Some((o, new_b)) => {
-                    origin = o;
-                    b = new_b;
-                }
-                None => {
-                    break Err(LatticeFitError::Diverged {
-                        radius_m: radius,
-                        fraction_ok: 100.0 * fraction,
-                    });
-                }
-            }
-            if radius >= farthest {
-                let cost: f64 = pairs
-                    .iter()
-                    .map(|(p, (n, m, s))| {
-                        (p - origin - b * lattice_vector(lattice, *n, *m, *s)).norm_squared()
-                    })
-                    .sum::<f64>()
-                    / pairs.len() as f64
-                    - pairs.len() as f64 * 1e-30; // prefer more points at equal cost
-                break Ok(cost);
-            }
-            if doublings >= MAX_DISC_DOUBLINGS || !radius.is_finite() {
-                break Err(LatticeFitError::NotConverged {
-                    radius_m: radius,
-                    farthest_m: farthest,
-                    iterations: doublings,
-                });
-            }
-            radius *= 2.0;
-            doublings += 1;
-        };
-        match outcome {
-            Ok(cost)
-                if best
-                    .as_ref()
-                    .is_none_or(|(c, _, _)| cost < *c * (1.0 - 1e-9)) =>
-            {
-                best = Some((cost, origin, b));
-            }
-            Ok(_) => {}
-            Err(error) => last_error = Some(error),
-        }
-    }
-    let Some((_, origin, b)) = best else {
-        return Err(last_error.unwrap_or(LatticeFitError::Diverged {
-            radius_m: 0.0,
-            fraction_ok: 0.0,
-        }));
+    let (seed, farthest) = central_point(seed_set);
+    let indexing = Indexing {
+        lattice,
+        points: seed_set,
+        options,
+        seed,
+        farthest,
+        nn: adf.median_nn_m,
+        needed,
     };
-
-    // Decompose B = D·R: row norms are the scales, the angle the mean of both rows' angles.
-    let (sx, sy) = (b.row(0).norm(), b.row(1).norm());
-    let (angle_a, angle_b) = ((-b[(0, 1)]).atan2(b[(0, 0)]), b[(1, 0)].atan2(b[(1, 1)]));
-    let angle = angle_a
-        + 0.5 * (angle_b - angle_a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
-        - 0.5 * std::f64::consts::PI;
-    let inverse = b.try_inverse().ok_or(LatticeFitError::Diverged {
+    let scale0 = adf.median_nn_m / lattice.nearest_neighbour_distance();
+    let (origin, b) = indexing.best(&adf, scale0)?;
+    let diverged = LatticeFitError::Diverged {
         radius_m: farthest,
         fraction_ok: 0.0,
-    })?;
-
-    // Index every set with the affine model, then refine (o, θ, sx, sy, Δ_k) by Gauss–Newton.
-    let mut indexed: Vec<Vec<IndexedPosition>> = sets
+    };
+    let inverse = b.try_inverse().ok_or(diverged)?;
+    // Index every set with the affine model, then refine (o, θ, sx, sy, Δ_k).
+    let indexed: Vec<Vec<IndexedPosition>> = sets
         .iter()
         .map(|points| {
             points
@@ -519,112 +614,16 @@ pub fn fit_lattice(
                 .collect()
         })
         .collect();
-    let count = 5 + 2 * sets.len().saturating_sub(1);
-    let mut params = DVector::<f64>::zeros(count);
-    params[0] = origin.x;
-    params[1] = origin.y;
-    params[2] = angle;
-    params[3] = sx;
-    params[4] = sy;
-    let mut used = 0;
-    let mut rms = f64::NAN;
-    let mut converged = false;
-    for _ in 0..MAX_GAUSS_NEWTON_ITERATIONS {
-        let t = transform(params[2], [params[3], params[4]]);
-        let (sin, cos) = params[2].sin_cos();
-        let mut normal = DMatrix::<f64>::zeros(count, count);
-        let mut rhs = DVector::<f64>::zeros(count);
-        let (mut sum_sq, mut n_used) = (0.0, 0usize);
-        for (set, points) in indexed.iter().enumerate() {
-            let offset = if set == 0 {
-                Vector2::zeros()
-            } else {
-                Vector2::new(params[5 + 2 * (set - 1)], params[6 + 2 * (set - 1)])
-            };
-            for (p, (n, m, site)) in points {
-                let v = lattice_vector(lattice, *n, *m, *site);
-                let r = p - (Vector2::new(params[0], params[1]) + offset + t * v);
-                if r.norm() > max_deviation {
-                    continue;
-                }
-                sum_sq += r.norm_squared();
-                n_used += 1;
-                let rotated = Vector2::new(cos * v.x - sin * v.y, sin * v.x + cos * v.y);
-                let d_theta = Vector2::new(
-                    params[3] * (-sin * v.x - cos * v.y),
-                    params[4] * (cos * v.x - sin * v.y),
-                );
-                for axis in 0..2 {
-                    let mut g = DVector::<f64>::zeros(count);
-                    g[axis] = 1.0;
-                    g[2] = d_theta[axis];
-                    g[3 + axis] = rotated[axis];
-                    if set > 0 {
-                        g[5 + 2 * (set - 1) + axis] = 1.0;
-                    }
-                    normal += &g * g.transpose();
-                    rhs += &g * r[axis];
-                }
-            }
-        }
-        used = n_used;
-        rms = (sum_sq / n_used.max(1) as f64).sqrt();
-        let Some(step) = normal.cholesky().map(|c| c.solve(&rhs)) else {
-            break;
-        };
-        params += &step;
-        if step.iter().take(2).all(|v| v.abs() < 1e-6 * nn) && step[2].abs() < 1e-12 {
-            converged = true;
-            break;
-        }
-    }
-    // Re-index with the final model and report deviations.
-    let final_fit = LatticeFit {
-        origin_m: [params[0], params[1]],
-        angle_rad: params[2],
-        scale: [params[3], params[4]],
-        set_offsets_m: (0..sets.len())
-            .map(|set| {
-                if set == 0 {
-                    [0.0, 0.0]
-                } else {
-                    [params[5 + 2 * (set - 1)], params[6 + 2 * (set - 1)]]
-                }
-            })
-            .collect(),
-        points: Vec::new(),
-        rms_deviation_m: rms,
-        used,
-        converged,
-    };
-    let t = final_fit.transform();
-    let inverse = t.try_inverse().ok_or(LatticeFitError::Diverged {
+    let max_deviation = options.max_deviation_fraction * adf.median_nn_m;
+    let fit = refine(
+        lattice,
+        &indexed,
+        (origin, b),
+        max_deviation,
+        adf.median_nn_m,
+    );
+    reindex(lattice, fit, &indexed).ok_or(LatticeFitError::Diverged {
         radius_m: farthest,
         fraction_ok: 0.0,
-    })?;
-    let points = indexed
-        .iter_mut()
-        .enumerate()
-        .map(|(set, points)| {
-            let origin =
-                Vector2::from(final_fit.origin_m) + Vector2::from(final_fit.set_offsets_m[set]);
-            points
-                .iter()
-                .map(|(p, _)| {
-                    let (n, m, site, _) = nearest_site(lattice, origin, &t, &inverse, *p);
-                    let r = p - origin - t * lattice_vector(lattice, n, m, site);
-                    IndexedPoint {
-                        n,
-                        m,
-                        site,
-                        deviation_m: [r.x, r.y],
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    Ok(LatticeFit {
-        points,
-        ..final_fit
     })
 }

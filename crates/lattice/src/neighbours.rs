@@ -1,13 +1,17 @@
-//! Neighbour geometry derived from primitive vectors and motif, and enumeration of the
-//! lattice sites inside a region.
+//! Neighbour geometry derived from primitive vectors and motif: nearest-neighbour vectors
+//! per motif site, neighbour shells, and the windows that tell the shells apart.
 
-use nalgebra::{Matrix2, Vector2};
-use serde::{Deserialize, Serialize};
+use nalgebra::Vector2;
 
-use crate::{Lattice, MotifSite};
+use crate::MotifSite;
 
-/// Relative tolerance for two distances to count as one shell.
-const SHELL_TOLERANCE: f64 = 1e-6;
+/// The default relative tolerance for two distances to count as one shell (exact
+/// vectors); see [`crate::Lattice::shell_tolerance`].
+pub const DEFAULT_SHELL_TOLERANCE: f64 = 1e-6;
+
+/// The largest relative window around a nearest-neighbour distance (the DHCT paper's
+/// 35 %); a lattice whose other shells are closer gets a narrower one.
+pub const MAX_NEIGHBOUR_WINDOW: f64 = 0.35;
 
 /// Most cells visited along either lattice direction in a neighbour search: bounds the work
 /// for any lattice, even one that `UserLattice` validation would refuse (e.g. a preset
@@ -16,10 +20,6 @@ pub const MAX_CELL_REACH: i64 = 2048;
 
 /// Most neighbour shells computed by [`crate::Lattice::neighbour_shells`].
 pub const MAX_SHELLS: usize = 64;
-
-/// Most cells [`lattice_sites`] visits (10^8, about 5 GB of sites); a larger region gives
-/// no sites.
-pub const MAX_REGION_CELLS: f64 = 1e8;
 
 /// The offset of a motif site from its cell origin, with the fractional position wrapped
 /// into `[0, 1)`: the set of features (and so every neighbour vector) is the same, and the
@@ -55,12 +55,14 @@ pub(crate) fn neighbour_search_work(vectors: [Vector2<f64>; 2], motif: &[MotifSi
     (2 * n_max + 1) as f64 * (2 * m_max + 1) as f64 * sites * sites
 }
 
-/// All vectors from site `from` to features within `radius` (excluding itself).
+/// All vectors from site `from` to features within `radius` (relative tolerance
+/// `tolerance`), excluding itself.
 fn vectors_within(
     vectors: [Vector2<f64>; 2],
     motif: &[MotifSite],
     from: usize,
     radius: f64,
+    tolerance: f64,
 ) -> Vec<Vector2<f64>> {
     let [a1, a2] = vectors;
     let (n_max, m_max) = search_reach(vectors, motif, radius);
@@ -72,7 +74,7 @@ fn vectors_within(
             for site in motif {
                 let v = cell + site_offset(vectors, site) - origin;
                 let d = v.norm();
-                if d > radius * SHELL_TOLERANCE && d <= radius * (1.0 + SHELL_TOLERANCE) {
+                if d > radius * DEFAULT_SHELL_TOLERANCE && d <= radius * (1.0 + tolerance) {
                     out.push(v);
                 }
             }
@@ -83,23 +85,23 @@ fn vectors_within(
 
 /// Nearest-neighbour vectors of motif site `site`, sorted by angle from +x: the nearest
 /// shell, extended by the next shells until the vectors span the plane (so a rectangular
-/// lattice gets its ±a and ±b neighbours).
+/// lattice gets its ±a and ±b neighbours). Distances within the relative `tolerance` of a
+/// shell's first are that shell.
 pub(crate) fn nearest_neighbour_vectors(
     vectors: [Vector2<f64>; 2],
     motif: &[MotifSite],
     site: usize,
+    tolerance: f64,
 ) -> Vec<Vector2<f64>> {
     // Both primitive vectors lie within this reach, so the candidates span the plane.
     let reach = vectors[0].norm().max(vectors[1].norm());
-    let mut candidates = vectors_within(vectors, motif, site, reach);
+    let mut candidates = vectors_within(vectors, motif, site, reach, tolerance);
     candidates.sort_by(|a, b| a.norm().total_cmp(&b.norm()));
     let mut chosen: Vec<Vector2<f64>> = Vec::new();
     let mut index = 0;
     while index < candidates.len() {
         let shell = candidates[index].norm();
-        while index < candidates.len()
-            && candidates[index].norm() <= shell * (1.0 + SHELL_TOLERANCE)
-        {
+        while index < candidates.len() && candidates[index].norm() <= shell * (1.0 + tolerance) {
             chosen.push(candidates[index]);
             index += 1;
         }
@@ -120,28 +122,24 @@ fn spans_plane(vectors: &[Vector2<f64>]) -> bool {
         .any(|v| (first.x * v.y - first.y * v.x).abs() > 1e-6 * first.norm() * v.norm())
 }
 
-/// The first `count` distinct neighbour distances over all motif sites, ascending.
+/// The first `count` distinct neighbour distances over all motif sites, ascending:
+/// distances are clustered, a distance within the relative `tolerance` of its cluster's
+/// first joining it, and each shell is its cluster's mean.
 pub(crate) fn shell_distances(
     vectors: [Vector2<f64>; 2],
     motif: &[MotifSite],
     count: usize,
+    tolerance: f64,
 ) -> Vec<f64> {
     // Multiples of the shorter primitive vector alone give `count` distinct distances.
     let count = count.clamp(1, MAX_SHELLS);
     let shortest = vectors[0].norm().min(vectors[1].norm());
     let radius = count as f64 * shortest;
-    let mut distances: Vec<f64> = (0..motif.len())
-        .flat_map(|site| vectors_within(vectors, motif, site, radius))
+    let distances: Vec<f64> = (0..motif.len())
+        .flat_map(|site| vectors_within(vectors, motif, site, radius, tolerance))
         .map(|v| v.norm())
         .collect();
-    distances.sort_by(f64::total_cmp);
-    let mut shells: Vec<f64> = Vec::new();
-    for d in distances {
-        match shells.last() {
-            Some(&last) if d <= last * (1.0 + SHELL_TOLERANCE) => {}
-            _ => shells.push(d),
-        }
-    }
+    let mut shells = cluster_distances(distances, tolerance);
     shells.truncate(count);
     if shells.is_empty() {
         // Only for degenerate input (non-finite vectors): never an empty list.
@@ -150,91 +148,35 @@ pub(crate) fn shell_distances(
     shells
 }
 
-/// The rotation of a lattice from measured bond vectors: the circular mean of
-/// `(bond angle − reference_rad)` with period `period_rad` (the period of the ideal bond
-/// directions, e.g. π/3 for hexagonal), in `(−period/2, period/2]`; `None` without bonds.
-/// `reference_rad` is the direction of any one ideal bond.
-pub fn mean_bond_rotation(
-    bonds: impl IntoIterator<Item = [f64; 2]>,
-    reference_rad: f64,
-    period_rad: f64,
-) -> Option<f64> {
-    let (mut sum_cos, mut sum_sin, mut count) = (0.0, 0.0, 0usize);
-    for [dx, dy] in bonds {
-        let phase = 2.0 * std::f64::consts::PI * (dy.atan2(dx) - reference_rad) / period_rad;
-        sum_cos += phase.cos();
-        sum_sin += phase.sin();
-        count += 1;
-    }
-    (count > 0).then(|| sum_sin.atan2(sum_cos) * period_rad / (2.0 * std::f64::consts::PI))
-}
-
-/// One feature of a lattice placed in a region: cell indices, motif site and position.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct LatticeSite {
-    /// Integer index along a1.
-    pub n: i64,
-    /// Integer index along a2.
-    pub m: i64,
-    /// Index into the motif.
-    pub site: usize,
-    /// Position in metres, in the frame of the region.
-    pub position: Vector2<f64>,
-}
-
-/// Every feature of `lattice`, rotated by `angle` (radians, from +x towards +y) about the
-/// cell origin placed at `origin` (metres), that lies inside `[0, width] x [0, height]`.
-/// Regions of more than [`MAX_REGION_CELLS`] cells, and non-finite input, give no sites.
-pub fn lattice_sites(
-    lattice: &dyn Lattice,
-    origin: Vector2<f64>,
-    angle: f64,
-    width: f64,
-    height: f64,
-) -> Vec<LatticeSite> {
-    let [a1, a2] = lattice.primitive_vectors();
-    let (sin, cos) = angle.sin_cos();
-    let rotation = Matrix2::new(cos, -sin, sin, cos);
-    let basis = rotation * Matrix2::from_columns(&[a1, a2]);
-    let Some(inverse) = basis.try_inverse() else {
-        return Vec::new();
-    };
-    // Fractional coordinates of the region's corners bound the cells to visit.
-    let corners = [(0.0, 0.0), (width, 0.0), (0.0, height), (width, height)];
-    let (mut lo, mut hi) = (
-        Vector2::repeat(f64::INFINITY),
-        Vector2::repeat(f64::NEG_INFINITY),
-    );
-    for (x, y) in corners {
-        let f = inverse * (Vector2::new(x, y) - origin);
-        lo = lo.inf(&f);
-        hi = hi.sup(&f);
-    }
-    let (n_lo, n_hi) = (lo.x.floor() - 1.0, hi.x.ceil() + 1.0);
-    let (m_lo, m_hi) = (lo.y.floor() - 1.0, hi.y.ceil() + 1.0);
-    let cells = (n_hi - n_lo + 1.0) * (m_hi - m_lo + 1.0);
-    if !(cells.is_finite() && cells <= MAX_REGION_CELLS) {
-        return Vec::new();
-    }
-    let offsets: Vec<_> = (0..lattice.motif().len())
-        .map(|s| rotation * lattice.site_position(s))
-        .collect();
-    let mut sites = Vec::new();
-    for n in (n_lo as i64)..=(n_hi as i64) {
-        for m in (m_lo as i64)..=(m_hi as i64) {
-            let cell = origin + basis * Vector2::new(n as f64, m as f64);
-            for (site, offset) in offsets.iter().enumerate() {
-                let position = cell + offset;
-                if (0.0..=width).contains(&position.x) && (0.0..=height).contains(&position.y) {
-                    sites.push(LatticeSite {
-                        n,
-                        m,
-                        site,
-                        position,
-                    });
-                }
+/// Clusters `distances` into shells (ascending): a distance within the relative
+/// `tolerance` of its cluster's smallest joins it; each shell is its cluster's mean.
+pub(crate) fn cluster_distances(mut distances: Vec<f64>, tolerance: f64) -> Vec<f64> {
+    distances.sort_by(f64::total_cmp);
+    let mut clusters: Vec<(f64, f64, usize)> = Vec::new(); // (first, sum, count)
+    for d in distances {
+        match clusters.last_mut() {
+            Some((first, sum, count)) if d <= *first * (1.0 + tolerance) => {
+                *sum += d;
+                *count += 1;
             }
+            _ => clusters.push((d, d, 1)),
         }
     }
-    sites
+    clusters
+        .into_iter()
+        .map(|(_, sum, count)| sum / count as f64)
+        .collect()
+}
+
+/// The relative half-width of a window around each of the `inside` distances that keeps
+/// every `outside` distance out with a margin (half the smallest relative gap), at most
+/// [`MAX_NEIGHBOUR_WINDOW`]. With no outside distance the window is the maximum.
+pub(crate) fn separating_window(inside: &[f64], outside: &[f64]) -> f64 {
+    let mut window = MAX_NEIGHBOUR_WINDOW;
+    for &d in inside {
+        for &s in outside {
+            window = window.min(0.5 * (s - d).abs() / d);
+        }
+    }
+    window
 }

@@ -6,22 +6,39 @@ use crate::LatticeError;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum PlaneGroup {
+    /// Oblique, no symmetry but translations.
     P1,
+    /// Oblique, two-fold rotations.
     P2,
+    /// Rectangular, parallel mirrors.
     Pm,
+    /// Rectangular, parallel glides.
     Pg,
+    /// Centred rectangular, mirrors (conventional cell, centring (½, ½)).
     Cm,
+    /// Rectangular, two perpendicular mirror sets.
     P2mm,
+    /// Rectangular, mirrors and perpendicular glides.
     P2mg,
+    /// Rectangular, two perpendicular glide sets.
     P2gg,
+    /// Centred rectangular, two perpendicular mirror sets (conventional cell).
     C2mm,
+    /// Square, four-fold rotations.
     P4,
+    /// Square, four-fold rotations and mirrors through them.
     P4mm,
+    /// Square, four-fold rotations, mirrors off them.
     P4gm,
+    /// Hexagonal, three-fold rotations.
     P3,
+    /// Hexagonal, three-fold rotations, every three-fold axis on mirrors.
     P3m1,
+    /// Hexagonal, three-fold rotations, some three-fold axes off the mirrors.
     P31m,
+    /// Hexagonal, six-fold rotations.
     P6,
+    /// Hexagonal, six-fold rotations and mirrors.
     P6mm,
 }
 

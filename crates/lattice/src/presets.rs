@@ -244,3 +244,147 @@ impl Lattice for Rectangular {
         PlaneGroup::P2mm
     }
 }
+
+/// A centred rectangular lattice given by its conventional cell `a × b` with sites at the
+/// corner and the centre (plane group c2mm); its image repeats with the rhombic primitive
+/// cell ([`Lattice::translation_cell`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CentredRectangular {
+    a: f64,
+    b: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl CentredRectangular {
+    /// A centred rectangular lattice with conventional sides `a` along x and `b` along y
+    /// (metres).
+    pub fn new(a: f64, b: f64) -> Result<CentredRectangular, LatticeError> {
+        check_length("a", a)?;
+        check_length("b", b)?;
+        Ok(CentredRectangular {
+            a,
+            b,
+            motif: vec![
+                MotifSite::new(0.0, 0.0, "corner"),
+                MotifSite::new(0.5, 0.5, "centre"),
+            ],
+        })
+    }
+}
+
+impl Lattice for CentredRectangular {
+    fn name(&self) -> &str {
+        "centred-rectangular"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        [Vector2::new(self.a, 0.0), Vector2::new(0.0, self.b)]
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::C2mm
+    }
+}
+
+/// An oblique lattice with two sites of different heights, at the cell corner and the cell
+/// centre (both two-fold centres, plane group p2): `a1 = a` along x, `a2` of length `b` at
+/// `gamma` (radians) from `a1`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Oblique {
+    a: f64,
+    b: f64,
+    gamma: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl Oblique {
+    /// An oblique two-site lattice; `centre_height` is the centre site's height relative
+    /// to the corner site's (finite, > 0).
+    pub fn new(a: f64, b: f64, gamma: f64, centre_height: f64) -> Result<Oblique, LatticeError> {
+        check_length("a", a)?;
+        check_length("b", b)?;
+        if !(gamma.is_finite() && gamma > 0.0 && gamma < std::f64::consts::PI) {
+            return Err(LatticeError::NearlyParallel {
+                angle_deg: gamma.to_degrees(),
+                min_deg: 0.0,
+            });
+        }
+        if !(centre_height.is_finite() && centre_height > 0.0) {
+            return Err(LatticeError::BadHeight {
+                index: 1,
+                value: centre_height,
+            });
+        }
+        let mut centre = MotifSite::new(0.5, 0.5, "B");
+        centre.relative_height = centre_height;
+        Ok(Oblique {
+            a,
+            b,
+            gamma,
+            motif: vec![MotifSite::new(0.0, 0.0, "A"), centre],
+        })
+    }
+}
+
+impl Lattice for Oblique {
+    fn name(&self) -> &str {
+        "oblique"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        let (sin, cos) = self.gamma.sin_cos();
+        [
+            Vector2::new(self.a, 0.0),
+            Vector2::new(self.b * cos, self.b * sin),
+        ]
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::P2
+    }
+}
+
+/// The kagome lattice: three sites per hexagonal cell of constant `a`, at the midpoints of
+/// the triangular lattice's edges, each with 4 nearest neighbours at `a/2`; p6mm about the
+/// hexagon centre (1/2, 1/2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Kagome {
+    a: f64,
+    motif: Vec<MotifSite>,
+}
+
+impl Kagome {
+    /// A kagome lattice with cell constant `a` (metres; nearest-neighbour distance `a/2`).
+    pub fn new(a: f64) -> Result<Kagome, LatticeError> {
+        check_length("a", a)?;
+        Ok(Kagome {
+            a,
+            motif: vec![
+                MotifSite::new(0.0, 0.0, "A"),
+                MotifSite::new(0.5, 0.0, "B"),
+                MotifSite::new(0.0, 0.5, "C"),
+            ],
+        })
+    }
+}
+
+impl Lattice for Kagome {
+    fn name(&self) -> &str {
+        "kagome"
+    }
+    fn primitive_vectors(&self) -> [Vector2<f64>; 2] {
+        hexagonal_vectors(self.a)
+    }
+    fn motif(&self) -> &[MotifSite] {
+        &self.motif
+    }
+    fn plane_group(&self) -> PlaneGroup {
+        PlaneGroup::P6mm
+    }
+    /// The hexagon centre: about a site the kagome is only p2mm.
+    fn symmetry_origin(&self) -> [f64; 2] {
+        [0.5, 0.5]
+    }
+}

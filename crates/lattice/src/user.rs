@@ -5,7 +5,9 @@ use std::path::Path;
 use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
+use crate::metric::{check_motif_symmetry, exact_cell};
 use crate::neighbours::neighbour_search_work;
+use crate::precision::file_tolerance;
 use crate::{Lattice, LatticeError, MotifSite, PlaneGroup};
 
 /// Most motif sites of a user lattice.
@@ -30,7 +32,10 @@ pub const MAX_NEIGHBOUR_WORK: f64 = 5e7;
 /// Largest lattice file read, bytes.
 pub const MAX_FILE_BYTES: u64 = 1 << 20;
 
-/// A lattice read from a file. Example (TOML):
+/// A lattice read from a file. Its numbers may be rounded (e.g. 4-decimal vectors): the
+/// tolerance within which distances are one shell follows from the finest digit given
+/// (see [`UserLattice::new`]), and the cell is made exact for the plane group when it
+/// agrees with it within that tolerance. Example (TOML):
 ///
 /// ```toml
 /// name = "Si(111)-7x7 corner holes"
@@ -61,6 +66,7 @@ pub struct UserLattice {
     plane_group: PlaneGroup,
     motif: Vec<MotifSite>,
     symmetry_origin: [f64; 2],
+    tolerance: f64,
 }
 
 /// The file layout of a [`UserLattice`].
@@ -99,13 +105,20 @@ fn unit_factor(unit: &str) -> Result<f64, LatticeError> {
 }
 
 impl UserLattice {
-    /// Builds and validates a lattice from primitive vectors (metres), motif and plane group.
+    /// Builds and validates a lattice from primitive vectors (metres), motif and plane group
+    /// (about the cell origin; see [`UserLattice::with_symmetry_origin`]).
     ///
     /// Refused, each with an error naming the value: non-finite numbers; vectors shorter
     /// than 0.1 pm or longer than 10 µm, less than 10° from parallel, or differing in length
     /// by more than a factor 20; an empty motif or one of more than 256 sites; a site beyond
-    /// ±1000 cells; a non-finite relative height; coincident sites; and lattices whose
-    /// neighbour search would need more than 5·10^7 site comparisons (about a second).
+    /// ±1000 cells; a non-finite relative height; coincident sites; lattices whose
+    /// neighbour search would need more than 5·10^7 site comparisons (about a second); a
+    /// cell without the plane group's metric (e.g. p6mm with |a1| ≠ |a2|) and a motif the
+    /// group's rotation (or centring) does not map onto itself.
+    ///
+    /// Tolerance: the numbers may be rounded; the relative tolerance is four times the
+    /// rounding error of the finest digit given (4-decimal vectors of 2.46 Å: 8·10^-5),
+    /// between 1e-6 and 1e-3 ([`Lattice::shell_tolerance`]).
     pub fn new(
         name: impl Into<String>,
         a1: Vector2<f64>,
@@ -113,18 +126,31 @@ impl UserLattice {
         plane_group: PlaneGroup,
         motif: Vec<MotifSite>,
     ) -> Result<UserLattice, LatticeError> {
+        let fractions: Vec<[f64; 2]> = motif.iter().map(|s| s.fractional).collect();
+        let tolerance = file_tolerance([[a1.x, a1.y], [a2.x, a2.y]], &fractions);
+        Self::build(
+            name.into(),
+            [a1, a2],
+            plane_group,
+            motif,
+            [0.0, 0.0],
+            tolerance,
+        )
+    }
+
+    /// Validates everything (see [`UserLattice::new`]) with the symmetry origin `origin`
+    /// and the relative `tolerance`.
+    fn build(
+        name: String,
+        [a1, a2]: [Vector2<f64>; 2],
+        plane_group: PlaneGroup,
+        motif: Vec<MotifSite>,
+        origin: [f64; 2],
+        tolerance: f64,
+    ) -> Result<UserLattice, LatticeError> {
         check_vectors(a1, a2)?;
         check_motif(&motif)?;
-        // Two sites that differ by a lattice vector are the same feature.
-        for first in 0..motif.len() {
-            for second in first + 1..motif.len() {
-                let [p, q] = [motif[first].fractional, motif[second].fractional];
-                let wrapped = |d: f64| (d - d.round()).abs() < 1e-9;
-                if wrapped(p[0] - q[0]) && wrapped(p[1] - q[1]) {
-                    return Err(LatticeError::CoincidentSites { first, second });
-                }
-            }
-        }
+        check_distinct_sites(&motif)?;
         let work = neighbour_search_work([a1, a2], &motif);
         if work.is_nan() || work > MAX_NEIGHBOUR_WORK {
             return Err(LatticeError::TooComplex {
@@ -132,25 +158,35 @@ impl UserLattice {
                 max: MAX_NEIGHBOUR_WORK,
             });
         }
-        Ok(UserLattice {
-            name: name.into(),
-            vectors: [a1, a2],
-            plane_group,
-            motif,
-            symmetry_origin: [0.0, 0.0],
-        })
-    }
-
-    /// This lattice with its plane group's symmetry elements at `origin` (fractional
-    /// coordinates, each finite; see [`Lattice::symmetry_origin`]).
-    pub fn with_symmetry_origin(mut self, origin: [f64; 2]) -> Result<UserLattice, LatticeError> {
         if !origin.iter().all(|v| v.is_finite()) {
             return Err(LatticeError::Parse(format!(
                 "symmetry_origin must be finite fractional coordinates, got {origin:?}"
             )));
         }
-        self.symmetry_origin = origin.map(|v| v.rem_euclid(1.0));
-        Ok(self)
+        let origin = origin.map(|v| v.rem_euclid(1.0));
+        let vectors = exact_cell(a1, a2, plane_group, tolerance)?;
+        check_motif_symmetry(vectors, &motif, plane_group, origin, tolerance)?;
+        Ok(UserLattice {
+            name,
+            vectors,
+            plane_group,
+            motif,
+            symmetry_origin: origin,
+            tolerance,
+        })
+    }
+
+    /// This lattice with its plane group's symmetry elements at `origin` (fractional
+    /// coordinates, each finite; see [`Lattice::symmetry_origin`]), checked again.
+    pub fn with_symmetry_origin(self, origin: [f64; 2]) -> Result<UserLattice, LatticeError> {
+        Self::build(
+            self.name,
+            self.vectors,
+            self.plane_group,
+            self.motif,
+            origin,
+            self.tolerance,
+        )
     }
 
     /// Parses the TOML layout documented on [`UserLattice`].
@@ -174,6 +210,20 @@ impl UserLattice {
             Self::from_toml(&text)
         }
     }
+}
+
+/// Two sites that differ by a lattice vector are the same feature.
+fn check_distinct_sites(motif: &[MotifSite]) -> Result<(), LatticeError> {
+    for first in 0..motif.len() {
+        for second in first + 1..motif.len() {
+            let [p, q] = [motif[first].fractional, motif[second].fractional];
+            let wrapped = |d: f64| (d - d.round()).abs() < 1e-9;
+            if wrapped(p[0] - q[0]) && wrapped(p[1] - q[1]) {
+                return Err(LatticeError::CoincidentSites { first, second });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks the primitive vectors (see [`UserLattice::new`]).
@@ -306,14 +356,17 @@ impl TryFrom<UserLatticeFile> for UserLattice {
     fn try_from(file: UserLatticeFile) -> Result<Self, Self::Error> {
         let factor = unit_factor(&file.length_unit)?;
         let vector = |v: [f64; 2]| Vector2::new(v[0], v[1]) * factor;
-        let lattice = UserLattice::new(
+        // The precision is that of the numbers as written, before the unit conversion.
+        let fractions: Vec<[f64; 2]> = file.motif.iter().map(|s| s.fractional).collect();
+        let tolerance = file_tolerance([file.a1, file.a2], &fractions);
+        UserLattice::build(
             file.name,
-            vector(file.a1),
-            vector(file.a2),
+            [vector(file.a1), vector(file.a2)],
             file.plane_group,
             file.motif,
-        )?;
-        lattice.with_symmetry_origin(file.symmetry_origin)
+            file.symmetry_origin,
+            tolerance,
+        )
     }
 }
 
@@ -347,5 +400,8 @@ impl Lattice for UserLattice {
     }
     fn symmetry_origin(&self) -> [f64; 2] {
         self.symmetry_origin
+    }
+    fn shell_tolerance(&self) -> f64 {
+        self.tolerance
     }
 }

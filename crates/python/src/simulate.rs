@@ -71,3 +71,13 @@ pub fn presets() -> Vec<(&'static str, &'static str)> {
         .map(|p| (p.name, p.summary))
         .collect()
 }
+
+/// The lattice catalogue: (name, aliases, one-line summary, whether its constant is known),
+/// the names `correct(lattice=...)` and a simulation's `surface.lattice` take.
+#[pyfunction]
+pub fn lattices() -> Vec<(&'static str, Vec<&'static str>, &'static str, bool)> {
+    dhct_lattice::CATALOGUE
+        .iter()
+        .map(|e| (e.name, e.aliases.to_vec(), e.summary, e.known_constant))
+        .collect()
+}

@@ -62,3 +62,13 @@ def test_simulated_scan_corrects():
     result = dhct.correct(sim.scan)
     assert result.corrected_trace.shape == sim.scan.shape
     assert sum(p["indexed"] for p in result.model["passes"]) > 100
+
+
+def test_lattice_catalogue_listed():
+    lattices = dhct.lattices()
+    assert len(lattices) >= 10
+    for name in ("graphite", "honeycomb", "rectangular", "centred-rectangular", "oblique", "kagome"):
+        assert name in lattices
+    assert lattices["graphite"]["known_constant"] is True
+    assert lattices["kagome"]["known_constant"] is False
+    assert "graphene" in lattices["honeycomb"]["aliases"]

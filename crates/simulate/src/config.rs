@@ -207,9 +207,10 @@ impl LatticeConfig {
     /// Builds the lattice.
     pub fn build(&self) -> Result<Box<dyn Lattice>, SimulationError> {
         Ok(match self {
-            LatticeConfig::Graphite => Box::new(Hexagonal::graphite()),
-            LatticeConfig::Graphene => Box::new(Honeycomb::graphene()),
-            LatticeConfig::SamSqrt3 => Box::new(Hexagonal::sam_sqrt3()),
+            // The named lattices are the catalogue's (one registry for every front end).
+            LatticeConfig::Graphite => catalogue_lattice("graphite", None)?,
+            LatticeConfig::Graphene => catalogue_lattice("honeycomb", None)?,
+            LatticeConfig::SamSqrt3 => catalogue_lattice("sam-sqrt3", None)?,
             LatticeConfig::Hexagonal { a_m } => {
                 Box::new(Hexagonal::new("hexagonal", *a_m, PlaneGroup::P6mm)?)
             }
@@ -217,20 +218,23 @@ impl LatticeConfig {
             LatticeConfig::Square { a_m } => Box::new(Square::new(*a_m)?),
             LatticeConfig::Rectangular { a_m, b_m } => Box::new(Rectangular::new(*a_m, *b_m)?),
             LatticeConfig::User(lattice) => Box::new(lattice.clone()),
-            LatticeConfig::Catalogue { name, nn_m } => {
-                let entry = dhct_lattice::catalogue::lookup(name).ok_or_else(|| {
-                    SimulationError::InvalidConfig {
-                        field: "surface.lattice.name".into(),
-                        reason: format!(
-                            "unknown catalogue lattice '{name}' (use {})",
-                            dhct_lattice::catalogue::names()
-                        ),
-                    }
-                })?;
-                entry.build(*nn_m)?
-            }
+            LatticeConfig::Catalogue { name, nn_m } => catalogue_lattice(name, *nn_m)?,
         })
     }
+}
+
+/// The catalogue lattice `name`, with its nearest-neighbour distance `nn_m` (metres) if
+/// given.
+fn catalogue_lattice(name: &str, nn_m: Option<f64>) -> Result<Box<dyn Lattice>, SimulationError> {
+    let entry =
+        dhct_lattice::catalogue::lookup(name).ok_or_else(|| SimulationError::InvalidConfig {
+            field: "surface.lattice.name".into(),
+            reason: format!(
+                "unknown catalogue lattice '{name}' (use {})",
+                dhct_lattice::catalogue::names()
+            ),
+        })?;
+    Ok(entry.build(nn_m)?)
 }
 
 /// One feature: a sum of 2-D Gaussians ("lobes") centred on the lattice site.

@@ -53,6 +53,7 @@ __all__ = [
     "__version__",
     "correct",
     "diagnose",
+    "lattices",
     "presets",
     "read",
     "simulate",
@@ -186,9 +187,10 @@ def correct(
 ) -> "Result":
     """Corrects drift, creep and hysteresis in a scan and analyses its lattice.
 
-    ``scan_or_path``: a :class:`Scan` or the path of a scan file. ``lattice``: graphite
-    (the default), honeycomb, sam-sqrt3, si111-7x7, hexagonal, square, or a lattice file
-    (TOML/JSON). ``nn``: the nearest-neighbour distance in metres (a float), as text with
+    ``scan_or_path``: a :class:`Scan` or the path of a scan file. ``lattice``: a name of
+    the lattice catalogue (see :func:`lattices`: graphite, the default, honeycomb,
+    hexagonal, sam-sqrt3, si111-7x7, square, rectangular, centred-rectangular, oblique,
+    kagome) or a lattice file (TOML/JSON). ``nn``: the nearest-neighbour distance in metres (a float), as text with
     a unit ("2.46A", "0.246nm"), or "auto" (the distance the image shows); presets with a
     known constant need none. ``mask``: a mask file (PNG, NPY, TIFF) or a 2-D array of the
     scan's shape (non-zero = analyse).
@@ -424,6 +426,16 @@ class Simulation:
     scan: Scan
     truth: Dict[str, Any]
     config: str
+
+
+def lattices() -> Dict[str, Dict[str, Any]]:
+    """The lattice catalogue (docs/lattices.md): name -> {"aliases", "summary",
+    "known_constant"}; ``correct(lattice=name)`` takes any of these names or aliases (an
+    entry without a known constant needs ``nn``)."""
+    return {
+        name: {"aliases": list(aliases), "summary": summary, "known_constant": known}
+        for name, aliases, summary, known in _dhct.lattices()
+    }
 
 
 def presets() -> Dict[str, str]:
