@@ -21,7 +21,8 @@
 //! A stored integer `n` is the value `n · hard value / 2^(8 · bytes per pixel) · soft
 //! value`, where the soft value is the parameter named in brackets (`@Sens. Zscan: V
 //! 12.75 nm/V` in the scanner list), and the unit is the soft value's without `/V` (metres
-//! after folding the prefix). Without a soft scale the value stays in the hard value's unit.
+//! after folding the prefix). Without a soft scale, or with one that has no unit, the value
+//! stays in the hard value's unit.
 //! This matches Gwyddion's and pySPM's readings. `@2:Z offset` is not applied (it only
 //! shifts the values) but is kept in the metadata when it is not zero.
 //!
@@ -331,7 +332,11 @@ fn z_scale(
                 format!("{soft_name} \"{soft_text}\" is not a CIAO value"),
             )
         })?;
-    let unit = soft.unit.strip_suffix("/V").unwrap_or(&soft.unit);
+    // A soft scale without a unit (`@Sens. Friction: V 1.000000`) leaves the volts.
+    let unit = match soft.unit.as_str() {
+        "" => scale.unit.as_str(),
+        unit => unit.strip_suffix("/V").unwrap_or(unit),
+    };
     let (unit, prefix) = parse_unit(&normalise_unit(unit));
     Ok((per_unit * soft.value * prefix, unit))
 }
