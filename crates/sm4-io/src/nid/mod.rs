@@ -16,7 +16,8 @@
 //! | `Dim2Name`, `Dim2Unit`, `Dim2Min`, `Dim2Range` | channel name, unit and value range |
 //! | `SaveBits`, `SaveSign`, `SaveOrder`, `SaveMode` | 16 or 32, `Signed`, `Intel` (little-endian), `Binary` |
 //!
-//! A stored integer `n` of `b` bits is the value `Dim2Min + Dim2Range · (n + 2^(b−1)) / 2^b`.
+//! A stored integer `n` of `b` bits is the value `Dim2Min + Dim2Range · (n + 2^(b−1)) / 2^b`,
+//! in `Dim2Unit` with its prefix folded into the value (`°` is written `deg`).
 //!
 //! # Orientation (matches Gwyddion's import and the header's `CurLine`)
 //!
@@ -234,7 +235,11 @@ fn data_set(ini: &Ini, section: &str, start: usize) -> Result<DataSet, ReadError
         (false, _) => None,
         (true, backward) => Some(backward),
     };
-    let (unit, scale) = parse_unit(get("Dim2Unit").unwrap_or(""));
+    let unit = match get("Dim2Unit").unwrap_or("") {
+        "°" | "º" => "deg",
+        unit => unit,
+    };
+    let (unit, scale) = parse_unit(unit);
     let value_min = number("Dim2Min").ok_or_else(|| corrupt("Dim2Min is missing".into()))?;
     let value_range = number("Dim2Range").ok_or_else(|| corrupt("Dim2Range is missing".into()))?;
     let size = lateral_size(ini, section)?;
