@@ -24,6 +24,12 @@ pub enum FileFormat {
     Tiff,
     /// PNG image.
     Png,
+    /// Gwyddion native file (.gwy, serialized GwyContainer).
+    Gwyddion,
+    /// Nanosurf NID (INI-like text header + integer data).
+    NanosurfNid,
+    /// Bruker/Veeco Nanoscope (.spm, .001, ...: text header + integer data).
+    Nanoscope,
 }
 
 impl FileFormat {
@@ -38,6 +44,9 @@ impl FileFormat {
             FileFormat::Npy => "NumPy NPY",
             FileFormat::Tiff => "TIFF",
             FileFormat::Png => "PNG",
+            FileFormat::Gwyddion => "Gwyddion GWY",
+            FileFormat::NanosurfNid => "Nanosurf NID",
+            FileFormat::Nanoscope => "Bruker Nanoscope",
         }
     }
 }

@@ -24,6 +24,16 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::Tiff)
     } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         Some(FileFormat::Png)
+    } else if bytes.starts_with(crate::gwy::MAGIC) || bytes.starts_with(crate::gwy::OLD_MAGIC) {
+        Some(FileFormat::Gwyddion)
+    } else if text_start("[DataSet]") {
+        Some(FileFormat::NanosurfNid)
+    } else if crate::nanoscope::MAGICS
+        .iter()
+        .any(|m| bytes.starts_with(m))
+    {
+        // Not ISO 28600, whose `.spm` files start with "ISO/TC 201".
+        Some(FileFormat::Nanoscope)
     } else {
         None
     }
@@ -50,6 +60,18 @@ mod tests {
         assert_eq!(detect_format(b"\x93NUMPY\x01\x00"), Some(FileFormat::Npy));
         assert_eq!(detect_format(b"II*\0\x08\0\0\0"), Some(FileFormat::Tiff));
         assert_eq!(detect_format(b"MM\0*\0\0\0\x08"), Some(FileFormat::Tiff));
+        assert_eq!(
+            detect_format(b"GWYPGwyContainer\0"),
+            Some(FileFormat::Gwyddion)
+        );
+        assert_eq!(
+            detect_format(b"[DataSet]\r\nVersion=2\r\n"),
+            Some(FileFormat::NanosurfNid)
+        );
+        assert_eq!(
+            detect_format(b"\\*File list\r\n\\Version: 0x05120130\r\n"),
+            Some(FileFormat::Nanoscope)
+        );
         assert_eq!(detect_format(b""), None);
         assert_eq!(detect_format(b"hello world"), None);
         assert_eq!(detect_format(&[0xFF; 64]), None);

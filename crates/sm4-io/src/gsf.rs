@@ -68,87 +68,16 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
 /// [`read`] under `limits` (see [`crate::limits`]).
 pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     let mut budget = Budget::new(limits, bytes.len())?;
-    let start = if bytes.starts_with(b"\xEF\xBB\xBF") {
-        3
-    } else {
-        0
-    };
-    let header_start = start + MAGIC.len();
-    if bytes.get(start..header_start) != Some(MAGIC) {
-        let reason = "the file does not start with the line \"Gwyddion Simple Field 1.0\"";
-        return Err(ReadError::wrong_format(FORMAT, reason));
-    }
-    let nul = bytes
-        .get(header_start..)
-        .and_then(|rest| rest.iter().position(|&b| b == 0))
-        .map(|i| header_start + i)
-        .ok_or_else(|| ReadError::Truncated {
-            format: FORMAT,
-            what: "NUL padding that ends the header".to_string(),
-            offset: bytes.len() as u64,
-            needed: 1,
-            len: bytes.len() as u64,
-        })?;
-    let data_start = nul + (4 - nul % 4);
-    match bytes.get(nul..data_start) {
-        Some(padding) if padding.iter().all(|&b| b == 0) => {}
-        Some(_) => {
-            return Err(ReadError::corrupt(
-                FORMAT,
-                format!("header padding at bytes {nul}..{data_start} is not all NUL"),
-            ));
-        }
-        None => {
-            return Err(ReadError::Truncated {
-                format: FORMAT,
-                what: "NUL padding that ends the header".to_string(),
-                offset: nul as u64,
-                needed: (data_start - nul) as u64,
-                len: bytes.len() as u64,
-            });
-        }
-    }
+    let (header_start, nul, data_start) = header_extent(bytes)?;
     let header_text = String::from_utf8_lossy(bytes.get(header_start..nul).unwrap_or(&[]));
-    let mut fields: Vec<(String, String)> = Vec::new();
-    for line in header_text.split('\n') {
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        let (name, value) = line.split_once('=').ok_or_else(|| {
-            ReadError::corrupt(
-                FORMAT,
-                format!(
-                    "header line \"{}\" is not of the form name = value",
-                    shorten(line)
-                ),
-            )
-        })?;
-        fields.push((name.trim().to_string(), value.trim().to_string()));
-    }
+    let fields = parse_fields(&header_text)?;
     let get = |name: &str| {
         fields
             .iter()
             .find(|(n, _)| n == name)
             .map(|(_, v)| v.as_str())
     };
-
-    let resolution = |name: &str| -> Result<u64, ReadError> {
-        let text = get(name).ok_or_else(|| {
-            ReadError::corrupt(FORMAT, format!("header lacks the mandatory field {name}"))
-        })?;
-        match text.parse::<u64>() {
-            Ok(n) if n > 0 => Ok(n),
-            _ => Err(ReadError::corrupt(
-                FORMAT,
-                format!(
-                    "{name} must be a positive integer, got \"{}\"",
-                    shorten(text)
-                ),
-            )),
-        }
-    };
-    let (x_res, y_res) = (resolution("XRes")?, resolution("YRes")?);
+    let (x_res, y_res) = (resolution(&get, "XRes")?, resolution(&get, "YRes")?);
     budget.charge_images(FORMAT, x_res, y_res, 1, 0)?;
     let data_len = checked_data_len(FORMAT, y_res, x_res, 4)?;
     let data = bytes
@@ -191,24 +120,115 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
 
     let mut metadata = BTreeMap::new();
     let geometry = build_geometry(&get, columns, rows, &mut metadata)?;
-    let pass = match get("DHCT_Pass") {
-        None => ScanPass::Trace,
-        Some(p) if p.eq_ignore_ascii_case("trace") => ScanPass::Trace,
-        Some(p) if p.eq_ignore_ascii_case("retrace") => ScanPass::Retrace,
-        Some(p) => {
-            return Err(ReadError::corrupt(
-                FORMAT,
-                format!("DHCT_Pass must be trace or retrace, got \"{}\"", shorten(p)),
-            ));
-        }
-    };
-    let pair = match pass {
+    let pair = match pass(get("DHCT_Pass"))? {
         ScanPass::Trace => ScanPair::new(geometry, channel, None),
         ScanPass::Retrace => ScanPair::retrace_only(geometry, channel),
     }
     .map_err(|source| ReadError::geometry(FORMAT, source))?;
+    add_unknown_fields(&fields, &mut metadata);
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs: vec![pair],
+        metadata,
+    })
+}
 
-    for (name, value) in &fields {
+/// Checks the magic line and the NUL padding; returns where the header text starts, the
+/// offset of its first NUL and where the data start (the next multiple of 4).
+fn header_extent(bytes: &[u8]) -> Result<(usize, usize, usize), ReadError> {
+    let start = if bytes.starts_with(b"\xEF\xBB\xBF") {
+        3
+    } else {
+        0
+    };
+    let header_start = start + MAGIC.len();
+    if bytes.get(start..header_start) != Some(MAGIC) {
+        let reason = "the file does not start with the line \"Gwyddion Simple Field 1.0\"";
+        return Err(ReadError::wrong_format(FORMAT, reason));
+    }
+    let nul = bytes
+        .get(header_start..)
+        .and_then(|rest| rest.iter().position(|&b| b == 0))
+        .map(|i| header_start + i)
+        .ok_or_else(|| ReadError::Truncated {
+            format: FORMAT,
+            what: "NUL padding that ends the header".to_string(),
+            offset: bytes.len() as u64,
+            needed: 1,
+            len: bytes.len() as u64,
+        })?;
+    let data_start = nul + (4 - nul % 4);
+    match bytes.get(nul..data_start) {
+        Some(padding) if padding.iter().all(|&b| b == 0) => Ok((header_start, nul, data_start)),
+        Some(_) => Err(ReadError::corrupt(
+            FORMAT,
+            format!("header padding at bytes {nul}..{data_start} is not all NUL"),
+        )),
+        None => Err(ReadError::Truncated {
+            format: FORMAT,
+            what: "NUL padding that ends the header".to_string(),
+            offset: nul as u64,
+            needed: (data_start - nul) as u64,
+            len: bytes.len() as u64,
+        }),
+    }
+}
+
+/// The `name = value` lines of the header, in order.
+fn parse_fields(header_text: &str) -> Result<Vec<(String, String)>, ReadError> {
+    let mut fields: Vec<(String, String)> = Vec::new();
+    for line in header_text.split('\n') {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let (name, value) = line.split_once('=').ok_or_else(|| {
+            ReadError::corrupt(
+                FORMAT,
+                format!(
+                    "header line \"{}\" is not of the form name = value",
+                    shorten(line)
+                ),
+            )
+        })?;
+        fields.push((name.trim().to_string(), value.trim().to_string()));
+    }
+    Ok(fields)
+}
+
+/// The mandatory positive pixel count `name` (`XRes` or `YRes`).
+fn resolution<'a>(get: &impl Fn(&str) -> Option<&'a str>, name: &str) -> Result<u64, ReadError> {
+    let text = get(name).ok_or_else(|| {
+        ReadError::corrupt(FORMAT, format!("header lacks the mandatory field {name}"))
+    })?;
+    match text.parse::<u64>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(ReadError::corrupt(
+            FORMAT,
+            format!(
+                "{name} must be a positive integer, got \"{}\"",
+                shorten(text)
+            ),
+        )),
+    }
+}
+
+/// The pass `DHCT_Pass` names (trace when absent).
+fn pass(text: Option<&str>) -> Result<ScanPass, ReadError> {
+    match text {
+        None => Ok(ScanPass::Trace),
+        Some(p) if p.eq_ignore_ascii_case("trace") => Ok(ScanPass::Trace),
+        Some(p) if p.eq_ignore_ascii_case("retrace") => Ok(ScanPass::Retrace),
+        Some(p) => Err(ReadError::corrupt(
+            FORMAT,
+            format!("DHCT_Pass must be trace or retrace, got \"{}\"", shorten(p)),
+        )),
+    }
+}
+
+/// Copies the header fields dhct does not interpret into the metadata.
+fn add_unknown_fields(fields: &[(String, String)], metadata: &mut BTreeMap<String, String>) {
+    for (name, value) in fields {
         let known = matches!(
             name.as_str(),
             "XRes" | "YRes" | "XReal" | "YReal" | "XYUnits" | "ZUnits" | "Title"
@@ -217,11 +237,6 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             metadata.insert(name.clone(), value.clone());
         }
     }
-    Ok(ScanFile {
-        format: FORMAT,
-        pairs: vec![pair],
-        metadata,
-    })
 }
 
 /// The scan geometry from the header fields (`get`); assumptions are noted in `metadata`.

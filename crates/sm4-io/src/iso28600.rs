@@ -109,7 +109,48 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
         .split(|&b| b == b'\n')
         .map(|line| line.strip_suffix(b"\r").unwrap_or(line));
 
-    // Header: exactly 128 lines, latin-1 decoded and trimmed.
+    let h = read_header(bytes, &mut lines)?;
+    let experiment = h.line(8).to_ascii_uppercase();
+    let channel_count = channel_count(&h, &experiment)?;
+    check_scan_mode(&h)?;
+
+    let columns = h.count(24, "number of X points")?;
+    let rows = h.count(25, "number of Y points")?;
+    if columns == 0 || rows == 0 {
+        return Err(ReadError::NoImage {
+            format: FORMAT,
+            reason: format!("the map has {columns} x {rows} points"),
+        });
+    }
+
+    let channels = channel_names(&h, &experiment, channel_count);
+
+    budget.charge_images(FORMAT, columns as u64, rows as u64, channel_count as u64, 0)?;
+    let values = read_data(bytes, &mut lines, columns, rows, channel_count, &channels)?;
+
+    let mut metadata = metadata(&h);
+    let geometry = build_geometry(&h, columns, rows, &mut metadata)?;
+    let mut pairs = Vec::with_capacity(channel_count);
+    for ((name, unit, _), z) in channels.into_iter().zip(values) {
+        let channel = ImageChannel::from_row_major(name, unit, rows, columns, z)
+            .map_err(|source| ReadError::geometry(FORMAT, source))?;
+        pairs.push(
+            ScanPair::new(geometry.clone(), channel, None)
+                .map_err(|source| ReadError::geometry(FORMAT, source))?,
+        );
+    }
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs,
+        metadata,
+    })
+}
+
+/// The 128 header lines (latin-1 decoded, trimmed), with the fixed labels checked.
+fn read_header<'a>(
+    bytes: &[u8],
+    lines: &mut impl Iterator<Item = &'a [u8]>,
+) -> Result<Header, ReadError> {
     let mut header: Vec<String> = Vec::with_capacity(HEADER_LINES);
     for number in 1..=HEADER_LINES {
         let line = lines
@@ -142,10 +183,13 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             ));
         }
     }
+    Ok(h)
+}
 
-    let experiment = h.line(8).to_ascii_uppercase();
-    let channel_count = match experiment.as_str() {
-        "MAP_SC" => 1,
+/// The number of channels the experiment mode (line 8, upper case) implies.
+fn channel_count(h: &Header, experiment: &str) -> Result<usize, ReadError> {
+    match experiment {
+        "MAP_SC" => Ok(1),
         "MAP_MC" => {
             let n = h.count(94, "number of data channels")?;
             if n == 0 || n > MAX_CHANNELS {
@@ -156,23 +200,22 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
                     ),
                 ));
             }
-            n
+            Ok(n)
         }
-        "SPEC_SC" | "SPEC_MC" => {
-            return Err(ReadError::unsupported(
-                FORMAT,
-                format!("experiment mode {experiment} holds spectra, not images"),
-            ));
-        }
-        other => {
-            return Err(ReadError::corrupt(
-                FORMAT,
-                format!("unknown experiment mode \"{other}\" on line 8"),
-            ));
-        }
-    };
-    let scan_mode = h.line(17).to_ascii_uppercase();
-    if scan_mode != "REGULAR MAPPING" {
+        "SPEC_SC" | "SPEC_MC" => Err(ReadError::unsupported(
+            FORMAT,
+            format!("experiment mode {experiment} holds spectra, not images"),
+        )),
+        other => Err(ReadError::corrupt(
+            FORMAT,
+            format!("unknown experiment mode \"{other}\" on line 8"),
+        )),
+    }
+}
+
+/// Refuses scan modes other than `REGULAR MAPPING` (line 17).
+fn check_scan_mode(h: &Header) -> Result<(), ReadError> {
+    if h.line(17).to_ascii_uppercase() != "REGULAR MAPPING" {
         return Err(ReadError::unsupported(
             FORMAT,
             format!(
@@ -181,19 +224,13 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             ),
         ));
     }
+    Ok(())
+}
 
-    let columns = h.count(24, "number of X points")?;
-    let rows = h.count(25, "number of Y points")?;
-    if columns == 0 || rows == 0 {
-        return Err(ReadError::NoImage {
-            format: FORMAT,
-            reason: format!("the map has {columns} x {rows} points"),
-        });
-    }
-
-    // Channel names and units.
-    let mut channels: Vec<(String, String, f64)> = Vec::with_capacity(channel_count);
-    for i in 0..channel_count {
+/// Name, unit and unit-prefix factor of every channel.
+fn channel_names(h: &Header, experiment: &str, count: usize) -> Vec<(String, String, f64)> {
+    let mut channels = Vec::with_capacity(count);
+    for i in 0..count {
         let (name_line, unit_line) = if experiment == "MAP_SC" {
             (69, 70)
         } else {
@@ -206,26 +243,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
         let (unit, factor) = parse_unit(h.line(unit_line));
         channels.push((name, unit, factor));
     }
-
-    budget.charge_images(FORMAT, columns as u64, rows as u64, channel_count as u64, 0)?;
-    let values = read_data(bytes, &mut lines, columns, rows, channel_count, &channels)?;
-
-    let mut metadata = metadata(&h);
-    let geometry = build_geometry(&h, columns, rows, &mut metadata)?;
-    let mut pairs = Vec::with_capacity(channel_count);
-    for ((name, unit, _), z) in channels.into_iter().zip(values) {
-        let channel = ImageChannel::from_row_major(name, unit, rows, columns, z)
-            .map_err(|source| ReadError::geometry(FORMAT, source))?;
-        pairs.push(
-            ScanPair::new(geometry.clone(), channel, None)
-                .map_err(|source| ReadError::geometry(FORMAT, source))?,
-        );
-    }
-    Ok(ScanFile {
-        format: FORMAT,
-        pairs,
-        metadata,
-    })
+    channels
 }
 
 /// The 128 header lines, 1-based access.

@@ -10,6 +10,9 @@
 //! | NumPy .npy | yes | yes | [`npy`] |
 //! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
 //! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
+//! | Gwyddion native (.gwy) | yes | — | [`gwy`] |
+//! | Nanosurf NID | yes | — | [`nid`] |
+//! | Bruker/Veeco Nanoscope (.spm, .001, …) | yes | — | [`nanoscope`] |
 //!
 //! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
 //! the whole file as a byte slice and checks every length against it before allocating, so
@@ -33,8 +36,11 @@ pub mod bytes;
 mod detect;
 mod error;
 pub mod gsf;
+pub mod gwy;
 pub mod iso28600;
 pub mod limits;
+pub mod nanoscope;
+pub mod nid;
 pub mod npy;
 mod overrides;
 mod placeholders;
@@ -117,6 +123,9 @@ pub fn read_as_limited(
         FileFormat::Gsf => gsf::read_limited(bytes, limits),
         FileFormat::Npy => npy::read_limited(bytes, limits),
         FileFormat::Tiff => tiff_file::read_limited(bytes, limits),
+        FileFormat::Gwyddion => gwy::read_limited(bytes, limits),
+        FileFormat::NanosurfNid => nid::read_limited(bytes, limits),
+        FileFormat::Nanoscope => nanoscope::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \

@@ -86,6 +86,84 @@ pub fn read(bytes: &[u8]) -> Result<ScanFile, ReadError> {
 /// [`read`] under `limits` (see [`crate::limits`]).
 pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     let mut budget = Budget::new(limits, bytes.len())?;
+    let layout = find_layout(bytes)?;
+    let header_bytes = bytes.get(layout.body_start..layout.end_tag).unwrap_or(&[]);
+    let header = parse_header(header_bytes)?;
+    let big_endian = big_endian(header.get("SCANIT_TYPE").unwrap_or("FLOAT MSBFIRST"))?;
+    let pixels = header
+        .get("SCAN_PIXELS")
+        .ok_or_else(|| ReadError::corrupt(FORMAT, "header lacks SCAN_PIXELS"))?;
+    let (columns, rows) = parse_pixels(pixels)?;
+    let channels = channels(&header)?;
+
+    // Check the whole data length against the file before allocating anything.
+    let image_len = checked_data_len(FORMAT, rows as u64, columns as u64, 4)?;
+    let image_count: u64 = channels
+        .iter()
+        .map(|c| {
+            if c.directions == Directions::Both {
+                2
+            } else {
+                1
+            }
+        })
+        .sum();
+    let total = image_len.checked_mul(image_count).ok_or_else(|| {
+        ReadError::corrupt(
+            FORMAT,
+            format!("{image_count} images of {columns} x {rows} px are too large"),
+        )
+    })?;
+    budget.charge_images(FORMAT, columns as u64, rows as u64, image_count, 0)?;
+    let data_start = layout.data_start;
+    let available = bytes.len().saturating_sub(data_start) as u64;
+    if total > available {
+        return Err(ReadError::Truncated {
+            format: FORMAT,
+            what: format!("{image_count} image(s) of {columns} x {rows} float32 values"),
+            offset: data_start as u64,
+            needed: total,
+            len: bytes.len() as u64,
+        });
+    }
+
+    let scan_up = header
+        .get("SCAN_DIR")
+        .is_some_and(|d| d.trim().eq_ignore_ascii_case("up"));
+    let geometry = build_geometry(&header, columns, rows, scan_up)?;
+    let mut metadata = metadata(&header);
+    note_assumptions(&geometry, &mut metadata);
+    let stored = StoredImages {
+        bytes,
+        data_start,
+        image_len: usize::try_from(image_len)
+            .map_err(|_| ReadError::corrupt(FORMAT, "image too large for this machine"))?,
+        total,
+        columns,
+        rows,
+        big_endian,
+        scan_up,
+    };
+    let pairs = stored.decode_channels(&channels, &geometry)?;
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs,
+        metadata,
+    })
+}
+
+/// Where the header and the data lie in the file.
+struct Layout {
+    /// Start of the header text (after a UTF-8 byte-order mark, if any).
+    body_start: usize,
+    /// Offset of `:SCANIT_END:`.
+    end_tag: usize,
+    /// First data byte (after the `\x1A\x04` marker).
+    data_start: usize,
+}
+
+/// Checks the magic and finds the end tag and the data marker.
+fn find_layout(bytes: &[u8]) -> Result<Layout, ReadError> {
     let body_start = if bytes.starts_with(b"\xEF\xBB\xBF") {
         3
     } else {
@@ -126,148 +204,135 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
                 ReadError::corrupt(FORMAT, "no data start marker \\x1A\\x04 after :SCANIT_END:")
             }
         })?;
-    let data_start = marker + DATA_MARKER.len();
+    Ok(Layout {
+        body_start,
+        end_tag,
+        data_start: marker + DATA_MARKER.len(),
+    })
+}
 
-    let header_bytes = bytes.get(body_start..end_tag).unwrap_or(&[]);
-    let header = parse_header(header_bytes)?;
-
-    let scan_type = header.get("SCANIT_TYPE").unwrap_or("FLOAT MSBFIRST");
+/// Whether `SCANIT_TYPE` says big-endian floats (`FLOAT MSBFIRST`) or little-endian.
+fn big_endian(scan_type: &str) -> Result<bool, ReadError> {
     let mut words = scan_type.split_whitespace();
-    let big_endian = match (words.next(), words.next()) {
+    match (words.next(), words.next()) {
         (Some(t), Some(order)) if t.eq_ignore_ascii_case("FLOAT") => {
             if order.eq_ignore_ascii_case("MSBFIRST") {
-                true
+                Ok(true)
             } else if order.eq_ignore_ascii_case("LSBFIRST") {
-                false
+                Ok(false)
             } else {
-                return Err(unsupported_type(scan_type));
+                Err(unsupported_type(scan_type))
             }
         }
-        _ => return Err(unsupported_type(scan_type)),
-    };
+        _ => Err(unsupported_type(scan_type)),
+    }
+}
 
-    let pixels = header
-        .get("SCAN_PIXELS")
-        .ok_or_else(|| ReadError::corrupt(FORMAT, "header lacks SCAN_PIXELS"))?;
-    let (columns, rows) = parse_pixels(pixels)?;
-    let channels =
-        parse_data_info(
-            header
-                .get_raw("DATA_INFO")
-                .ok_or_else(|| ReadError::NoImage {
-                    format: FORMAT,
-                    reason: "header has no DATA_INFO table".to_string(),
-                })?,
-        )?;
+/// The channels of the `DATA_INFO` table (at least one).
+fn channels(header: &Header) -> Result<Vec<ChannelInfo>, ReadError> {
+    let table = header
+        .get_raw("DATA_INFO")
+        .ok_or_else(|| ReadError::NoImage {
+            format: FORMAT,
+            reason: "header has no DATA_INFO table".to_string(),
+        })?;
+    let channels = parse_data_info(table)?;
     if channels.is_empty() {
         return Err(ReadError::NoImage {
             format: FORMAT,
             reason: "the DATA_INFO table lists no channel".to_string(),
         });
     }
+    Ok(channels)
+}
 
-    // Check the whole data length against the file before allocating anything.
-    let image_len = checked_data_len(FORMAT, rows as u64, columns as u64, 4)?;
-    let image_count: u64 = channels
-        .iter()
-        .map(|c| {
-            if c.directions == Directions::Both {
-                2
-            } else {
-                1
-            }
-        })
-        .sum();
-    let total = image_len.checked_mul(image_count).ok_or_else(|| {
-        ReadError::corrupt(
-            FORMAT,
-            format!("{image_count} images of {columns} x {rows} px are too large"),
-        )
-    })?;
-    budget.charge_images(FORMAT, columns as u64, rows as u64, image_count, 0)?;
-    let available = bytes.len().saturating_sub(data_start) as u64;
-    if total > available {
-        return Err(ReadError::Truncated {
-            format: FORMAT,
-            what: format!("{image_count} image(s) of {columns} x {rows} float32 values"),
-            offset: data_start as u64,
-            needed: total,
-            len: bytes.len() as u64,
-        });
-    }
-
-    let scan_up = header
-        .get("SCAN_DIR")
-        .is_some_and(|d| d.trim().eq_ignore_ascii_case("up"));
-    let geometry = build_geometry(&header, columns, rows, scan_up)?;
-
-    let image_len = usize::try_from(image_len)
-        .map_err(|_| ReadError::corrupt(FORMAT, "image too large for this machine"))?;
-    let mut data = bytes
-        .get(data_start..)
-        .unwrap_or(&[])
-        .chunks_exact(image_len.max(1));
-    let mut next_image = |what: &str| {
-        data.next().ok_or_else(|| ReadError::Truncated {
-            format: FORMAT,
-            what: what.to_string(),
-            offset: data_start as u64,
-            needed: total,
-            len: bytes.len() as u64,
-        })
-    };
-    let mut pairs = Vec::with_capacity(channels.len());
-    let mut metadata = metadata(&header);
+/// Records why scale or timing were assumed.
+fn note_assumptions(geometry: &ScanGeometry, metadata: &mut BTreeMap<String, String>) {
     if geometry.scale_source() == ValueSource::Assumed {
-        note(
-            &mut metadata,
-            ASSUMED_SCALE_KEY,
-            "no SCAN_RANGE in the header",
-        );
+        note(metadata, ASSUMED_SCALE_KEY, "no SCAN_RANGE in the header");
     }
     if geometry.timing_source() == ValueSource::Assumed {
-        note(
-            &mut metadata,
-            ASSUMED_TIMING_KEY,
-            "no SCAN_TIME in the header",
-        );
+        note(metadata, ASSUMED_TIMING_KEY, "no SCAN_TIME in the header");
     }
-    for channel in &channels {
-        let forward = match channel.directions {
-            Directions::Forward | Directions::Both => Some(decode_image(
-                next_image(&format!("{} forward image", channel.name))?,
-                columns,
-                rows,
-                big_endian,
-                false,
-                scan_up,
-                channel,
-            )?),
-            Directions::Backward => None,
+}
+
+/// The stored images of a file whose length was checked against all of them.
+struct StoredImages<'a> {
+    bytes: &'a [u8],
+    data_start: usize,
+    /// Bytes of one image.
+    image_len: usize,
+    /// Bytes of all images.
+    total: u64,
+    columns: usize,
+    rows: usize,
+    big_endian: bool,
+    scan_up: bool,
+}
+
+impl StoredImages<'_> {
+    /// One [`ScanPair`] per channel, its images taken in storage order.
+    fn decode_channels(
+        &self,
+        channels: &[ChannelInfo],
+        geometry: &ScanGeometry,
+    ) -> Result<Vec<ScanPair>, ReadError> {
+        let mut data = self
+            .bytes
+            .get(self.data_start..)
+            .unwrap_or(&[])
+            .chunks_exact(self.image_len.max(1));
+        let mut next_image = |what: &str| {
+            data.next().ok_or_else(|| ReadError::Truncated {
+                format: FORMAT,
+                what: what.to_string(),
+                offset: self.data_start as u64,
+                needed: self.total,
+                len: self.bytes.len() as u64,
+            })
         };
-        let backward = match channel.directions {
-            Directions::Backward | Directions::Both => Some(decode_image(
-                next_image(&format!("{} backward image", channel.name))?,
-                columns,
-                rows,
-                big_endian,
-                true,
-                scan_up,
-                channel,
-            )?),
-            Directions::Forward => None,
-        };
-        pairs.push(
-            ScanPair::from_parts(geometry.clone(), forward, backward)
-                .map_err(|source| ReadError::geometry(FORMAT, source))?,
-        );
+        let mut pairs = Vec::with_capacity(channels.len());
+        for channel in channels {
+            let forward = match channel.directions {
+                Directions::Forward | Directions::Both => Some(self.decode(
+                    next_image(&format!("{} forward image", channel.name))?,
+                    false,
+                    channel,
+                )?),
+                Directions::Backward => None,
+            };
+            let backward = match channel.directions {
+                Directions::Backward | Directions::Both => Some(self.decode(
+                    next_image(&format!("{} backward image", channel.name))?,
+                    true,
+                    channel,
+                )?),
+                Directions::Forward => None,
+            };
+            pairs.push(
+                ScanPair::from_parts(geometry.clone(), forward, backward)
+                    .map_err(|source| ReadError::geometry(FORMAT, source))?,
+            );
+        }
+        Ok(pairs)
     }
 
-    Ok(ScanFile {
-        format: FORMAT,
-        pairs,
-        metadata,
-    })
+    fn decode(
+        &self,
+        data: &[u8],
+        backward: bool,
+        channel: &ChannelInfo,
+    ) -> Result<ImageChannel, ReadError> {
+        decode_image(
+            data,
+            self.columns,
+            self.rows,
+            self.big_endian,
+            backward,
+            self.scan_up,
+            channel,
+        )
+    }
 }
 
 /// Decodes one stored image into display orientation.

@@ -194,33 +194,8 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             reason: format!("the image is {width} x {height} px"),
         });
     }
-    let bits = match decoder.colortype().map_err(|e| read_error(e, bytes))? {
-        ColorType::Gray(bits @ (8 | 16 | 32 | 64)) => bits,
-        other => {
-            return Err(ReadError::unsupported(
-                FORMAT,
-                format!(
-                    "colour type {other:?}; dhct reads single-channel grey images of 8, 16, 32 or 64 bits"
-                ),
-            ));
-        }
-    };
-    let needed = crate::bytes::checked_data_len(
-        FORMAT,
-        u64::from(height),
-        u64::from(width),
-        u64::from(bits / 8),
-    )?;
-    if needed > budget as u64 {
-        return Err(ReadError::corrupt(
-            FORMAT,
-            format!(
-                "a {width} x {height} px image of {bits}-bit samples needs {needed} bytes, \
-                 more than a {}-byte file can plausibly hold",
-                bytes.len()
-            ),
-        ));
-    }
+    let bits = sample_bits(decoder.colortype().map_err(|e| read_error(e, bytes))?)?;
+    check_plausible_size(width, height, bits, budget as u64, bytes.len())?;
     read_budget.charge_images(
         FORMAT,
         u64::from(width),
@@ -234,21 +209,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
         .unwrap_or_default();
     let more_pages = decoder.more_images();
     let image = decoder.read_image().map_err(|e| read_error(e, bytes))?;
-    let values: Vec<f64> = match image {
-        DecodingResult::U8(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::U16(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::U32(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::U64(v) => v.into_iter().map(|x| x as f64).collect(),
-        DecodingResult::I8(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::I16(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::I32(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::I64(v) => v.into_iter().map(|x| x as f64).collect(),
-        DecodingResult::F32(v) => v.into_iter().map(f64::from).collect(),
-        DecodingResult::F64(v) => v,
-        DecodingResult::F16(_) => {
-            return Err(ReadError::unsupported(FORMAT, "16-bit float samples"));
-        }
-    };
+    let values = samples_as_f64(image)?;
 
     let info = parse_description(&description);
     let scale = match (info.z_offset, info.z_step) {
@@ -280,6 +241,79 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     let pair = ScanPair::new(geometry, channel, None)
         .map_err(|source| ReadError::geometry(FORMAT, source))?;
 
+    let metadata = tiff_metadata(bits, more_pages, &description, scale);
+    Ok(ScanFile {
+        format: FORMAT,
+        pairs: vec![pair],
+        metadata,
+    })
+}
+
+/// The bits per sample of a single-channel grey image (8, 16, 32 or 64).
+fn sample_bits(colour: ColorType) -> Result<u8, ReadError> {
+    match colour {
+        ColorType::Gray(bits @ (8 | 16 | 32 | 64)) => Ok(bits),
+        other => Err(ReadError::unsupported(
+            FORMAT,
+            format!(
+                "colour type {other:?}; dhct reads single-channel grey images of 8, 16, 32 or 64 bits"
+            ),
+        )),
+    }
+}
+
+/// Refuses an image whose decoded samples would exceed the decoder's buffer budget.
+fn check_plausible_size(
+    width: u32,
+    height: u32,
+    bits: u8,
+    budget: u64,
+    file_len: usize,
+) -> Result<(), ReadError> {
+    let needed = crate::bytes::checked_data_len(
+        FORMAT,
+        u64::from(height),
+        u64::from(width),
+        u64::from(bits / 8),
+    )?;
+    if needed > budget {
+        return Err(ReadError::corrupt(
+            FORMAT,
+            format!(
+                "a {width} x {height} px image of {bits}-bit samples needs {needed} bytes, \
+                 more than a {file_len}-byte file can plausibly hold"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The decoded samples as `f64`.
+fn samples_as_f64(image: DecodingResult) -> Result<Vec<f64>, ReadError> {
+    Ok(match image {
+        DecodingResult::U8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U64(v) => v.into_iter().map(|x| x as f64).collect(),
+        DecodingResult::I8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I64(v) => v.into_iter().map(|x| x as f64).collect(),
+        DecodingResult::F32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::F64(v) => v,
+        DecodingResult::F16(_) => {
+            return Err(ReadError::unsupported(FORMAT, "16-bit float samples"));
+        }
+    })
+}
+
+/// The file's metadata: sample bits, the assumptions, pages, description and z scale.
+fn tiff_metadata(
+    bits: u8,
+    more_pages: bool,
+    description: &str,
+    scale: Option<U16Scale>,
+) -> BTreeMap<String, String> {
     let mut metadata = BTreeMap::new();
     metadata.insert("tiff sample bits".to_string(), bits.to_string());
     metadata.insert(
@@ -308,11 +342,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             format!("z = {:e} + {:e} · count", scale.offset, scale.step),
         );
     }
-    Ok(ScanFile {
-        format: FORMAT,
-        pairs: vec![pair],
-        metadata,
-    })
+    metadata
 }
 
 /// What dhct stored in `ImageDescription`.
