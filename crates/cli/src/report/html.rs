@@ -1,108 +1,48 @@
-//! `report.html`: one self-contained page (pictures embedded as data URIs, plots as inline
-//! SVG, no scripts, no network) with the tables and figures a reader of the DHCT paper
-//! expects.
+//! `report.html`: one self-contained page (pictures embedded in their SVGs, plots as inline
+//! SVG, no scripts, no network) that opens with what was measured and what was assumed,
+//! then the tables and figures a reader of the DHCT paper expects. Built with the escaping
+//! [`Html`] builder.
 
-use std::fmt::Write as _;
+use dhct_pipeline::{CorrectionSource, WarningCode};
+use dhct_scan::{ScanDirection, ValueSource};
 
-use base64::Engine as _;
-
-use super::figures::{Figure, FigureContent};
-use super::plots::html_escape;
+use super::figures::Figure;
+use super::page::{Html, document};
 use super::summary::RunSummary;
-use crate::info::si;
+use crate::units::{angstrom, degrees, length, picometres, si, value_with_sigma};
 
-pub(crate) const STYLE: &str = "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1180px;margin:24px auto;padding:0 16px;color:#222}
-h1{font-size:1.6em;margin-bottom:0}h2{border-bottom:1px solid #ccc;padding-bottom:4px;margin-top:2em}
-.sub{color:#666;margin-top:4px}table{border-collapse:collapse;margin:8px 0 16px}td,th{border:1px solid #ddd;padding:3px 8px;text-align:right;font-variant-numeric:tabular-nums}
-th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(520px,1fr));gap:18px}
-figure{margin:0;border:1px solid #e4e4e4;padding:8px;background:#fff}figure img,figure svg{width:100%;height:auto;image-rendering:pixelated}
-figcaption{font-size:.88em;color:#444;margin-top:6px}figcaption b{color:#222}.note{background:#fff8e0;border:1px solid #eed;padding:6px 10px}";
-
-pub(crate) fn row(html: &mut String, cells: &[String]) {
-    html.push_str("<tr>");
-    for c in cells {
-        let _ = write!(html, "<td>{}</td>", html_escape(c));
+/// A direction in words.
+pub fn direction_words(direction: ScanDirection) -> &'static str {
+    match direction {
+        ScanDirection::Right => "left to right",
+        ScanDirection::Left => "right to left",
+        ScanDirection::Down => "top to bottom",
+        ScanDirection::Up => "bottom to top",
     }
-    html.push_str("</tr>\n");
 }
 
-pub(crate) fn header(html: &mut String, cells: &[&str]) {
-    html.push_str("<tr>");
-    for c in cells {
-        let _ = write!(html, "<th>{}</th>", html_escape(c));
-    }
-    html.push_str("</tr>\n");
+/// A figure with its caption and file names.
+pub(crate) fn figure_html(html: &mut Html, figure: &Figure) {
+    let files: Vec<String> = figure.files().into_iter().map(|(name, _)| name).collect();
+    html.open("figure", &[("id", &figure.stem)])
+        .trusted_svg(figure.svg())
+        .open("figcaption", &[])
+        .element("b", &format!("{}.", figure.title))
+        .text(" ")
+        .text(&figure.caption)
+        .text(" ")
+        .element("i", &format!("({})", files.join(", ")))
+        .close("figcaption")
+        .close("figure");
 }
 
-fn pm(metres: f64) -> String {
-    format!("{:.1} pm", metres * 1e12)
-}
-
-/// A parameter value ± uncertainty: SI prefix for plain units, the value rounded to the
-/// uncertainty's second significant digit.
-pub fn value_with_sigma(value: f64, sigma: f64, unit: &str) -> String {
-    let prefixable = matches!(unit, "m" | "m/s" | "m/s^2" | "s");
-    let (scale, unit) = if prefixable && value.is_finite() && value != 0.0 {
-        let prefixes = [
-            (1e-15, "f"),
-            (1e-12, "p"),
-            (1e-9, "n"),
-            (1e-6, "µ"),
-            (1e-3, "m"),
-            (1.0, ""),
-        ];
-        let (scale, prefix) = prefixes
-            .iter()
-            .rev()
-            .find(|(s, _)| value.abs() >= *s)
-            .copied()
-            .unwrap_or(prefixes[0]);
-        (scale, format!("{prefix}{unit}"))
-    } else {
-        (
-            1.0,
-            if unit == "1" {
-                String::new()
-            } else {
-                unit.to_string()
-            },
-        )
-    };
-    let (v, e) = (value / scale, sigma / scale);
-    if !e.is_finite() || e <= 0.0 {
-        return format!("{v:.4} {unit} (fixed)").trim().replace("  ", " ");
+/// A grid of figures.
+pub(crate) fn figure_grid(html: &mut Html, figures: &[Figure]) {
+    html.open("div", &[("class", "grid")]);
+    for figure in figures {
+        figure_html(html, figure);
     }
-    let decimals = (1 - e.abs().log10().floor() as i32).clamp(0, 12) as usize;
-    format!("{v:.decimals$} ± {e:.decimals$} {unit}")
-        .trim()
-        .to_string()
-}
-
-pub(crate) fn figure_html(html: &mut String, figure: &Figure) {
-    html.push_str("<figure>");
-    match &figure.content {
-        FigureContent::Png(full, preview) => {
-            let data =
-                base64::engine::general_purpose::STANDARD.encode(preview.as_ref().unwrap_or(full));
-            let _ = write!(
-                html,
-                "<img alt='{}' src='data:image/png;base64,{data}'>",
-                html_escape(&figure.title)
-            );
-        }
-        FigureContent::Svg(svg) => {
-            // Strip any XML prolog; inline SVG needs only the element.
-            let start = svg.find("<svg").unwrap_or(0);
-            html.push_str(&svg[start..]);
-        }
-    }
-    let _ = writeln!(
-        html,
-        "<figcaption><b>{}.</b> {} <i>({})</i></figcaption></figure>",
-        html_escape(&figure.title),
-        html_escape(&figure.caption),
-        html_escape(&figure.file_name())
-    );
+    html.close("div");
 }
 
 /// Why the global affine correction was kept: it beat the fitted model, or no model could
@@ -115,192 +55,252 @@ pub fn affine_reason(summary: &RunSummary) -> &'static str {
     }
 }
 
+/// Which correction the corrected data come from, in words.
+fn correction_kept(summary: &RunSummary) -> &'static str {
+    match summary.correction {
+        CorrectionSource::DriftModel => "the drift/creep/hysteresis model",
+        CorrectionSource::Affine => affine_reason(summary),
+    }
+}
+
+/// The opening summary in plain words: what was measured, what was given, what was
+/// assumed.
+fn summary_section(html: &mut Html, summary: &RunSummary) {
+    let mut measured = Vec::new();
+    if let Some(found) = &summary.calibration {
+        let c = &found.calibration;
+        measured.push(format!(
+            "The lattice in the image, by FFT: x scale {:.4}, y scale {:.4}, shear {} relative \
+             to the lattice given (1, 1, 0° = the file's pixel size is right).",
+            c.scale[0],
+            c.scale[1],
+            degrees(c.shear_deg, 2)
+        ));
+    }
+    let features: Vec<String> = summary
+        .passes
+        .iter()
+        .map(|p| {
+            format!(
+                "{} in the {} image ({} indexed)",
+                p.features, p.pass, p.indexed
+            )
+        })
+        .collect();
+    measured.push(format!("Features: {}.", features.join(", ")));
+    for r in &summary.regions {
+        measured.push(format!(
+            "Region {}: rms deviation from the fitted lattice {}, 1σ ellipse {} × {}.",
+            r.region,
+            picometres(r.rms_deviation_m),
+            picometres(r.whole_ellipse.sigma_major_m),
+            picometres(r.whole_ellipse.sigma_minor_m)
+        ));
+    }
+    measured.push(format!("Correction kept: {}.", correction_kept(summary)));
+    let given = vec![format!(
+        "Lattice {} with nearest-neighbour distance {}.",
+        summary.lattice,
+        angstrom(summary.nearest_neighbour_distance_m, 3)
+    )];
+    let assumed = assumptions(summary);
+    html.open("div", &[("class", "summary"), ("id", "summary")])
+        .element("h2", "Summary")
+        .element("p", "Measured from the image:")
+        .list(&measured)
+        .element("p", "Given:")
+        .list(&given)
+        .element("p", "Assumed (not stated by the file; results that depend on it are only as right as the assumption):")
+        .list(&assumed);
+    if !summary.warnings.is_empty() {
+        html.element(
+            "p",
+            &format!(
+                "{} warning(s) below say what not to trust and what to do.",
+                summary.warnings.len()
+            ),
+        );
+    }
+    html.close("div");
+}
+
+/// The scan geometry's assumed values and the pipeline's assumption warnings, in words.
+fn assumptions(summary: &RunSummary) -> Vec<String> {
+    let g = &summary.geometry;
+    let mut assumed = Vec::new();
+    if g.scale_source() == ValueSource::Assumed {
+        assumed.push(format!(
+            "Pixel size {} × {} (placeholder: lengths and velocities scale with it).",
+            length(g.pitch_x()),
+            length(g.pitch_y())
+        ));
+    }
+    if g.timing_source() == ValueSource::Assumed {
+        assumed.push(format!(
+            "Scan timing: {} per pixel, line period {}, frame {} (placeholder: drift \
+             velocities and creep times scale with it).",
+            si(g.pixel_period(), "s"),
+            si(g.line_period(), "s"),
+            si(g.frame_duration(), "s")
+        ));
+    }
+    for w in &summary.warnings {
+        if matches!(
+            w.code,
+            WarningCode::AssumedTiming | WarningCode::AssumedPixelSize
+        ) {
+            assumed.push(w.message.clone());
+        }
+    }
+    if assumed.is_empty() {
+        assumed.push("Nothing: pixel size and scan timing are stated by the file.".into());
+    }
+    assumed
+}
+
+/// The pipeline's warnings, each with what to do (the stable code as a tooltip).
+fn warnings_section(html: &mut Html, summary: &RunSummary) {
+    for w in &summary.warnings {
+        html.open("p", &[("class", "note"), ("title", w.code.name())])
+            .element("b", "Warning:")
+            .text(" ")
+            .text(&w.message)
+            .open("br", &[])
+            .element("b", "What to do:")
+            .text(" ")
+            .text(&w.what_to_do)
+            .close("p");
+    }
+}
+
 /// What the image shows, the calibration from it, and the affine floor.
-fn calibration_section(html: &mut String, summary: &RunSummary) {
-    html.push_str("<h2>Calibration from the lattice</h2>");
+fn calibration_section(html: &mut Html, summary: &RunSummary) {
+    html.element("h2", "Calibration from the lattice");
     let Some(found) = &summary.calibration else {
-        let _ = writeln!(
-            html,
-            "<p>The lattice could not be measured from the image ({}); the file's pixel size \
-             was taken as right and the inputs were not checked.</p>",
-            html_escape(
+        html.element(
+            "p",
+            &format!(
+                "The lattice could not be measured from the image ({}); the file's pixel size \
+                 was taken as right and the inputs were not checked.",
                 summary
                     .calibration_note
                     .as_deref()
                     .unwrap_or("no reason given")
-            )
+            ),
         );
         return;
     };
-    html.push_str(
-        "<p>Measured from the Fourier transform of each image before anything else, in the \
-         file's units; the scales are apparent over true lengths (1 = the file's pixel size \
-         is right). A pixel-size error along the slow axis and a constant slow drift look the \
-         same in one frame.</p><table>\n",
+    html.element(
+        "p",
+        "Measured from the Fourier transform of each image before anything else, in the \
+         file's units; the scales are apparent over true lengths (1 = the file's pixel size is \
+         right). A pixel-size error along the slow axis and a constant slow drift look the \
+         same in one frame.",
     );
-    header(html, &["", "value"]);
-    for pass in &found.passes {
-        row(
-            html,
-            &[
-                format!("{} shows", pass.pass),
-                html_escape(&pass.lattice.describe()),
-            ],
-        );
-    }
+    let mut rows: Vec<(String, String)> = found
+        .passes
+        .iter()
+        .map(|p| (format!("{} shows", p.pass), p.lattice.describe()))
+        .collect();
     let c = &found.calibration;
-    let rows = [
+    rows.extend([
         (
-            "x scale",
+            "x scale".into(),
             format!("{:.4} ± {:.4}", c.scale[0], c.scale_sigma[0]),
         ),
         (
-            "y scale",
+            "y scale".into(),
             format!("{:.4} ± {:.4}", c.scale[1], c.scale_sigma[1]),
         ),
         (
-            "shear",
-            format!("{:.2}° ± {:.2}°", c.shear_deg, c.shear_sigma_deg),
+            "shear".into(),
+            format!(
+                "{} ± {}",
+                degrees(c.shear_deg, 2),
+                degrees(c.shear_sigma_deg, 2)
+            ),
         ),
-        ("lattice rotation", format!("{:.2}°", c.rotation_deg)),
-    ];
-    for (name, value) in rows {
-        row(html, &[name.into(), value]);
-    }
+        ("lattice rotation".into(), degrees(c.rotation_deg, 2)),
+    ]);
     for a in &summary.affine_baseline {
-        row(
-            html,
-            &[
-                format!("region {}: rms from the lattice", a.region),
-                format!(
-                    "{:.1} pm (drift model, {} features) vs {:.1} pm (global affine, {})",
-                    a.model_rms_m * 1e12,
-                    a.model_used,
-                    a.affine_rms_m * 1e12,
-                    a.affine_used
-                ),
-            ],
-        );
+        rows.push((
+            format!("region {}: rms from the lattice", a.region),
+            format!(
+                "{} (drift model, {} features) vs {} (global affine, {})",
+                picometres(a.model_rms_m),
+                a.model_used,
+                picometres(a.affine_rms_m),
+                a.affine_used
+            ),
+        ));
     }
     for check in &summary.corrected_images {
         let k = &check.calibration;
-        row(
-            html,
-            &[
-                format!("corrected {}: its lattice by FFT", check.pass),
-                format!(
-                    "{:.4} × {:.4} of the lattice given along x × y, shear {:.2}°{}",
-                    k.scale[0],
-                    k.scale[1],
-                    k.shear_deg,
-                    if check.passes() {
-                        ""
-                    } else {
-                        " (off: see the warning)"
-                    }
-                ),
-            ],
-        );
+        rows.push((
+            format!("corrected {}: its lattice by FFT", check.pass),
+            format!(
+                "{:.4} × {:.4} of the lattice given along x × y, shear {}{}",
+                k.scale[0],
+                k.scale[1],
+                degrees(k.shear_deg, 2),
+                if check.passes() {
+                    ""
+                } else {
+                    " (off: see the warning)"
+                }
+            ),
+        ));
     }
-    let kept = match summary.correction {
-        dhct_pipeline::CorrectionSource::DriftModel => "the drift/creep/hysteresis model",
-        dhct_pipeline::CorrectionSource::Affine => affine_reason(summary),
-    };
-    row(html, &["correction kept".into(), kept.into()]);
-    html.push_str("</table>\n");
+    rows.push(("correction kept".into(), correction_kept(summary).into()));
+    html.pairs("", &rows);
 }
 
-/// The whole page.
-pub fn report_html(
-    summary: &RunSummary,
-    figures: &[Figure],
-    extra_section: Option<&str>,
-) -> String {
-    let mut html = String::with_capacity(1 << 20);
-    let _ = writeln!(
-        html,
-        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dhct report: {}</title><style>{STYLE}</style></head><body>",
-        html_escape(&summary.input)
-    );
+/// Image size, timing (stated or assumed), scan directions and the per-image counts.
+fn scan_section(html: &mut Html, summary: &RunSummary) {
     let g = &summary.geometry;
-    let _ = write!(
-        html,
-        "<h1>DHCT distortion correction</h1><p class='sub'>{}{} · lattice {} (NN {}) · dhct {}</p>",
-        html_escape(&summary.input),
-        summary
-            .retrace_input
-            .as_ref()
-            .map(|r| format!(" + retrace {}", html_escape(r)))
-            .unwrap_or_default(),
-        html_escape(&summary.lattice),
-        si(summary.nearest_neighbour_distance_m, "m"),
-        summary.dhct_version
-    );
-
-    for w in &summary.warnings {
-        let _ = writeln!(
-            html,
-            "<p class='note'><b>Warning ({}):</b> {} <br><b>What to do:</b> {}</p>",
-            w.code.name(),
-            html_escape(&w.message),
-            html_escape(&w.what_to_do)
-        );
-    }
-    calibration_section(&mut html, summary);
-    html.push_str("<h2>Scan and features</h2><table>\n");
-    header(&mut html, &["", "value"]);
-    row(
-        &mut html,
+    let source = |s: ValueSource| match s {
+        ValueSource::Stated => "stated by the file",
+        ValueSource::Assumed => "assumed: the file does not say",
+    };
+    html.element("h2", "Scan and features").pairs(
+        "",
         &[
-            "image".into(),
-            format!(
-                "{} × {} px, {} × {}",
-                g.columns(),
-                g.rows(),
-                si(g.width(), "m"),
-                si(g.height(), "m")
+            (
+                "image".into(),
+                format!(
+                    "{} × {} px, {} × {} ({})",
+                    g.columns(),
+                    g.rows(),
+                    length(g.width()),
+                    length(g.height()),
+                    source(g.scale_source())
+                ),
+            ),
+            (
+                "timing".into(),
+                format!(
+                    "{} per pixel, line period {}, frame {} ({})",
+                    si(g.pixel_period(), "s"),
+                    si(g.line_period(), "s"),
+                    si(g.frame_duration(), "s"),
+                    source(g.timing_source())
+                ),
+            ),
+            (
+                "scan".into(),
+                format!(
+                    "trace lines {}, slow axis {}",
+                    direction_words(g.trace_fast()),
+                    direction_words(g.slow_direction())
+                ),
             ),
         ],
     );
-    row(
-        &mut html,
-        &[
-            "timing".into(),
-            format!(
-                "{} per pixel, line period {}, frame {} ({:?})",
-                si(g.pixel_period(), "s"),
-                si(g.line_period(), "s"),
-                si(g.frame_duration(), "s"),
-                g.timing_source()
-            ),
-        ],
-    );
-    row(
-        &mut html,
-        &[
-            "scan".into(),
-            format!("trace {:?}, slow {:?}", g.trace_fast(), g.slow_direction()),
-        ],
-    );
-    html.push_str("</table><table>\n");
-    header(
-        &mut html,
-        &[
-            "image",
-            "features",
-            "candidates",
-            "rejected",
-            "with full NN shell",
-            "local distortions",
-            "indexed",
-            "RDF 1st shell",
-            "FWHM",
-        ],
-    );
-    for p in &summary.passes {
-        row(
-            &mut html,
-            &[
+    let rows: Vec<Vec<String>> = summary
+        .passes
+        .iter()
+        .map(|p| {
+            vec![
                 p.pass.to_string(),
                 p.features.to_string(),
                 p.candidates.to_string(),
@@ -312,161 +312,161 @@ pub fn report_html(
                 },
                 p.local_distortions.to_string(),
                 p.indexed.to_string(),
-                format!("{:.3} Å", p.rdf_fit.nn_distance_m * 1e10),
-                format!(
-                    "{:.3} Å",
-                    p.rdf_fit.fwhm_m.first().copied().unwrap_or(f64::NAN) * 1e10
-                ),
-            ],
-        );
-    }
-    html.push_str("</table>\n");
-
-    html.push_str("<h2>Distortion model</h2><p>D(t) = v + a·t + C/(t + t0) for drift and creep, and the fast-scan hysteresis law S(τ), fitted jointly to trace and retrace.</p><table>\n");
-    header(&mut html, &["parameter", "value ± 1σ"]);
-    for p in &summary.parameters {
-        row(
-            &mut html,
-            &[p.name.clone(), value_with_sigma(p.value, p.sigma, &p.unit)],
-        );
-    }
-    html.push_str("</table><table>\n");
-    let gf = &summary.goodness;
-    header(&mut html, &["goodness of fit", "value"]);
-    row(
-        &mut html,
+                angstrom(p.rdf_fit.nn_distance_m, 3),
+                angstrom(p.rdf_fit.fwhm_m.first().copied().unwrap_or(f64::NAN), 3),
+            ]
+        })
+        .collect();
+    html.table(
         &[
-            "local measurements".into(),
-            gf.local_measurements.to_string(),
-        ],
-    );
-    row(
-        &mut html,
-        &[
-            "rms S residual".into(),
-            format!("{:.4}", gf.rms_scale_residual),
-        ],
-    );
-    row(
-        &mut html,
-        &[
-            "rms Dx residual (rms Dx)".into(),
-            format!(
-                "{} ({})",
-                si(gf.rms_drift_residual_m_per_s[0], "m/s"),
-                si(gf.rms_drift_m_per_s[0], "m/s")
-            ),
-        ],
-    );
-    row(
-        &mut html,
-        &[
-            "rms Dy residual (rms Dy)".into(),
-            format!(
-                "{} ({})",
-                si(gf.rms_drift_residual_m_per_s[1], "m/s"),
-                si(gf.rms_drift_m_per_s[1], "m/s")
-            ),
-        ],
-    );
-    html.push_str("</table>\n");
-
-    html.push_str("<h2>Lattice fit and confidence ellipses</h2><table>\n");
-    header(
-        &mut html,
-        &[
-            "region",
+            "image",
             "features",
-            "angle",
-            "a along x",
-            "a along y",
-            "rms dev.",
-            "retrace offset",
-            "1σ ellipse (whole)",
-            "2σ ellipse (whole)",
-            "σz",
-            "1σ ellipse (local cells)",
-            "cells",
+            "candidates",
+            "rejected",
+            "with full NN shell",
+            "local distortions",
+            "indexed",
+            "RDF 1st shell",
+            "FWHM",
+        ],
+        &rows,
+    );
+}
+
+/// The fitted parameters with uncertainties and the goodness of fit.
+fn model_section(html: &mut Html, summary: &RunSummary) {
+    html.element("h2", "Distortion model").element(
+        "p",
+        "D(t) = v + a·t + C/(t + t0) for drift and creep, and the fast-scan hysteresis law \
+         S(τ), fitted jointly to trace and retrace.",
+    );
+    let rows: Vec<Vec<String>> = summary
+        .parameters
+        .iter()
+        .map(|p| vec![p.name.clone(), value_with_sigma(p.value, p.sigma, &p.unit)])
+        .collect();
+    html.table(&["parameter", "value ± 1σ"], &rows);
+    let gf = &summary.goodness;
+    let drift = |k: usize| {
+        format!(
+            "{} ({})",
+            si(gf.rms_drift_residual_m_per_s[k], "m/s"),
+            si(gf.rms_drift_m_per_s[k], "m/s")
+        )
+    };
+    html.table(
+        &["goodness of fit", "value"],
+        &[
+            vec![
+                "local measurements".into(),
+                gf.local_measurements.to_string(),
+            ],
+            vec![
+                "rms S residual".into(),
+                format!("{:.4}", gf.rms_scale_residual),
+            ],
+            vec!["rms Dx residual (rms Dx)".into(), drift(0)],
+            vec!["rms Dy residual (rms Dy)".into(), drift(1)],
         ],
     );
-    for r in &summary.regions {
-        let e = &r.whole_ellipse;
-        row(
-            &mut html,
-            &[
+}
+
+/// One row per region of the lattice fit with its confidence ellipses.
+fn lattice_section(html: &mut Html, summary: &RunSummary) {
+    let pair = |a: f64, b: f64| format!("{} × {}", picometres(a), picometres(b));
+    let rows: Vec<Vec<String>> = summary
+        .regions
+        .iter()
+        .map(|r| {
+            let e = &r.whole_ellipse;
+            vec![
                 r.region.to_string(),
                 format!("{} ({} used)", r.features_indexed, r.features_used_in_fit),
-                format!("{:.2}°", r.angle_deg),
-                format!("{:.4} Å", r.lattice_constant_m[0] * 1e10),
-                format!("{:.4} Å", r.lattice_constant_m[1] * 1e10),
-                pm(r.rms_deviation_m),
+                degrees(r.angle_deg, 2),
+                angstrom(r.lattice_constant_m[0], 4),
+                angstrom(r.lattice_constant_m[1], 4),
+                picometres(r.rms_deviation_m),
                 r.set_offsets_m
                     .first()
-                    .map(|o| format!("({}, {})", pm(o[0]), pm(o[1])))
+                    .map(|o| format!("({}, {})", picometres(o[0]), picometres(o[1])))
                     .unwrap_or_else(|| "—".into()),
-                format!("{} × {}", pm(e.sigma_major_m), pm(e.sigma_minor_m)),
-                format!("{} × {}", pm(e.two_sigma_major_m), pm(e.two_sigma_minor_m)),
-                e.sigma_z.map(pm).unwrap_or_else(|| "—".into()),
+                pair(e.sigma_major_m, e.sigma_minor_m),
+                pair(e.two_sigma_major_m, e.two_sigma_minor_m),
+                e.sigma_z.map(picometres).unwrap_or_else(|| "—".into()),
                 r.local_ellipse
                     .as_ref()
-                    .map(|l| format!("{} × {}", pm(l.sigma_major_m), pm(l.sigma_minor_m)))
+                    .map(|l| pair(l.sigma_major_m, l.sigma_minor_m))
                     .unwrap_or_else(|| "—".into()),
                 r.local_cells.to_string(),
+            ]
+        })
+        .collect();
+    html.element("h2", "Lattice fit and confidence ellipses")
+        .table(
+            &[
+                "region",
+                "features",
+                "angle",
+                "a along x",
+                "a along y",
+                "rms dev.",
+                "retrace offset",
+                "1σ ellipse (whole)",
+                "2σ ellipse (whole)",
+                "σz",
+                "1σ ellipse (local cells)",
+                "cells",
             ],
+            &rows,
         );
-    }
-    html.push_str("</table>\n");
     for s in &summary.skipped_regions {
-        let _ = writeln!(
-            html,
-            "<p class='note'>Region {} ({} px, {} features) skipped: {}</p>",
-            s.region,
-            s.pixels,
-            s.features,
-            html_escape(&s.reason)
+        html.element_with(
+            "p",
+            &[("class", "note")],
+            &format!(
+                "Region {} ({} px, {} features) skipped: {}",
+                s.region, s.pixels, s.features, s.reason
+            ),
         );
     }
+}
 
-    html.push_str("<h2>Unit cell</h2>");
-    match &summary.unit_cell {
-        Some(c) => {
-            let _ = write!(
-                html,
-                "<p>{} of {} local cells averaged; symmetry average in <b>{}</b>. Symmetry residual ‖A − S(A)‖/‖A − ⟨A⟩‖ of the translational average for every plane group compatible with the lattice (smaller = closer to that symmetry):</p><table>",
-                c.cells_selected, c.cells_available, c.group
-            );
-            header(&mut html, &["plane group", "residual"]);
-            let mut residuals = c.residuals.clone();
-            residuals.sort_by(|a, b| a.residual.total_cmp(&b.residual));
-            for r in &residuals {
-                row(
-                    &mut html,
-                    &[r.group.to_string(), format!("{:.4}", r.residual)],
-                );
-            }
-            html.push_str("</table>\n");
-        }
-        None => {
-            let _ = writeln!(
-                html,
-                "<p class='note'>No unit-cell average: {}</p>",
-                html_escape(summary.unit_cell_note.as_deref().unwrap_or(""))
-            );
-        }
-    }
+/// The averaged cell and the symmetry residuals of every compatible plane group.
+fn unit_cell_section(html: &mut Html, summary: &RunSummary) {
+    html.element("h2", "Unit cell");
+    let Some(c) = &summary.unit_cell else {
+        html.element_with(
+            "p",
+            &[("class", "note")],
+            &format!(
+                "No unit-cell average: {}",
+                summary.unit_cell_note.as_deref().unwrap_or("")
+            ),
+        );
+        return;
+    };
+    html.element(
+        "p",
+        &format!(
+            "{} of {} local cells averaged; symmetry average in {}. Symmetry residual \
+             ‖A − S(A)‖/‖A − ⟨A⟩‖ of the translational average for every plane group \
+             compatible with the lattice (smaller = closer to that symmetry):",
+            c.cells_selected, c.cells_available, c.group
+        ),
+    );
+    let mut residuals = c.residuals.clone();
+    residuals.sort_by(|a, b| a.residual.total_cmp(&b.residual));
+    let rows: Vec<Vec<String>> = residuals
+        .iter()
+        .map(|r| vec![r.group.to_string(), format!("{:.4}", r.residual)])
+        .collect();
+    html.table(&["plane group", "residual"], &rows);
+}
 
-    html.push_str("<h2>Figures</h2><div class='grid'>\n");
-    for f in figures {
-        figure_html(&mut html, f);
-    }
-    html.push_str("</div>\n");
-    if let Some(section) = extra_section {
-        html.push_str(section);
-    }
-    html.push_str("<h2>Timing</h2><table>\n");
+/// Time per stage.
+fn timing_section(html: &mut Html, summary: &RunSummary) {
     let t = &summary.timings;
-    header(&mut html, &["stage", "seconds"]);
-    for (name, v) in [
+    let rows: Vec<Vec<String>> = [
         ("read", summary.read_s),
         ("features", t.features_s),
         ("neighbours, local distortion, model fit", t.model_s),
@@ -475,9 +475,56 @@ pub fn report_html(
         ("unit cells", t.unit_cells_s),
         ("analysis total", t.total_s),
         ("writing outputs", summary.write_s),
-    ] {
-        row(&mut html, &[name.into(), format!("{v:.3}")]);
+    ]
+    .into_iter()
+    .map(|(name, v)| vec![name.to_string(), format!("{v:.3}")])
+    .collect();
+    html.element("h2", "Timing")
+        .table(&["stage", "seconds"], &rows);
+}
+
+/// The whole page; `extra_section` (the diagnosis) goes after the figures.
+pub fn report_html(
+    summary: &RunSummary,
+    figures: &[Figure],
+    extra_section: Option<Html>,
+) -> String {
+    let mut html = Html::new();
+    let retrace = summary
+        .retrace_input
+        .as_ref()
+        .map(|r| format!(" + retrace {r}"))
+        .unwrap_or_default();
+    html.element("h1", "DHCT distortion correction")
+        .element_with(
+            "p",
+            &[("class", "sub")],
+            &format!(
+                "{}{retrace} · lattice {} (NN {}) · dhct {}",
+                summary.input,
+                summary.lattice,
+                angstrom(summary.nearest_neighbour_distance_m, 3),
+                summary.dhct_version
+            ),
+        );
+    summary_section(&mut html, summary);
+    warnings_section(&mut html, summary);
+    calibration_section(&mut html, summary);
+    scan_section(&mut html, summary);
+    model_section(&mut html, summary);
+    lattice_section(&mut html, summary);
+    unit_cell_section(&mut html, summary);
+    html.element("h2", "Figures");
+    figure_grid(&mut html, figures);
+    if let Some(section) = extra_section {
+        html.append(section);
     }
-    html.push_str("</table><p class='sub'>Method: Yothers, Browder &amp; Bumm, Rev. Sci. Instrum. 88, 013708 (2017). Every number on this page is in model.json; every feature in features.csv.</p></body></html>\n");
-    html
+    timing_section(&mut html, summary);
+    html.element_with(
+        "p",
+        &[("class", "sub")],
+        "Method: Yothers, Browder & Bumm, Rev. Sci. Instrum. 88, 013708 (2017). Every number \
+         on this page is in model.json; every feature in features.csv.",
+    );
+    document(&format!("dhct report: {}", summary.input), html)
 }
