@@ -114,9 +114,9 @@ fn human(summary: &FileSummary) -> String {
         );
         let _ = writeln!(
             out,
-            "  scan:        trace fast {:?}, slow {:?}, angle {:.2}°{}",
-            g.trace_fast(),
-            g.slow_direction(),
+            "  scan:        trace lines {}, slow axis {}, angle {:.2}°{}",
+            crate::report::html::direction_words(g.trace_fast()),
+            crate::report::html::direction_words(g.slow_direction()),
             g.scan_angle().to_degrees(),
             source_note(g.timing_source())
         );
