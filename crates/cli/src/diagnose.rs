@@ -3,14 +3,13 @@
 //! withheld-effect validation. The same section is added to `dhct correct --diagnose`'s
 //! report.
 
-use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, ValidationOptions, diagnose,
-    validate,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, GapLocation,
+    ValidationOptions, VerdictKind, diagnose, validate,
 };
 use dhct_distortion::PassInput;
 use dhct_features::{Feature, find_features_in_pair};
@@ -20,14 +19,15 @@ use dhct_scan::ScanGeometry;
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
-use crate::correct::figures::{Figure, FigureContent};
-use crate::correct::plots::{
-    BLUE, GREEN, ORANGE, Plot, Series, Style, VERMILION, html_escape, thin,
-};
-use crate::correct::render::{Canvas, heat_colour};
-use crate::correct::report::{STYLE, figure_html, header, row};
-use crate::correct::{self, CorrectConfig};
 use crate::output_dir::StagedOutput;
+use crate::report::bars::ColourBar;
+use crate::report::figures::{Figure, PictureStyle, metres_per_picture_px};
+use crate::report::html::figure_grid;
+use crate::report::page::{Html, document};
+use crate::report::plots::{BLUE, ORANGE, Plot, Series, Style, thin};
+use crate::report::render::{Canvas, heat_colour, upscale_for};
+use crate::report::{write_bytes, write_figure_files};
+use crate::setup::{self, CorrectConfig};
 
 /// Writes `text` to a locked stdout and flushes it. A closed pipe (`dhct … --json | head -1`)
 /// is success, not a panic: the reader has all it wanted.
@@ -61,31 +61,23 @@ pub fn diagnose_features(
     diagnose(&inputs, geometry, lattice, &options).context("diagnosis")
 }
 
-fn bin_plot(title: &str, x_label: &str, bins: &[Bin], x_scale: f64, noise: [f64; 2]) -> Plot {
-    let series = |k: usize| {
-        bins.iter()
-            .map(|b| (b.centre * x_scale, b.rms_m[k] * 1e12))
-            .collect()
-    };
-    let x_range: Vec<f64> = bins.iter().map(|b| b.centre * x_scale).collect();
-    let (x0, x1) = (
-        x_range.iter().copied().fold(f64::INFINITY, f64::min),
-        x_range.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-    );
+fn bin_plot(title: &str, x_label: &str, bins: &[Bin], noise: [f64; 2]) -> Plot {
+    let series = |k: usize| bins.iter().map(|b| (b.centre, b.rms_m[k] * 1e12)).collect();
+    let (x0, x1) = bins
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), bin| {
+            (a.min(bin.centre), b.max(bin.centre))
+        });
+    let floor = |k: usize| vec![(x0, noise[k] * 1e12), (x1, noise[k] * 1e12)];
     Plot::new(title, x_label, "rms residual (pm)")
         .with(Series::new("x", series(0), Style::Line, BLUE))
         .with(Series::new("y", series(1), Style::Line, ORANGE))
-        .with(Series::new(
-            "noise floor x",
-            vec![(x0, noise[0] * 1e12), (x1, noise[0] * 1e12)],
-            Style::Line,
-            GREEN,
-        ))
+        .with(Series::new("noise floor x", floor(0), Style::Dashed, BLUE))
         .with(Series::new(
             "noise floor y",
-            vec![(x0, noise[1] * 1e12), (x1, noise[1] * 1e12)],
-            Style::Line,
-            VERMILION,
+            floor(1),
+            Style::Dashed,
+            ORANGE,
         ))
 }
 
@@ -100,29 +92,51 @@ fn floor_source(source: FloorSource) -> &'static str {
     }
 }
 
-/// The figures and the HTML section of a diagnosis.
-pub fn diagnosis_section(
-    report: &DiagnosisReport,
-    geometry: &ScanGeometry,
-) -> (String, Vec<Figure>) {
-    let mut figures = Vec::new();
-    let noise = report.noise.sigma_m;
-    if let Some(location) = &report.location {
-        figures.push(Figure::svg(
+/// The gap binned by frame time and by fast phase, and the residual spectrum.
+fn location_figures(location: &GapLocation, noise: [f64; 2]) -> Vec<Figure> {
+    let spectrum = &location.spectrum;
+    let mut plot = Plot::new(
+        "Residual spectrum (Lomb–Scargle)",
+        "frequency (Hz)",
+        "power",
+    )
+    .with(Series::new(
+        "power",
+        spectrum
+            .frequency_hz
+            .iter()
+            .zip(&spectrum.power)
+            .map(|(f, p)| (*f, *p))
+            .collect(),
+        Style::Line,
+        BLUE,
+    ));
+    plot.vertical_lines = spectrum.peaks.iter().map(|p| p.frequency_hz).collect();
+    let peaks: Vec<String> = spectrum
+        .peaks
+        .iter()
+        .map(|p| {
+            format!(
+                "{:.3} Hz, false-alarm p {:.1e}",
+                p.frequency_hz, p.false_alarm_probability
+            )
+        })
+        .collect();
+    vec![
+        Figure::plot(
             "diagnosis_frame_time",
             "Gap against frame time (slow axis)",
             "RMS of measured − predicted feature positions of the base model, binned by \
-             acquisition time, against the independent noise floor."
+             acquisition time, against the independent noise floor (dashed)."
                 .into(),
             &bin_plot(
                 "Gap vs frame time",
                 "time since frame start (s)",
                 &location.by_frame_time,
-                1.0,
                 noise,
             ),
-        ));
-        figures.push(Figure::svg(
+        ),
+        Figure::plot(
             "diagnosis_fast_phase",
             "Gap against time since line start (fast phase)",
             "The same residuals binned by their fast phase: the time since the start of their \
@@ -132,65 +146,38 @@ pub fn diagnosis_section(
                 "Gap vs fast phase",
                 "fast phase τ/T (time since line start / line scan time)",
                 &location.by_fast_phase,
-                1.0,
                 noise,
             ),
-        ));
-        let spectrum = &location.spectrum;
-        let mut plot = Plot::new(
-            "Residual spectrum (Lomb–Scargle)",
-            "frequency (Hz)",
-            "power",
-        )
-        .with(Series::new(
-            "power",
-            spectrum
-                .frequency_hz
-                .iter()
-                .zip(&spectrum.power)
-                .map(|(f, p)| (*f, *p))
-                .collect(),
-            Style::Line,
-            BLUE,
-        ));
-        plot.vertical_lines = spectrum.peaks.iter().map(|p| p.frequency_hz).collect();
-        figures.push(Figure::svg(
+        ),
+        Figure::plot(
             "diagnosis_spectrum",
             "Spectrum of the residuals against time",
             format!(
                 "Periodic signals in the base-model residuals; grey lines: significant peaks ({}).",
-                if spectrum.peaks.is_empty() {
+                if peaks.is_empty() {
                     "none".to_string()
                 } else {
-                    spectrum
-                        .peaks
-                        .iter()
-                        .map(|p| {
-                            format!(
-                                "{:.3} Hz, false-alarm p {:.1e}",
-                                p.frequency_hz, p.false_alarm_probability
-                            )
-                        })
-                        .collect::<Vec<_>>()
-                        .join("; ")
+                    peaks.join("; ")
                 }
             ),
             &plot,
-        ));
-    }
-    // Residuals against time before and after the added effects.
-    let before: Vec<(f64, f64)> = report
-        .residuals
-        .iter()
-        .filter(|r| !r.outlier)
-        .map(|r| (r.time_s, r.base_m[0].hypot(r.base_m[1]) * 1e12))
-        .collect();
-    let after: Vec<(f64, f64)> = report
-        .residuals
-        .iter()
-        .filter(|r| !r.outlier)
-        .map(|r| (r.time_s, r.final_m[0].hypot(r.final_m[1]) * 1e12))
-        .collect();
+        ),
+    ]
+}
+
+/// Residual magnitudes against time before and after the added effects.
+fn residual_time_figure(report: &DiagnosisReport) -> Figure {
+    let magnitudes = |f: &dyn Fn(&dhct_diagnose::FeatureResidual) -> [f64; 2]| -> Vec<(f64, f64)> {
+        report
+            .residuals
+            .iter()
+            .filter(|r| !r.outlier)
+            .map(|r| {
+                let d = f(r);
+                (r.time_s, d[0].hypot(d[1]) * 1e12)
+            })
+            .collect()
+    };
     let mut plot = Plot::new(
         "Residual magnitude vs time",
         "time since frame start (s)",
@@ -198,28 +185,31 @@ pub fn diagnosis_section(
     )
     .with(Series::new(
         "base model",
-        thin(before, 3000),
+        thin(magnitudes(&|r| r.base_m), 3000),
         Style::Points,
         BLUE,
     ));
     if !report.added.is_empty() {
         plot = plot.with(Series::new(
             "with added effects",
-            thin(after, 3000),
+            thin(magnitudes(&|r| r.final_m), 3000),
             Style::Points,
             ORANGE,
         ));
     }
-    figures.push(Figure::svg(
+    Figure::plot(
         "diagnosis_residuals_time",
         "Residuals against time, before and after",
         "Distance of each feature from its predicted position: base model (blue) and with the \
          identified effects added (orange)."
             .into(),
         &plot,
-    ));
-    // Residual map.
-    let scale = crate::correct::render::upscale_for(geometry.rows(), geometry.columns(), 512);
+    )
+}
+
+/// Each feature at its raw position coloured by its base-model residual.
+fn residual_map_figure(report: &DiagnosisReport, geometry: &ScanGeometry) -> Figure {
+    let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
     let blank = Array2::<f64>::zeros((geometry.rows(), geometry.columns()));
     let mut canvas = Canvas::from_image(blank.view(), Colormap::Greys, Some((-1.0, 1.0)), scale);
     let magnitudes: Vec<f64> = report
@@ -241,120 +231,127 @@ pub fn diagnosis_section(
         ];
         canvas.disc(centre, 1.5 * scale as f64, heat_colour(m / top));
     }
-    figures.push(Figure {
-        stem: "diagnosis_map".into(),
-        title: "Where the gap lies (map)".into(),
-        caption: format!(
-            "Each feature at its raw position, coloured by its base-model residual: black 0 → \
-             yellow {:.1} pm (99th percentile).",
+    Figure::picture(
+        "diagnosis_map",
+        "Where the gap lies (map)",
+        format!(
+            "Each feature at its raw position, coloured by its base-model residual (colour \
+             bar; values above the 99th percentile, {:.1} pm, saturate).",
             top * 1e12
         ),
-        content: FigureContent::Png(canvas.png(), canvas.preview(1100).map(|p| p.png())),
-    });
+        &canvas,
+        PictureStyle {
+            metres_per_px: metres_per_picture_px(geometry, scale),
+            colour: Some(ColourBar {
+                colormap: Colormap::Inferno,
+                low: 0.0,
+                high: top,
+                unit: "m".into(),
+                label: "|residual|".into(),
+            }),
+            max_side: None,
+        },
+    )
+}
 
-    let mut html = String::from("<h2>Sim-to-real gap diagnosis</h2>\n");
+/// The verdict and where the remaining gap lies.
+fn verdict_html(html: &mut Html, report: &DiagnosisReport) {
     let v = &report.verdict_details;
-    let _ = writeln!(
-        html,
-        "<p class='verdict'><b>Verdict: {}.</b> {}</p>",
-        html_escape(report.verdict.name()),
-        html_escape(&v.summary)
-    );
+    html.open("p", &[("class", "verdict")])
+        .element("b", &format!("Verdict: {}.", verdict_words(report.verdict)))
+        .text(" ")
+        .text(&v.summary)
+        .close("p");
     if !v.remaining.is_empty() {
-        html.push_str("<p>Where the remaining gap lies:</p><table>\n");
-        header(
-            &mut html,
-            &["where", "features", "gap / floor", "share of the excess"],
-        );
-        for p in &v.remaining {
-            row(
-                &mut html,
-                &[
+        let rows: Vec<Vec<String>> = v
+            .remaining
+            .iter()
+            .map(|p| {
+                vec![
                     p.label.clone(),
                     p.count.to_string(),
                     format!("{:.2}", p.gap_to_noise),
                     format!("{:.0} %", 100.0 * p.share),
-                ],
-            );
-        }
-        html.push_str("</table>\n");
+                ]
+            })
+            .collect();
+        html.element("p", "Where the remaining gap lies:").table(
+            &["where", "features", "gap / floor", "share of the excess"],
+            &rows,
+        );
     }
-    html.push_str("<table>\n");
-    header(&mut html, &["", "x", "y", "gap / noise", "χ²/dof"]);
+}
+
+/// The verdict in words.
+fn verdict_words(verdict: VerdictKind) -> &'static str {
+    match verdict {
+        VerdictKind::NoGap => "no gap beyond the noise",
+        VerdictKind::Explained => "the gap is explained",
+        VerdictKind::PartlyExplained => "the gap is partly explained",
+        VerdictKind::Unexplained => "the gap is not explained",
+    }
+}
+
+/// The noise floor estimates and the gap of each model.
+fn noise_and_gap_html(html: &mut Html, report: &DiagnosisReport) {
     let n = &report.noise;
-    row(
-        &mut html,
-        &[
-            format!("noise floor ({})", floor_source(n.source)),
-            format!("{:.2} pm", n.sigma_m[0] * 1e12),
-            format!("{:.2} pm", n.sigma_m[1] * 1e12),
-            "1".into(),
-            "—".into(),
-        ],
-    );
+    let pm = |v: f64| format!("{:.2} pm", v * 1e12);
+    let mut rows = vec![vec![
+        format!("noise floor ({})", floor_source(n.source)),
+        pm(n.sigma_m[0]),
+        pm(n.sigma_m[1]),
+        "1".into(),
+        "—".into(),
+    ]];
     for (name, estimate) in [
         ("localisation (feature fits)", &n.localisation),
         ("successive differences", &n.successive_differences),
         ("trace/retrace pairs (not used)", &n.trace_retrace),
     ] {
         let (x, y) = match estimate {
-            FloorEstimate::Estimated { sigma_m, .. } => (
-                format!("{:.2} pm", sigma_m[0] * 1e12),
-                format!("{:.2} pm", sigma_m[1] * 1e12),
-            ),
+            FloorEstimate::Estimated { sigma_m, .. } => (pm(sigma_m[0]), pm(sigma_m[1])),
             FloorEstimate::Unavailable { reason } => (format!("— ({reason})"), "—".into()),
         };
-        row(&mut html, &[name.into(), x, y, "".into(), "".into()]);
+        rows.push(vec![name.into(), x, y, String::new(), String::new()]);
     }
     for (name, gap) in [
         ("DHCT fit (local distortions)", &report.dhct),
         ("base model (position fit)", &report.base.gap),
         ("with identified effects", &report.final_model.gap),
     ] {
-        row(
-            &mut html,
-            &[
-                name.into(),
-                format!("{:.2} pm", gap.rms_m[0] * 1e12),
-                format!("{:.2} pm", gap.rms_m[1] * 1e12),
-                format!("{:.2}", gap.gap_to_noise),
-                format!("{:.2}", gap.chi2_per_dof),
-            ],
-        );
+        rows.push(vec![
+            name.into(),
+            pm(gap.rms_m[0]),
+            pm(gap.rms_m[1]),
+            format!("{:.2}", gap.gap_to_noise),
+            format!("{:.2}", gap.chi2_per_dof),
+        ]);
     }
-    html.push_str("</table>\n");
-    let _ = writeln!(
-        html,
-        "<p>Gap/noise {:.2} → {} → {:.2} after the greedy set.</p>",
-        report.shrink.before,
-        report
-            .shrink
-            .after_top
-            .map(|v| format!("{v:.2} after the top effect"))
-            .unwrap_or_else(|| "—".into()),
-        report.shrink.after_greedy
+    html.table(&["", "x", "y", "gap / noise", "χ²/dof"], &rows);
+    html.element(
+        "p",
+        &format!(
+            "Gap/noise {:.2} → {} → {:.2} after the greedy set.",
+            report.shrink.before,
+            report
+                .shrink
+                .after_top
+                .map(|v| format!("{v:.2} after the top effect"))
+                .unwrap_or_else(|| "—".into()),
+            report.shrink.after_greedy
+        ),
     );
+}
+
+/// The candidates of the first round and the parameters of every added effect.
+fn candidates_html(html: &mut Html, report: &DiagnosisReport) {
     if let Some(round) = report.rounds.first() {
-        html.push_str("<p>Candidates of the first round (ΔBIC, ΔAIC < 0 and cross-validation ratio < 1 are improvements):</p><table>\n");
-        header(
-            &mut html,
-            &[
-                "candidate",
-                "shape",
-                "added parameters",
-                "Δχ²",
-                "ΔBIC",
-                "ΔAIC",
-                "CV ratio",
-                "passes",
-            ],
-        );
         let mut scores = round.scores.clone();
         scores.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-        for s in &scores {
-            row(
-                &mut html,
-                &[
+        let rows: Vec<Vec<String>> = scores
+            .iter()
+            .map(|s| {
+                vec![
                     s.candidate.to_string(),
                     s.shape.clone(),
                     s.added_parameters.to_string(),
@@ -362,61 +359,83 @@ pub fn diagnosis_section(
                     format!("{:.1}", s.delta_bic),
                     format!("{:.1}", s.delta_aic),
                     format!("{:.3}", s.cv_ratio),
-                    if s.passes { "yes".into() } else { "no".into() },
-                ],
-            );
-        }
-        html.push_str("</table>\n");
+                    if s.passes { "yes" } else { "no" }.into(),
+                ]
+            })
+            .collect();
+        html.element(
+            "p",
+            "Candidates of the first round (ΔBIC, ΔAIC < 0 and cross-validation ratio < 1 are improvements):",
+        )
+        .table(
+            &["candidate", "shape", "added parameters", "Δχ²", "ΔBIC", "ΔAIC", "CV ratio", "passes"],
+            &rows,
+        );
     }
     for added in &report.added {
-        let _ = writeln!(
-            html,
-            "<p>Added <b>{}</b> ({}):</p><table>",
-            html_escape(&added.candidate.to_string()),
-            html_escape(&added.shape)
-        );
-        header(&mut html, &["parameter", "value", "1σ"]);
-        for p in &added.parameters {
-            row(
-                &mut html,
-                &[
+        let rows: Vec<Vec<String>> = added
+            .parameters
+            .iter()
+            .map(|p| {
+                vec![
                     p.name.clone(),
                     format!("{:.4e}", p.value),
                     p.sigma
                         .map(|s| format!("{s:.2e}"))
                         .unwrap_or_else(|| "fixed".into()),
-                ],
-            );
-        }
-        html.push_str("</table>\n");
+                ]
+            })
+            .collect();
+        html.open("p", &[])
+            .text("Added ")
+            .element("b", &added.candidate.to_string())
+            .text(&format!(" ({}):", added.shape))
+            .close("p")
+            .table(&["parameter", "value", "1σ"], &rows);
     }
-    if let Some(location) = &report.location
-        && !location.hot_spots.is_empty()
-    {
-        html.push_str("<p>Where the gap concentrates (bins with the largest excess over the noise):</p><table>\n");
-        header(
-            &mut html,
-            &["bin", "features", "rms x", "rms y", "excess z"],
-        );
-        for b in &location.hot_spots {
-            row(
-                &mut html,
-                &[
-                    b.label.clone(),
-                    b.count.to_string(),
-                    format!("{:.2} pm", b.rms_m[0] * 1e12),
-                    format!("{:.2} pm", b.rms_m[1] * 1e12),
-                    format!("{:.1}", b.excess_z),
-                ],
-            );
-        }
-        html.push_str("</table>\n");
-    }
-    html.push_str("<div class='grid'>\n");
-    for f in &figures {
-        figure_html(&mut html, f);
-    }
-    html.push_str("</div>\n");
+}
+
+/// The bins where the gap concentrates.
+fn hot_spots_html(html: &mut Html, report: &DiagnosisReport) {
+    let Some(location) = report.location.as_ref().filter(|l| !l.hot_spots.is_empty()) else {
+        return;
+    };
+    let rows: Vec<Vec<String>> = location
+        .hot_spots
+        .iter()
+        .map(|b| {
+            vec![
+                b.label.clone(),
+                b.count.to_string(),
+                format!("{:.2} pm", b.rms_m[0] * 1e12),
+                format!("{:.2} pm", b.rms_m[1] * 1e12),
+                format!("{:.1}", b.excess_z),
+            ]
+        })
+        .collect();
+    html.element(
+        "p",
+        "Where the gap concentrates (bins with the largest excess over the noise):",
+    )
+    .table(&["bin", "features", "rms x", "rms y", "excess z"], &rows);
+}
+
+/// The figures and the HTML section of a diagnosis.
+pub fn diagnosis_section(report: &DiagnosisReport, geometry: &ScanGeometry) -> (Html, Vec<Figure>) {
+    let mut figures = report
+        .location
+        .as_ref()
+        .map(|l| location_figures(l, report.noise.sigma_m))
+        .unwrap_or_default();
+    figures.push(residual_time_figure(report));
+    figures.push(residual_map_figure(report, geometry));
+    let mut html = Html::new();
+    html.element("h2", "Sim-to-real gap diagnosis");
+    verdict_html(&mut html, report);
+    noise_and_gap_html(&mut html, report);
+    candidates_html(&mut html, report);
+    hot_spots_html(&mut html, report);
+    figure_grid(&mut html, &figures);
     (html, figures)
 }
 
@@ -432,25 +451,28 @@ pub fn run_file(
     let target = output;
     let staged = StagedOutput::prepare(target, config.overwrite)?;
     let output = staged.path();
-    let pair = correct::read_pair(input, retrace, &config.geometry)?;
+    let pair = setup::read_pair(input, retrace, &config.geometry)?;
     let geometry = pair.geometry().clone();
-    let mask = correct::load_mask(&config, &geometry)?;
-    let correct::Resolved {
+    let mask = setup::load_mask(&config, &geometry)?;
+    let setup::Resolved {
         lattice, options, ..
-    } = correct::with_measured_nn(correct::resolve(&config)?, &pair, mask.as_ref())?;
+    } = setup::with_measured_nn(setup::resolve(&config)?, &pair, mask.as_ref())?;
     let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
     let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
     let report = diagnose_features(&refs, &geometry, lattice.as_ref(), mask.as_ref(), &options)?;
-    correct::write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
+    write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
     let (section, figures) = diagnosis_section(&report, &geometry);
-    correct::write_figure_files(output, &figures)?;
-    let page = format!(
-        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dhct diagnosis: {}</title><style>{STYLE}</style></head><body><h1>DHCT sim-to-real gap</h1><p class='sub'>{} · lattice {}</p>{section}</body></html>\n",
-        html_escape(&input.display().to_string()),
-        html_escape(&input.display().to_string()),
-        html_escape(lattice.name())
-    );
-    correct::write_bytes(&output.join("diagnosis.html"), page.as_bytes())?;
+    write_figure_files(output, &figures)?;
+    let mut body = Html::new();
+    body.element("h1", "DHCT sim-to-real gap")
+        .element_with(
+            "p",
+            &[("class", "sub")],
+            &format!("{} · lattice {}", input.display(), lattice.name()),
+        )
+        .append(section);
+    let page = document(&format!("dhct diagnosis: {}", input.display()), body);
+    write_bytes(&output.join("diagnosis.html"), page.as_bytes())?;
     staged.commit()?;
     if json {
         write_stdout(&format!("{}\n", report.to_json()))
@@ -472,7 +494,7 @@ pub fn run_validation(seeds: Option<usize>, output: Option<&Path>, json: bool) -
     if let Some(dir) = output {
         let staged = StagedOutput::prepare(dir, false)?;
         let text = serde_json::to_string_pretty(&report)?;
-        correct::write_bytes(&staged.path().join("validation.json"), text.as_bytes())?;
+        write_bytes(&staged.path().join("validation.json"), text.as_bytes())?;
         staged.commit()?;
     }
     if json {

@@ -67,28 +67,7 @@ fn summarise<'a>(path: &'a Path, file: &'a ScanFile) -> FileSummary<'a> {
 
 /// Formats a value in SI with a prefix that keeps it readable: 2.205e-8 m → "22.05 nm".
 pub fn si(value: f64, unit: &str) -> String {
-    if value == 0.0 || !value.is_finite() {
-        return format!("{value} {unit}");
-    }
-    let prefixes = [
-        (1e-15, "f"),
-        (1e-12, "p"),
-        (1e-9, "n"),
-        (1e-6, "µ"),
-        (1e-3, "m"),
-        (1.0, ""),
-        (1e3, "k"),
-    ];
-    let magnitude = value.abs();
-    let (scale, prefix) = prefixes
-        .iter()
-        .rev()
-        .find(|(scale, _)| magnitude >= *scale)
-        .copied()
-        .unwrap_or(prefixes[0]);
-    let digits = format!("{:.4}", value / scale);
-    let digits = digits.trim_end_matches('0').trim_end_matches('.');
-    format!("{digits} {prefix}{unit}")
+    crate::units::si(value, unit)
 }
 
 fn source_note(source: ValueSource) -> &'static str {
@@ -135,9 +114,9 @@ fn human(summary: &FileSummary) -> String {
         );
         let _ = writeln!(
             out,
-            "  scan:        trace fast {:?}, slow {:?}, angle {:.2}°{}",
-            g.trace_fast(),
-            g.slow_direction(),
+            "  scan:        trace lines {}, slow axis {}, angle {:.2}°{}",
+            crate::report::html::direction_words(g.trace_fast()),
+            crate::report::html::direction_words(g.slow_direction()),
             g.scan_angle().to_degrees(),
             source_note(g.timing_source())
         );

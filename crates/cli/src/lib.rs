@@ -9,5 +9,7 @@ pub mod flags;
 pub mod info;
 pub mod output_dir;
 pub mod read_limits;
+pub mod report;
+pub mod setup;
 pub mod simulate;
 pub mod units;

@@ -221,7 +221,6 @@ fn feature_row(c: &mut Columns, pass: &dhct_pipeline::PassOutput, k: usize) {
             ("sigma_major_px", f.sigma_major_px),
             ("sigma_minor_px", f.sigma_minor_px),
             ("theta_rad", f.theta_rad),
-            ("amplitude", f.amplitude),
             ("height", f.height),
             ("z0", f.z0),
             ("residual_rms", f.residual_rms),

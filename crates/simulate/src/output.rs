@@ -77,6 +77,17 @@ impl SimulationOutput {
                         let path = dir.join(format!("{}.npy", pass_name(pass)));
                         write_atomically(&path, |w| npy::write(image, w))?;
                         written.push(path);
+                        // NPY has no place for the pixel size, unit and directions.
+                        let sidecar =
+                            npy::Sidecar::new(image, self.pair.geometry(), pass, Vec::new());
+                        let path = dir.join(format!("{}.json", pass_name(pass)));
+                        write_atomically(&path, |w| {
+                            serde_json::to_writer_pretty(&mut *w, &sidecar)
+                                .map_err(|e| WriteError::Stream(std::io::Error::other(e)))?;
+                            w.write_all(b"\n")?;
+                            Ok(())
+                        })?;
+                        written.push(path);
                     }
                 }
                 OutputFormat::Png => {

@@ -36,6 +36,8 @@ fn every_file_is_written_and_reads_back() {
         "retrace.gsf",
         "trace.npy",
         "retrace.npy",
+        "trace.json",
+        "retrace.json",
         "trace.png",
         "retrace.png",
         "displacement_trace_dx.npy",
@@ -80,6 +82,17 @@ fn every_file_is_written_and_reads_back() {
             .zip(retrace.iter())
             .all(|(a, b)| (a - b).abs() <= 1e-6 * b.abs().max(1e-12))
     );
+    // The NPY's sidecar holds what NPY cannot: the pixel size and unit of the scan.
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("trace.json")).unwrap())
+            .unwrap();
+    let geometry = output.pair.geometry();
+    assert_eq!(
+        sidecar["pixel_size_m"][0].as_f64(),
+        Some(geometry.pitch_x())
+    );
+    assert_eq!(sidecar["unit"], "m");
+    assert_eq!(sidecar["pass"], "trace");
     let npy = dhct_sm4_io::read_path(&dir.path().join("trace.npy")).unwrap();
     assert_eq!(
         &npy.pairs[0].images().next().unwrap().1.z,

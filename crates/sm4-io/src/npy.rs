@@ -165,7 +165,8 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
 
 /// Writes `channel.z` as a version 1.0 `.npy` file of little-endian `f8` in C order
 /// (`numpy.load` gives back an array of shape `(rows, columns)`, row 0 at the top).
-/// NaN values are kept. The unit and geometry are not stored: NPY has no place for them.
+/// NaN values are kept. The unit and geometry are not stored: NPY has no place for them (see
+/// [`Sidecar`]).
 pub fn write<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteError> {
     let (rows, columns) = (channel.rows(), channel.columns());
     let dict =
@@ -190,6 +191,71 @@ pub fn write<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteErr
     }
     w.write_all(&out)?;
     Ok(())
+}
+
+/// What a `.npy` written by dhct holds, for the JSON sidecar written beside it
+/// (`NAME.json` for `NAME.npy`): NPY itself has no place for a pixel size, unit or
+/// direction. Serialise it with any serde format (dhct writes JSON).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Sidecar {
+    /// The array layout: `float64`, C order, shape `[rows, columns]`, row 0 the top row.
+    pub array: String,
+    pub shape: [usize; 2],
+    /// Channel name and the unit of the values (e.g. `m`).
+    pub channel: String,
+    pub unit: String,
+    /// Metres per pixel along x (columns) and y (rows), and whether the source file stated
+    /// them or they are placeholders.
+    pub pixel_size_m: [f64; 2],
+    pub pixel_size_source: dhct_scan::ValueSource,
+    /// Seconds per pixel along the fast axis, and where that came from.
+    pub pixel_period_s: f64,
+    pub timing_source: dhct_scan::ValueSource,
+    /// `trace` or `retrace`.
+    pub pass: String,
+    /// Fast direction of this pass and slow direction (`right`, `left`, `down`, `up`).
+    pub fast_direction: String,
+    pub slow_direction: String,
+    /// What was done to the values (empty for raw data).
+    pub corrections: Vec<String>,
+}
+
+impl Sidecar {
+    /// The sidecar of `channel`, an image of `pass` with `geometry`.
+    pub fn new(
+        channel: &ImageChannel,
+        geometry: &ScanGeometry,
+        pass: dhct_scan::ScanPass,
+        corrections: Vec<String>,
+    ) -> Sidecar {
+        let word = |d: dhct_scan::ScanDirection| {
+            match d {
+                dhct_scan::ScanDirection::Right => "right",
+                dhct_scan::ScanDirection::Left => "left",
+                dhct_scan::ScanDirection::Down => "down",
+                dhct_scan::ScanDirection::Up => "up",
+            }
+            .to_string()
+        };
+        let fast = match pass {
+            dhct_scan::ScanPass::Trace => geometry.trace_fast(),
+            dhct_scan::ScanPass::Retrace => geometry.trace_fast().reversed(),
+        };
+        Sidecar {
+            array: "float64, C order, shape [rows, columns], row 0 = top".into(),
+            shape: [channel.rows(), channel.columns()],
+            channel: channel.name.clone(),
+            unit: channel.unit.clone(),
+            pixel_size_m: [geometry.pitch_x(), geometry.pitch_y()],
+            pixel_size_source: geometry.scale_source(),
+            pixel_period_s: geometry.pixel_period(),
+            timing_source: geometry.timing_source(),
+            pass: pass.to_string(),
+            fast_direction: word(fast),
+            slow_direction: word(geometry.slow_direction()),
+            corrections,
+        }
+    }
 }
 
 /// The placeholder geometry of formats without scale or timing (see the module docs).

@@ -14,6 +14,12 @@
 //! so that dhct's reader restores the channel name, unit and, for 16-bit files, the physical
 //! values `z = z_offset + z_step · count`. Other programs show the image and ignore the text.
 //!
+//! [`write_f32_with_pixel_size`] also stores the pixel size for other programs:
+//! `XResolution`/`YResolution` (pixels per centimetre, `ResolutionUnit` = centimetre) and an
+//! ImageJ header (`ImageJ=1.11a`, `unit=um`, `vunit=<z unit>`) before dhct's block, which then
+//! names the z unit `z_unit` (ImageJ reads `unit` as the length unit). ImageJ/Fiji convert a
+//! centimetre resolution only for `unit=um`, so they show µm.
+//!
 //! A TIFF carries no scan geometry dhct trusts, so the reader returns the placeholder
 //! geometry of [`crate::npy`]: pitch [`crate::ASSUMED_PITCH`], pixel period [`crate::ASSUMED_PIXEL_PERIOD`],
 //! fast right, slow down, scale and timing [`ValueSource::Assumed`](dhct_scan::ValueSource).
@@ -31,7 +37,8 @@ use std::io::{Cursor, Write};
 use ::tiff::ColorType;
 use ::tiff::TiffError;
 use ::tiff::decoder::{Decoder, DecodingResult, Limits};
-use ::tiff::encoder::{TiffEncoder, colortype};
+use ::tiff::encoder::{Rational, TiffEncoder, colortype};
+use ::tiff::tags::ResolutionUnit;
 use ::tiff::tags::Tag;
 use dhct_scan::{FileFormat, ImageChannel, ScanPair};
 
@@ -105,21 +112,80 @@ impl U16Scale {
 }
 
 /// Writes `channel` as a single-page, uncompressed 32-bit float grey TIFF (values rounded to
-/// `f32`, NaN kept), with the name and unit in `ImageDescription`.
+/// `f32`, NaN kept), with the name and unit in `ImageDescription`. The file carries no pixel
+/// size (see [`write_f32_with_pixel_size`]).
 pub fn write_f32<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteError> {
+    write_f32_tagged(channel, None, w)
+}
+
+/// [`write_f32`] with the physical pixel size `pitch_m` (x, y; metres per pixel) stored so
+/// other programs show lengths: `XResolution`/`YResolution` in pixels per centimetre with
+/// `ResolutionUnit` = centimetre (TIFF 6.0), and an ImageJ header in `ImageDescription`
+/// (`ImageJ=…`, `unit=um`: ImageJ and Fiji convert centimetre resolutions only for µm)
+/// followed by dhct's own block, whose z unit is then `z_unit=` (ImageJ's `unit` is the
+/// length unit). Fails when a pitch is not positive and finite or does not fit a 32-bit
+/// rational in pixels per centimetre (pitch below about 2.3 pm).
+pub fn write_f32_with_pixel_size<W: Write>(
+    channel: &ImageChannel,
+    pitch_m: [f64; 2],
+    w: &mut W,
+) -> Result<(), WriteError> {
+    let resolution = [
+        pixels_per_centimetre(pitch_m[0])?,
+        pixels_per_centimetre(pitch_m[1])?,
+    ];
+    write_f32_tagged(channel, Some(resolution), w)
+}
+
+/// The TIFF rational nearest to `1 / pitch` in pixels per centimetre (numerator and
+/// denominator at most `u32::MAX`).
+fn pixels_per_centimetre(pitch_m: f64) -> Result<Rational, WriteError> {
+    let per_cm = 0.01 / pitch_m;
+    let max = f64::from(u32::MAX);
+    if !(pitch_m.is_finite() && pitch_m > 0.0 && per_cm.is_finite() && per_cm <= max) {
+        return Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: format!(
+                "a pixel size of {pitch_m:e} m is not a TIFF resolution (positive, at most \
+                 2^32 - 1 pixels per centimetre)"
+            ),
+        });
+    }
+    // The largest denominator that keeps the numerator in range: the finest rational.
+    let denominator = (max / per_cm.max(1.0)).floor().clamp(1.0, max);
+    let numerator = (per_cm * denominator).round().clamp(1.0, max);
+    Ok(Rational {
+        n: numerator as u32,
+        d: denominator as u32,
+    })
+}
+
+fn write_f32_tagged<W: Write>(
+    channel: &ImageChannel,
+    resolution: Option<[Rational; 2]>,
+    w: &mut W,
+) -> Result<(), WriteError> {
     let (width, height) = dimensions(channel)?;
     let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
-    let description = description(channel, None);
+    let description = match resolution {
+        Some(_) => imagej_description(channel),
+        None => description(channel, None),
+    };
     let mut cursor = Cursor::new(Vec::new());
     {
         let mut encoder = TiffEncoder::new(&mut cursor).map_err(encoder_error)?;
         let mut image = encoder
             .new_image::<colortype::Gray32Float>(width, height)
             .map_err(encoder_error)?;
-        image
-            .encoder()
-            .write_tag(Tag::ImageDescription, description.as_str())
+        let tags = image.encoder();
+        tags.write_tag(Tag::ImageDescription, description.as_str())
             .map_err(encoder_error)?;
+        if let Some([x, y]) = resolution {
+            tags.write_tag(Tag::XResolution, x).map_err(encoder_error)?;
+            tags.write_tag(Tag::YResolution, y).map_err(encoder_error)?;
+            tags.write_tag(Tag::ResolutionUnit, ResolutionUnit::Centimeter.to_u16())
+                .map_err(encoder_error)?;
+        }
         image.write_data(&data).map_err(encoder_error)?;
     }
     w.write_all(cursor.get_ref())?;
@@ -356,8 +422,9 @@ struct DescriptionInfo {
 
 fn parse_description(text: &str) -> DescriptionInfo {
     let mut info = DescriptionInfo::default();
+    // dhct's block starts at its magic line: the first line, or after an ImageJ header.
     let mut lines = text.lines();
-    if lines.next().map(str::trim) != Some(DESCRIPTION_MAGIC) {
+    if !lines.any(|line| line.trim() == DESCRIPTION_MAGIC) {
         return info;
     }
     for line in lines {
@@ -367,7 +434,7 @@ fn parse_description(text: &str) -> DescriptionInfo {
         let value = value.trim();
         match key.trim() {
             "name" => info.name = Some(value.to_string()),
-            "unit" => info.unit = Some(value.to_string()),
+            "unit" | "z_unit" => info.unit = Some(value.to_string()),
             "z_offset" => info.z_offset = value.parse().ok().filter(|v: &f64| v.is_finite()),
             "z_step" => {
                 info.z_step = value
@@ -381,19 +448,30 @@ fn parse_description(text: &str) -> DescriptionInfo {
     info
 }
 
+/// ASCII only: TIFF ASCII tags are 7-bit; other characters become '?'.
+fn ascii(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_ascii() && !c.is_ascii_control() {
+                c
+            } else {
+                '?'
+            }
+        })
+        .collect()
+}
+
+/// The ImageJ header (length unit µm, matching the centimetre resolution tags; the value
+/// unit as `vunit`) followed by dhct's block with the z unit as `z_unit`.
+fn imagej_description(channel: &ImageChannel) -> String {
+    format!(
+        "ImageJ=1.11a\nunit=um\nvunit={unit}\n{DESCRIPTION_MAGIC}\nname={}\nz_unit={unit}\n",
+        ascii(&channel.name),
+        unit = ascii(&channel.unit)
+    )
+}
+
 fn description(channel: &ImageChannel, scale: Option<U16Scale>) -> String {
-    // ASCII only: TIFF ASCII tags are 7-bit; other characters become '?'.
-    let ascii = |text: &str| -> String {
-        text.chars()
-            .map(|c| {
-                if c.is_ascii() && !c.is_ascii_control() {
-                    c
-                } else {
-                    '?'
-                }
-            })
-            .collect()
-    };
     let mut text = format!(
         "{DESCRIPTION_MAGIC}\nname={}\nunit={}\n",
         ascii(&channel.name),

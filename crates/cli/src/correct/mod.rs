@@ -1,32 +1,29 @@
 //! `dhct correct`: the whole DHCT chain on one file (or a trace/retrace pair of files), with
 //! every result written into an output directory and summarised in `report.html`.
 
-mod config;
-pub(crate) mod figures;
-pub mod inputs;
-pub(crate) mod plots;
-pub(crate) mod render;
-pub(crate) mod report;
-mod summary;
+pub mod feature_table;
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail};
-use dhct_distortion::mask::{polygon_mask, read_mask};
+use anyhow::{Context, Result};
 use dhct_lattice::Lattice;
 use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
-use dhct_sm4_io::{WriteError, write_atomically};
+use dhct_sm4_io::write_atomically;
 use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
 use rayon::prelude::*;
 
-pub use config::{CorrectConfig, Length, build_lattice};
-pub use inputs::{Resolved, explain, resolve, with_measured_nn};
-pub use summary::RunSummary;
+use crate::report::figures::{FigureInputs, make_figures};
+pub use crate::report::summary::RunSummary;
+use crate::report::{html, summary, write_bytes, write_figure_files};
+pub use crate::setup::{
+    CorrectConfig, Length, Resolved, build_lattice, explain, load_mask, read_pair, resolve,
+    with_measured_nn,
+};
+use feature_table::write_features_csv;
 
 /// What to run.
 pub struct CorrectRequest<'a> {
@@ -39,54 +36,6 @@ pub struct CorrectRequest<'a> {
     pub progress: bool,
     /// Also run the sim-to-real gap diagnosis and add it to the report.
     pub diagnose: bool,
-}
-
-pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
-    write_atomically(path, |w| w.write_all(bytes).map_err(WriteError::from))
-}
-
-/// The scan pair to analyse: the file's topography (trace and retrace when present), or
-/// the first file's trace with the second file's image as retrace.
-pub fn read_pair(
-    input: &Path,
-    retrace: Option<&Path>,
-    overrides: &dhct_sm4_io::GeometryOverrides,
-) -> Result<ScanPair> {
-    let file = dhct_sm4_io::read_path_with_limits(input, overrides, &crate::read_limits::get())
-        .with_context(|| format!("cannot read {}", input.display()))?;
-    let pair = file
-        .topography()
-        .with_context(|| format!("{} holds no topography image", input.display()))?
-        .clone();
-    let Some(retrace_path) = retrace else {
-        return Ok(pair);
-    };
-    let other =
-        dhct_sm4_io::read_path_with_limits(retrace_path, overrides, &crate::read_limits::get())
-            .with_context(|| format!("cannot read {}", retrace_path.display()))?;
-    let other_pair = other
-        .topography()
-        .with_context(|| format!("{} holds no topography image", retrace_path.display()))?;
-    let retrace = other_pair
-        .image(ScanPass::Retrace)
-        .or_else(|| other_pair.image(ScanPass::Trace))
-        .context("the retrace file holds no image")?
-        .clone();
-    let geometry = pair.geometry().clone();
-    let trace = pair
-        .trace()
-        .context("the first file holds no trace image")?
-        .clone();
-    if (retrace.rows(), retrace.columns()) != (trace.rows(), trace.columns()) {
-        bail!(
-            "the retrace image is {} x {} px but the trace is {} x {} px",
-            retrace.columns(),
-            retrace.rows(),
-            trace.columns(),
-            trace.rows()
-        );
-    }
-    ScanPair::new(geometry, trace, Some(retrace)).context("cannot pair trace and retrace")
 }
 
 pub(crate) fn progress_bar(enabled: bool) -> ProgressBar {
@@ -287,7 +236,15 @@ fn write_into(
     let ((figures, images), csv) = rayon::join(
         || {
             rayon::join(
-                || figures::make_figures(pair, lattice.as_ref(), analysis, mask.as_ref(), colormap),
+                || {
+                    make_figures(&FigureInputs {
+                        pair,
+                        lattice: lattice.as_ref(),
+                        analysis,
+                        mask: mask.as_ref(),
+                        colormap,
+                    })
+                },
                 || write_data_images(dir, pair, analysis),
             )
         },
@@ -308,7 +265,7 @@ fn write_into(
     } else {
         None
     };
-    let html = report::report_html(&summary, &figures, section.as_deref());
+    let html = html::report_html(&summary, &figures, section);
     write_bytes(&dir.join("report.html"), html.as_bytes())?;
     Ok(summary)
 }
@@ -325,7 +282,7 @@ fn write_resolved_config(dir: &Path, corrected: &Corrected, colormap: Colormap) 
         polarity: Some(corrected.options.features.polarity),
         colormap: Some(colormap),
         geometry: config.geometry.clone(),
-        pipeline: Some(config::pipeline_table(&corrected.options)?),
+        pipeline: Some(crate::setup::pipeline_table(&corrected.options)?),
         ..config.clone()
     };
     let toml_text = format!(
@@ -338,7 +295,7 @@ fn write_resolved_config(dir: &Path, corrected: &Corrected, colormap: Colormap) 
 
 /// The sim-to-real gap diagnosis (`diagnosis.json` and its figures); returns the report
 /// section.
-fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<String> {
+fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<crate::report::page::Html> {
     let geometry = corrected.pair.geometry();
     let sets: Vec<&[dhct_features::Feature]> = corrected
         .analysis
@@ -359,26 +316,6 @@ fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<String> {
     Ok(section)
 }
 
-pub fn load_mask(
-    config: &CorrectConfig,
-    geometry: &dhct_scan::ScanGeometry,
-) -> Result<Option<Array2<bool>>> {
-    let from_file = match &config.mask {
-        Some(path) => Some(read_mask(path).map_err(|e| anyhow::anyhow!("{e}"))?),
-        None => None,
-    };
-    let from_polygon = config
-        .mask_polygon
-        .as_ref()
-        .map(|polygon| polygon_mask(geometry.rows(), geometry.columns(), polygon, true));
-    Ok(match (from_file, from_polygon) {
-        (Some(a), Some(b)) => Some(
-            dhct_distortion::mask::intersect(&a, &b).map_err(|e| anyhow::anyhow!("mask: {e}"))?,
-        ),
-        (a, b) => a.or(b),
-    })
-}
-
 fn channel_like(pair: &ScanPair, pass: ScanPass, z: &Array2<f64>) -> ImageChannel {
     let (name, unit) = pair
         .image(pass)
@@ -387,92 +324,52 @@ fn channel_like(pair: &ScanPair, pass: ScanPass, z: &Array2<f64>) -> ImageChanne
     ImageChannel::new(name, unit, z.clone())
 }
 
-/// The data images: corrected images (TIFF, GSF) and the unit cells (TIFF), written in
+/// How one data image is written.
+enum DataFormat {
+    /// Float TIFF with the pixel size (metres, x and y) when it has one.
+    Tiff(Option<[f64; 2]>),
+    /// GSF of the given pass (pixel size and geometry from the scan).
+    Gsf(ScanPass),
+}
+
+/// The data images: corrected images (TIFF with the scan's pixel size, GSF) and the unit
+/// cells (TIFF without a pixel size: their grid is in lattice coordinates), written in
 /// parallel.
 fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result<Vec<String>> {
     let geometry = pair.geometry();
-    let mut jobs: Vec<(String, ImageChannel, Option<ScanPass>)> = Vec::new();
+    let pitch = [geometry.pitch_x(), geometry.pitch_y()];
+    let mut jobs: Vec<(String, ImageChannel, DataFormat)> = Vec::new();
     for pass in &analysis.passes {
         let channel = channel_like(pair, pass.pass, &pass.corrected_image);
+        let name = format!("corrected_{}", pass.pass);
         jobs.push((
-            format!("corrected_{}.tiff", pass.pass),
+            format!("{name}.tiff"),
             channel.clone(),
-            None,
+            DataFormat::Tiff(Some(pitch)),
         ));
-        jobs.push((
-            format!("corrected_{}.gsf", pass.pass),
-            channel,
-            Some(pass.pass),
-        ));
+        jobs.push((format!("{name}.gsf"), channel, DataFormat::Gsf(pass.pass)));
     }
     if let Some(cell) = &analysis.unit_cell {
         for (name, values) in [
             ("unit_cell_averaged.tiff", &cell.averaged.values),
             ("unit_cell_symmetrized.tiff", &cell.symmetrized.values),
         ] {
-            jobs.push((
-                name.into(),
-                ImageChannel::new(name, "m", values.clone()),
-                None,
-            ));
+            let channel = ImageChannel::new(name, "m", values.clone());
+            jobs.push((name.into(), channel, DataFormat::Tiff(None)));
         }
     }
     jobs.par_iter()
-        .map(|(name, channel, gsf_pass)| {
-            write_atomically(&dir.join(name), |w| match gsf_pass {
-                Some(pass) => dhct_sm4_io::gsf::write_pass(channel, geometry, *pass, w),
-                None => dhct_sm4_io::tiff_file::write_f32(channel, w),
+        .map(|(name, channel, format)| {
+            write_atomically(&dir.join(name), |w| match format {
+                DataFormat::Gsf(pass) => dhct_sm4_io::gsf::write_pass(channel, geometry, *pass, w),
+                DataFormat::Tiff(Some(pitch)) => {
+                    dhct_sm4_io::tiff_file::write_f32_with_pixel_size(channel, *pitch, w)
+                }
+                DataFormat::Tiff(None) => dhct_sm4_io::tiff_file::write_f32(channel, w),
             })?;
             Ok(name.clone())
         })
         .collect()
-}
-
-/// Every figure as its own file, written in parallel.
-pub(crate) fn write_figure_files(dir: &Path, figures: &[figures::Figure]) -> Result<Vec<String>> {
-    figures
-        .par_iter()
-        .map(|figure| {
-            let name = figure.file_name();
-            let bytes: &[u8] = match &figure.content {
-                figures::FigureContent::Png(b, _) => b,
-                figures::FigureContent::Svg(s) => s.as_bytes(),
-            };
-            write_bytes(&dir.join(&name), bytes)?;
-            Ok(name)
-        })
-        .collect()
-}
-
-/// `features.csv`: every feature of every image with all fitted fields, acquisition times,
-/// corrected position, lattice indices and deviation.
-fn write_features_csv(dir: &Path, analysis: &Analysis) -> Result<String> {
-    let name = "features.csv".to_string();
-    write_atomically(&dir.join(&name), |w| {
-        writeln!(
-            w,
-            "{},corrected_x_m,corrected_y_m,region,n,m,site,deviation_x_m,deviation_y_m",
-            dhct_features::CSV_HEADER
-        )?;
-        for pass in &analysis.passes {
-            let mut buffer = Vec::new();
-            pass.features.write_csv(&mut buffer)?;
-            let text = String::from_utf8_lossy(&buffer);
-            for (k, line) in text.lines().skip(1).enumerate() {
-                let c = &pass.corrected[k];
-                let index = match &pass.indices[k] {
-                    Some(i) => format!(
-                        "{},{},{},{},{:e},{:e}",
-                        i.region, i.n, i.m, i.site, i.deviation_m[0], i.deviation_m[1]
-                    ),
-                    None => ",,,,,".into(),
-                };
-                writeln!(w, "{line},{:e},{:e},{index}", c.x_m, c.y_m)?;
-            }
-        }
-        Ok(())
-    })?;
-    Ok(name)
 }
 
 /// A one-screen text summary.
@@ -491,7 +388,7 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
             s,
             "  {:<28} {}",
             p.name,
-            report::value_with_sigma(p.value, p.sigma, &p.unit)
+            crate::units::value_with_sigma(p.value, p.sigma, &p.unit)
         );
     }
     for r in &summary.regions {
@@ -575,7 +472,7 @@ fn calibration_lines(summary: &RunSummary) -> String {
         );
     }
     if summary.correction == dhct_pipeline::CorrectionSource::Affine {
-        let _ = writeln!(s, "correction: {}", report::affine_reason(summary));
+        let _ = writeln!(s, "correction: {}", html::affine_reason(summary));
     }
     s
 }

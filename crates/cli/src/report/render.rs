@@ -249,8 +249,8 @@ pub fn upscale_for(rows: usize, columns: usize, target: usize) -> usize {
     target.div_ceil(longest).clamp(1, 16)
 }
 
-/// Diverging blue–white–red colour of a signed value in `[-1, 1]`, or a sequential
-/// (viridis) colour of `t` in `[0, 1]`.
+/// The sequential (inferno: black → yellow) colour of `t` in `[0, 1]` used for magnitudes
+/// such as deviations and residuals.
 pub fn heat_colour(t: f64) -> [u8; 3] {
     Colormap::Inferno.rgb(t.clamp(0.0, 1.0))
 }

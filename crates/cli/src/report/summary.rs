@@ -178,6 +178,50 @@ pub fn goodness(analysis: &Analysis) -> Goodness {
     }
 }
 
+/// The counts of one image.
+fn pass_counts(analysis: &Analysis, p: &dhct_pipeline::PassOutput) -> PassCounts {
+    let dhct = analysis.dhct.passes.iter().find(|d| d.pass == p.pass);
+    PassCounts {
+        pass: p.pass,
+        features: p.features.features.len(),
+        candidates: p.features.candidates,
+        rejected: p.features.rejected.len(),
+        selected_for_model: dhct.map(|d| d.used_selection().selected.len()).unwrap_or(0),
+        local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
+        indexed: p.indices.iter().flatten().count(),
+        exclusions: dhct
+            .map(|d| d.used_selection().exclusions)
+            .unwrap_or_default(),
+        neighbours_refined: dhct.is_some_and(|d| d.refined_selection.is_some()),
+        rdf_fit: dhct.map(|d| d.selection.rdf_fit.clone()).unwrap_or(RdfFit {
+            nn_distance_m: f64::NAN,
+            shells_m: vec![],
+            amplitudes: vec![],
+            widths_m: vec![],
+            fwhm_m: vec![],
+        }),
+    }
+}
+
+/// One region's lattice fit; `nominal` = |a1|, |a2| of the lattice given, metres.
+fn region_summary(r: &dhct_pipeline::RegionFit, nominal: [f64; 2]) -> RegionSummary {
+    RegionSummary {
+        region: r.region,
+        pixels: r.pixels,
+        features_indexed: r.members.iter().map(Vec::len).sum(),
+        features_used_in_fit: r.fit.used,
+        origin_m: r.fit.origin_m,
+        angle_deg: r.fit.angle_rad.to_degrees(),
+        scale: r.fit.scale,
+        lattice_constant_m: [nominal[0] * r.fit.scale[0], nominal[1] * r.fit.scale[1]],
+        rms_deviation_m: r.fit.rms_deviation_m,
+        set_offsets_m: r.fit.set_offsets_m.iter().skip(1).copied().collect(),
+        whole_ellipse: (&r.whole_ellipse).into(),
+        local_ellipse: r.local_ellipse.as_ref().map(Into::into),
+        local_cells: r.local_cells.iter().map(Vec::len).sum(),
+    }
+}
+
 pub fn summarise(
     input: String,
     retrace_input: Option<String>,
@@ -191,48 +235,12 @@ pub fn summarise(
     let passes = analysis
         .passes
         .iter()
-        .map(|p| {
-            let dhct = analysis.dhct.passes.iter().find(|d| d.pass == p.pass);
-            PassCounts {
-                pass: p.pass,
-                features: p.features.features.len(),
-                candidates: p.features.candidates,
-                rejected: p.features.rejected.len(),
-                selected_for_model: dhct.map(|d| d.used_selection().selected.len()).unwrap_or(0),
-                local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
-                indexed: p.indices.iter().flatten().count(),
-                exclusions: dhct
-                    .map(|d| d.used_selection().exclusions)
-                    .unwrap_or_default(),
-                neighbours_refined: dhct.is_some_and(|d| d.refined_selection.is_some()),
-                rdf_fit: dhct.map(|d| d.selection.rdf_fit.clone()).unwrap_or(RdfFit {
-                    nn_distance_m: f64::NAN,
-                    shells_m: vec![],
-                    amplitudes: vec![],
-                    widths_m: vec![],
-                    fwhm_m: vec![],
-                }),
-            }
-        })
+        .map(|p| pass_counts(analysis, p))
         .collect();
     let regions = analysis
         .regions
         .iter()
-        .map(|r| RegionSummary {
-            region: r.region,
-            pixels: r.pixels,
-            features_indexed: r.members.iter().map(Vec::len).sum(),
-            features_used_in_fit: r.fit.used,
-            origin_m: r.fit.origin_m,
-            angle_deg: r.fit.angle_rad.to_degrees(),
-            scale: r.fit.scale,
-            lattice_constant_m: [nominal[0] * r.fit.scale[0], nominal[1] * r.fit.scale[1]],
-            rms_deviation_m: r.fit.rms_deviation_m,
-            set_offsets_m: r.fit.set_offsets_m.iter().skip(1).copied().collect(),
-            whole_ellipse: (&r.whole_ellipse).into(),
-            local_ellipse: r.local_ellipse.as_ref().map(Into::into),
-            local_cells: r.local_cells.iter().map(Vec::len).sum(),
-        })
+        .map(|r| region_summary(r, nominal))
         .collect();
     RunSummary {
         dhct_version: env!("CARGO_PKG_VERSION"),

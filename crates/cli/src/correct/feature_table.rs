@@ -1,0 +1,120 @@
+//! `features.csv`: one row per feature of every image, written with the `csv` crate from
+//! [`FeatureRow`]s. The columns are documented in docs/outputs.md; each column is a
+//! different quantity (the fitted Gaussian's signed `height` only: its magnitude, the
+//! former `amplitude` column, is `|height|`).
+
+use std::path::Path;
+
+use anyhow::Result;
+use dhct_pipeline::{Analysis, PassOutput};
+use dhct_sm4_io::{WriteError, write_atomically};
+use serde::Serialize;
+
+/// File name in the output directory.
+pub const FEATURES_CSV: &str = "features.csv";
+
+/// One row of `features.csv`. Positions are in the controller frame of the feature's
+/// image (x = column, y = row, metres = px · pitch) unless named `corrected_`; z values
+/// are in the channel's unit (metres for topography).
+#[derive(Debug, Serialize)]
+pub struct FeatureRow {
+    /// Index within its image's feature set.
+    pub id: usize,
+    /// `trace` or `retrace`.
+    pub pass: String,
+    pub x_px: f64,
+    pub y_px: f64,
+    pub x_m: f64,
+    pub y_m: f64,
+    /// 1σ uncertainty of the centre from the fit covariance, px.
+    pub x_sigma_px: f64,
+    pub y_sigma_px: f64,
+    /// Gaussian widths along the major and minor axes, px.
+    pub sigma_major_px: f64,
+    pub sigma_minor_px: f64,
+    /// Major axis from +x towards +y, radians.
+    pub theta_rad: f64,
+    /// Signed apparent height of the fitted Gaussian (positive: bright, negative: dark).
+    pub height: f64,
+    /// Fitted background level.
+    pub z0: f64,
+    /// RMS residual of the fit.
+    pub residual_rms: f64,
+    pub pixel_count: usize,
+    pub ncc_peak: f64,
+    /// Fit status (`ok` or why not).
+    pub status: String,
+    pub fit_iterations: usize,
+    /// Acquisition time since frame start and since line start, seconds.
+    pub time_s: f64,
+    pub line_time_s: f64,
+    /// Position after the correction, sample frame, metres.
+    pub corrected_x_m: f64,
+    pub corrected_y_m: f64,
+    /// Lattice index (empty when the feature was not indexed).
+    pub region: Option<usize>,
+    pub n: Option<i64>,
+    pub m: Option<i64>,
+    pub site: Option<usize>,
+    /// Corrected position minus the fitted lattice site, metres.
+    pub deviation_x_m: Option<f64>,
+    pub deviation_y_m: Option<f64>,
+}
+
+/// The row of feature `k` of `pass`.
+pub fn feature_row(pass: &PassOutput, k: usize) -> FeatureRow {
+    let f = &pass.features.features[k];
+    let index = pass.indices.get(k).copied().flatten();
+    let corrected = pass.corrected.get(k);
+    let status = serde_json::to_value(f.status)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default();
+    FeatureRow {
+        id: f.id,
+        pass: f.pass.to_string(),
+        x_px: f.x_px,
+        y_px: f.y_px,
+        x_m: f.x_m,
+        y_m: f.y_m,
+        x_sigma_px: f.x_sigma_px,
+        y_sigma_px: f.y_sigma_px,
+        sigma_major_px: f.sigma_major_px,
+        sigma_minor_px: f.sigma_minor_px,
+        theta_rad: f.theta_rad,
+        height: f.height,
+        z0: f.z0,
+        residual_rms: f.residual_rms,
+        pixel_count: f.pixel_count,
+        ncc_peak: f.ncc_peak,
+        status,
+        fit_iterations: f.fit_iterations,
+        time_s: f.time_s,
+        line_time_s: f.line_time_s,
+        corrected_x_m: corrected.map_or(f64::NAN, |c| c.x_m),
+        corrected_y_m: corrected.map_or(f64::NAN, |c| c.y_m),
+        region: index.map(|i| i.region),
+        n: index.map(|i| i.n),
+        m: index.map(|i| i.m),
+        site: index.map(|i| i.site),
+        deviation_x_m: index.map(|i| i.deviation_m[0]),
+        deviation_y_m: index.map(|i| i.deviation_m[1]),
+    }
+}
+
+/// Writes `features.csv` into `dir`; returns its name.
+pub fn write_features_csv(dir: &Path, analysis: &Analysis) -> Result<String> {
+    write_atomically(&dir.join(FEATURES_CSV), |w| {
+        let mut writer = csv::Writer::from_writer(w);
+        for pass in &analysis.passes {
+            for k in 0..pass.features.features.len() {
+                writer
+                    .serialize(feature_row(pass, k))
+                    .map_err(|e| WriteError::from(std::io::Error::other(e)))?;
+            }
+        }
+        writer.flush()?;
+        Ok(())
+    })?;
+    Ok(FEATURES_CSV.to_string())
+}
