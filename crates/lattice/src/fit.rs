@@ -263,9 +263,9 @@ pub(crate) fn lattice_vector(lattice: &dyn Lattice, n: i64, m: i64, site: usize)
     a1 * n as f64 + a2 * m as f64 + lattice.site_position(site)
 }
 
+/// The median (NaN for no values), the shared convention of [`dhct_numerics::robust`].
 fn median(values: &mut [f64]) -> f64 {
-    let middle = values.len() / 2;
-    *values.select_nth_unstable_by(middle, f64::total_cmp).1
+    dhct_numerics::robust::median(values).unwrap_or(f64::NAN)
 }
 
 /// Distance from each point to its nearest other point (metres; infinite when alone).

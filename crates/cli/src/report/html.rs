@@ -168,8 +168,12 @@ fn warnings_section(html: &mut Html, summary: &RunSummary) {
             .open("br", &[])
             .element("b", "What to do:")
             .text(" ")
-            .text(&w.what_to_do)
-            .close("p");
+            .text(&w.what_to_do);
+        if !w.inputs.is_empty() {
+            let flags: Vec<&str> = w.inputs.iter().map(|i| crate::flags::flag(*i)).collect();
+            html.text(&format!(" (options: {})", flags.join(", ")));
+        }
+        html.close("p");
     }
 }
 
