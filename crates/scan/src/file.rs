@@ -24,6 +24,8 @@ pub enum FileFormat {
     Tiff,
     /// PNG image.
     Png,
+    /// Createc `.dat` (text header + zlib-compressed float32).
+    CreatecDat,
 }
 
 impl FileFormat {
@@ -38,6 +40,7 @@ impl FileFormat {
             FileFormat::Npy => "NumPy NPY",
             FileFormat::Tiff => "TIFF",
             FileFormat::Png => "PNG",
+            FileFormat::CreatecDat => "Createc DAT",
         }
     }
 }

@@ -24,6 +24,8 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::Tiff)
     } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         Some(FileFormat::Png)
+    } else if crate::createc::looks_like_createc(bytes) {
+        Some(FileFormat::CreatecDat)
     } else {
         None
     }
@@ -50,6 +52,10 @@ mod tests {
         assert_eq!(detect_format(b"\x93NUMPY\x01\x00"), Some(FileFormat::Npy));
         assert_eq!(detect_format(b"II*\0\x08\0\0\0"), Some(FileFormat::Tiff));
         assert_eq!(detect_format(b"MM\0*\0\0\0\x08"), Some(FileFormat::Tiff));
+        assert_eq!(
+            detect_format(b"[Paramco32]\r\nDAC-Type=20bit\r\n"),
+            Some(FileFormat::CreatecDat)
+        );
         assert_eq!(detect_format(b""), None);
         assert_eq!(detect_format(b"hello world"), None);
         assert_eq!(detect_format(&[0xFF; 64]), None);

@@ -61,7 +61,7 @@ pub enum ReadError {
     #[error("{format} file holds no image that dhct can use: {reason}", format = .format.name())]
     NoImage { format: FileFormat, reason: String },
     #[error(
-        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY or TIFF content"
+        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY, TIFF or Createc DAT content"
     )]
     UnknownFormat,
     #[error("invalid scan geometry option: {0}")]

@@ -9,6 +9,7 @@
 //! | Gwyddion Simple Field (.gsf) | yes | yes | [`gsf`] |
 //! | NumPy .npy | yes | yes | [`npy`] |
 //! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
+//! | Createc `.dat` (`[Paramco32]`) | yes | — | [`createc`] |
 //! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
 //!
 //! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
@@ -30,6 +31,7 @@
 
 mod atomic;
 pub mod bytes;
+pub mod createc;
 mod detect;
 mod error;
 pub mod gsf;
@@ -117,6 +119,7 @@ pub fn read_as_limited(
         FileFormat::Gsf => gsf::read_limited(bytes, limits),
         FileFormat::Npy => npy::read_limited(bytes, limits),
         FileFormat::Tiff => tiff_file::read_limited(bytes, limits),
+        FileFormat::CreatecDat => createc::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \
