@@ -26,6 +26,8 @@ pub enum FileFormat {
     Png,
     /// Createc `.dat` (text header + zlib-compressed float32).
     CreatecDat,
+    /// Omicron MATRIX `.*_mtrx` data file with its `_0001.mtrx` parameter file.
+    OmicronMatrix,
 }
 
 impl FileFormat {
@@ -41,6 +43,7 @@ impl FileFormat {
             FileFormat::Tiff => "TIFF",
             FileFormat::Png => "PNG",
             FileFormat::CreatecDat => "Createc DAT",
+            FileFormat::OmicronMatrix => "Omicron MATRIX",
         }
     }
 }

@@ -26,6 +26,8 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::Png)
     } else if crate::createc::looks_like_createc(bytes) {
         Some(FileFormat::CreatecDat)
+    } else if crate::matrix::looks_like_matrix(bytes) {
+        Some(FileFormat::OmicronMatrix)
     } else {
         None
     }
@@ -55,6 +57,10 @@ mod tests {
         assert_eq!(
             detect_format(b"[Paramco32]\r\nDAC-Type=20bit\r\n"),
             Some(FileFormat::CreatecDat)
+        );
+        assert_eq!(
+            detect_format(b"ONTMATRX0101TLKB"),
+            Some(FileFormat::OmicronMatrix)
         );
         assert_eq!(detect_format(b""), None);
         assert_eq!(detect_format(b"hello world"), None);

@@ -10,6 +10,7 @@
 //! | NumPy .npy | yes | yes | [`npy`] |
 //! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
 //! | Createc `.dat` (`[Paramco32]`) | yes | — | [`createc`] |
+//! | Omicron MATRIX (`*_mtrx` + `_0001.mtrx`, by path) | yes | — | [`matrix`] |
 //! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
 //!
 //! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
@@ -37,6 +38,7 @@ mod error;
 pub mod gsf;
 pub mod iso28600;
 pub mod limits;
+pub mod matrix;
 pub mod npy;
 mod overrides;
 mod placeholders;
@@ -69,6 +71,10 @@ pub fn read_path(path: &Path) -> Result<ScanFile, ReadError> {
 /// [`read_path`] under `limits`.
 pub fn read_path_limited(path: &Path, limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     let bytes = limits::read_regular_file(path, limits.max_bytes)?;
+    if matrix::is_data_file(&bytes) {
+        // A MATRIX data file is read with its parameter file from beside it.
+        return matrix::read_files(path, &bytes, limits);
+    }
     read_bytes_limited(&bytes, limits)
 }
 
@@ -120,6 +126,7 @@ pub fn read_as_limited(
         FileFormat::Npy => npy::read_limited(bytes, limits),
         FileFormat::Tiff => tiff_file::read_limited(bytes, limits),
         FileFormat::CreatecDat => createc::read_limited(bytes, limits),
+        FileFormat::OmicronMatrix => matrix::read_alone(bytes),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \
