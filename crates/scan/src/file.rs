@@ -28,6 +28,8 @@ pub enum FileFormat {
     CreatecDat,
     /// Omicron MATRIX `.*_mtrx` data file with its `_0001.mtrx` parameter file.
     OmicronMatrix,
+    /// WSxM image (`.top`, `.stp`; text header + binary).
+    Wsxm,
 }
 
 impl FileFormat {
@@ -44,6 +46,7 @@ impl FileFormat {
             FileFormat::Png => "PNG",
             FileFormat::CreatecDat => "Createc DAT",
             FileFormat::OmicronMatrix => "Omicron MATRIX",
+            FileFormat::Wsxm => "WSxM",
         }
     }
 }

@@ -28,6 +28,8 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::CreatecDat)
     } else if crate::matrix::looks_like_matrix(bytes) {
         Some(FileFormat::OmicronMatrix)
+    } else if crate::wsxm::looks_like_wsxm(bytes) {
+        Some(FileFormat::Wsxm)
     } else {
         None
     }
@@ -61,6 +63,14 @@ mod tests {
         assert_eq!(
             detect_format(b"ONTMATRX0101TLKB"),
             Some(FileFormat::OmicronMatrix)
+        );
+        assert_eq!(
+            detect_format(b"WSxM file copyright UAM\r\nSxM Image file\r\n"),
+            Some(FileFormat::Wsxm)
+        );
+        assert_eq!(
+            detect_format(b"WSxM file copyright UAM\r\nIV curve file\r\n"),
+            None
         );
         assert_eq!(detect_format(b""), None);
         assert_eq!(detect_format(b"hello world"), None);

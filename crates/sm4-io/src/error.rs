@@ -61,7 +61,7 @@ pub enum ReadError {
     #[error("{format} file holds no image that dhct can use: {reason}", format = .format.name())]
     NoImage { format: FileFormat, reason: String },
     #[error(
-        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY, TIFF, Createc DAT or Omicron MATRIX content"
+        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF, NumPy NPY, TIFF, Createc DAT, Omicron MATRIX or WSxM content"
     )]
     UnknownFormat,
     #[error(

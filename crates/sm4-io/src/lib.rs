@@ -11,6 +11,7 @@
 //! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
 //! | Createc `.dat` (`[Paramco32]`) | yes | — | [`createc`] |
 //! | Omicron MATRIX (`*_mtrx` + `_0001.mtrx`, by path) | yes | — | [`matrix`] |
+//! | WSxM image (`.top`, `.stp`) | yes | — | [`wsxm`] |
 //! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
 //!
 //! Formats are detected by content ([`detect_format`]), not by extension. Every reader takes
@@ -46,6 +47,7 @@ pub mod png_file;
 pub mod sm4;
 pub mod sxm;
 pub mod tiff_file;
+pub mod wsxm;
 
 use std::path::Path;
 
@@ -127,6 +129,7 @@ pub fn read_as_limited(
         FileFormat::Tiff => tiff_file::read_limited(bytes, limits),
         FileFormat::CreatecDat => createc::read_limited(bytes, limits),
         FileFormat::OmicronMatrix => matrix::read_alone(bytes),
+        FileFormat::Wsxm => wsxm::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \
