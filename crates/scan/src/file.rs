@@ -30,6 +30,12 @@ pub enum FileFormat {
     NanosurfNid,
     /// Bruker/Veeco Nanoscope (.spm, .001, ...: text header + integer data).
     Nanoscope,
+    /// Createc `.dat` (text header + zlib-compressed float32).
+    CreatecDat,
+    /// Omicron MATRIX `.*_mtrx` data file with its `_0001.mtrx` parameter file.
+    OmicronMatrix,
+    /// WSxM image (`.top`, `.stp`; text header + binary).
+    Wsxm,
 }
 
 impl FileFormat {
@@ -47,6 +53,9 @@ impl FileFormat {
             FileFormat::Gwyddion => "Gwyddion GWY",
             FileFormat::NanosurfNid => "Nanosurf NID",
             FileFormat::Nanoscope => "Bruker Nanoscope",
+            FileFormat::CreatecDat => "Createc DAT",
+            FileFormat::OmicronMatrix => "Omicron MATRIX",
+            FileFormat::Wsxm => "WSxM",
         }
     }
 }

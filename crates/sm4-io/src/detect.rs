@@ -34,6 +34,12 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
     {
         // Not ISO 28600, whose `.spm` files start with "ISO/TC 201".
         Some(FileFormat::Nanoscope)
+    } else if crate::createc::looks_like_createc(bytes) {
+        Some(FileFormat::CreatecDat)
+    } else if crate::matrix::looks_like_matrix(bytes) {
+        Some(FileFormat::OmicronMatrix)
+    } else if crate::wsxm::looks_like_wsxm(bytes) {
+        Some(FileFormat::Wsxm)
     } else {
         None
     }
@@ -71,6 +77,22 @@ mod tests {
         assert_eq!(
             detect_format(b"\\*File list\r\n\\Version: 0x05120130\r\n"),
             Some(FileFormat::Nanoscope)
+        );
+        assert_eq!(
+            detect_format(b"[Paramco32]\r\nDAC-Type=20bit\r\n"),
+            Some(FileFormat::CreatecDat)
+        );
+        assert_eq!(
+            detect_format(b"ONTMATRX0101TLKB"),
+            Some(FileFormat::OmicronMatrix)
+        );
+        assert_eq!(
+            detect_format(b"WSxM file copyright UAM\r\nSxM Image file\r\n"),
+            Some(FileFormat::Wsxm)
+        );
+        assert_eq!(
+            detect_format(b"WSxM file copyright UAM\r\nIV curve file\r\n"),
+            None
         );
         assert_eq!(detect_format(b""), None);
         assert_eq!(detect_format(b"hello world"), None);

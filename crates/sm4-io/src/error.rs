@@ -61,9 +61,18 @@ pub enum ReadError {
     #[error("{format} file holds no image that dhct can use: {reason}", format = .format.name())]
     NoImage { format: FileFormat, reason: String },
     #[error(
-        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF or GWY, Nanosurf NID, Bruker Nanoscope, NumPy NPY or TIFF content"
+        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF or GWY, Nanosurf NID, Bruker Nanoscope, Createc DAT, Omicron MATRIX, WSxM, NumPy NPY or TIFF content"
     )]
     UnknownFormat,
+    #[error(
+        "{format} file needs its {what} {path}, which does not exist",
+        format = .format.name(), path = .path.display()
+    )]
+    MissingCompanion {
+        format: FileFormat,
+        path: PathBuf,
+        what: &'static str,
+    },
     #[error("invalid scan geometry option: {0}")]
     BadOverride(crate::overrides::OverrideRangeError),
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]

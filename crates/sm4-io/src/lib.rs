@@ -9,6 +9,9 @@
 //! | Gwyddion Simple Field (.gsf) | yes | yes | [`gsf`] |
 //! | NumPy .npy | yes | yes | [`npy`] |
 //! | float32 / 16-bit TIFF | yes | yes | [`tiff_file`] |
+//! | Createc `.dat` (`[Paramco32]`) | yes | — | [`createc`] |
+//! | Omicron MATRIX (`*_mtrx` + `_0001.mtrx`, by path) | yes | — | [`matrix`] |
+//! | WSxM image (`.top`, `.stp`) | yes | — | [`wsxm`] |
 //! | 16-bit grey and colour-mapped PNG | — | yes | [`png_file`] |
 //! | Gwyddion native (.gwy) | yes | — | [`gwy`] |
 //! | Nanosurf NID | yes | — | [`nid`] |
@@ -33,12 +36,14 @@
 
 mod atomic;
 pub mod bytes;
+pub mod createc;
 mod detect;
 mod error;
 pub mod gsf;
 pub mod gwy;
 pub mod iso28600;
 pub mod limits;
+pub mod matrix;
 pub mod nanoscope;
 pub mod nid;
 pub mod npy;
@@ -48,6 +53,7 @@ pub mod png_file;
 pub mod sm4;
 pub mod sxm;
 pub mod tiff_file;
+pub mod wsxm;
 
 use std::path::Path;
 
@@ -73,6 +79,10 @@ pub fn read_path(path: &Path) -> Result<ScanFile, ReadError> {
 /// [`read_path`] under `limits`.
 pub fn read_path_limited(path: &Path, limits: &ReadLimits) -> Result<ScanFile, ReadError> {
     let bytes = limits::read_regular_file(path, limits.max_bytes)?;
+    if matrix::is_data_file(&bytes) {
+        // A MATRIX data file is read with its parameter file from beside it.
+        return matrix::read_files(path, &bytes, limits);
+    }
     read_bytes_limited(&bytes, limits)
 }
 
@@ -126,6 +136,9 @@ pub fn read_as_limited(
         FileFormat::Gwyddion => gwy::read_limited(bytes, limits),
         FileFormat::NanosurfNid => nid::read_limited(bytes, limits),
         FileFormat::Nanoscope => nanoscope::read_limited(bytes, limits),
+        FileFormat::CreatecDat => createc::read_limited(bytes, limits),
+        FileFormat::OmicronMatrix => matrix::read_alone(bytes),
+        FileFormat::Wsxm => wsxm::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \

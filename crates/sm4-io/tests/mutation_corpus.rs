@@ -130,6 +130,53 @@ fn vendored_real_files() -> Vec<(String, Vec<u8>)> {
     .collect()
 }
 
+/// The real Createc and WSxM files of `tests/data/real` (the older formats' real files are
+/// mutated through `DHCT_REAL_DATA`). The 512 × 512 × 4 Createc file is cropped to its top
+/// left 64 × 64 pixels (real header, real values), so its mutants read in seconds.
+fn real_files_of_later_readers() -> Vec<(String, Vec<u8>)> {
+    files_in(&repository_root().join("tests/data/real"))
+        .into_iter()
+        .filter(|(name, _)| name.starts_with("createc_") || name.starts_with("wsxm_"))
+        .map(|(name, bytes)| {
+            if name.starts_with("createc_") {
+                (
+                    format!("{name} (64 x 64 crop)"),
+                    cropped_createc(&bytes, 512, 4, 64),
+                )
+            } else {
+                (name, bytes)
+            }
+        })
+        .collect()
+}
+
+/// A `[Paramco32]` file of `channels` images of `side × side` cut down to `crop × crop`.
+fn cropped_createc(bytes: &[u8], side: usize, channels: usize, crop: usize) -> Vec<u8> {
+    use std::io::Read as _;
+    let data = bytes.windows(5).position(|w| w == b"\nDATA").unwrap() + 5;
+    let mut values = Vec::new();
+    flate2::read::ZlibDecoder::new(&bytes[data..])
+        .read_to_end(&mut values)
+        .unwrap();
+    let mut cropped = values[..4].to_vec();
+    for image in 0..channels {
+        for row in 0..crop {
+            let start = 4 + 4 * (image * side * side + row * side);
+            cropped.extend_from_slice(&values[start..start + 4 * crop]);
+        }
+    }
+    // Latin-1 text: one char per byte, so the header's other bytes stay as they are.
+    let header: String = bytes[..data].iter().map(|&b| b as char).collect();
+    let header = header
+        .replace(&format!("Num.X={side}"), &format!("Num.X={crop}"))
+        .replace(&format!("Num.Y={side}"), &format!("Num.Y={crop}"));
+    let mut out: Vec<u8> = header.chars().map(|c| c as u32 as u8).collect();
+    let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder.write_all(&cropped).unwrap();
+    out.extend(encoder.finish().unwrap());
+    out
+}
+
 /// Hostile replacements for a number in a text header.
 const NUMBERS: [&str; 8] = [
     "0",
@@ -245,6 +292,7 @@ fn every_reader_survives_its_mutation_corpus() {
     let mut corpus = written_files();
     corpus.extend(files_in(&repository_root().join("tests/data")));
     corpus.extend(vendored_real_files());
+    corpus.extend(real_files_of_later_readers());
     match std::env::var_os("DHCT_REAL_DATA") {
         Some(dir) => {
             let real = files_in(Path::new(&dir));
@@ -260,8 +308,12 @@ fn every_reader_survives_its_mutation_corpus() {
             format.is_some(),
             "{name}: the unmutated file is not recognised"
         );
+        let file_start = Instant::now();
         let (count, errors) = read_mutants(name, bytes, 0x9E37_79B9 + k as u64);
-        eprintln!("{name} ({format:?}): {count} mutants, {errors} errors");
+        eprintln!(
+            "{name} ({format:?}): {count} mutants, {errors} errors, {:?}",
+            file_start.elapsed()
+        );
         total += count;
     }
     eprintln!(
@@ -273,6 +325,47 @@ fn every_reader_survives_its_mutation_corpus() {
         total >= 300 * corpus.len(),
         "the corpus is smaller than planned: {total}"
     );
+}
+
+#[test]
+fn the_matrix_reader_survives_mutations_of_either_file_of_its_pair() {
+    let dir = repository_root().join("tests/data/real");
+    let data_name = "20201111--4_1.Z_mtrx";
+    let data = std::fs::read(dir.join(data_name)).unwrap();
+    let parameters = std::fs::read(dir.join("20201111_0001.mtrx")).unwrap();
+    let read = |data: &[u8], parameters: &[u8]| {
+        dhct_sm4_io::matrix::read_pair(data, data_name, parameters, &LIMITS)
+    };
+    assert!(read(&data, &parameters).is_ok());
+    let mut total = 0;
+    for (which, k) in [("data", 0u64), ("parameters", 1)] {
+        let original = if k == 0 { &data } else { &parameters };
+        for (what, mutant) in mutants(original, 0x5EED + k) {
+            let start = Instant::now();
+            let result = catch_unwind(AssertUnwindSafe(|| {
+                if k == 0 {
+                    read(&mutant, &parameters)
+                } else {
+                    read(&data, &mutant)
+                }
+            }));
+            assert!(
+                result.is_ok(),
+                "MATRIX {which}, {what}: the reader panicked"
+            );
+            if let Ok(Ok(file)) = result {
+                for pair in &file.pairs {
+                    assert!(pair.geometry().pitch_x().is_finite(), "{which}, {what}");
+                }
+            }
+            assert!(
+                start.elapsed() < MAX_READ,
+                "MATRIX {which}, {what}: too slow"
+            );
+            total += 1;
+        }
+    }
+    assert!(total >= 600, "{total} mutants");
 }
 
 #[test]
