@@ -476,7 +476,7 @@ impl Indexing<'_> {
     /// Coarse-to-fine indexing from the seed taken as motif site `site`, the lattice
     /// rotated by `angle` and scaled by `scale`: the final affine model and its mean
     /// squared deviation.
-    fn from_seed(
+    fn index_from_seed(
         &self,
         angle: f64,
         scale: f64,
@@ -514,7 +514,7 @@ impl Indexing<'_> {
         for k in 0..candidates {
             let angle = adf.lattice_angle_rad + k as f64 * adf.period_rad;
             for site in 0..self.lattice.motif().len() {
-                match self.from_seed(angle, scale, site) {
+                match self.index_from_seed(angle, scale, site) {
                     Ok((cost, model))
                         if best.as_ref().is_none_or(|(c, _)| cost < *c * (1.0 - 1e-9)) =>
                     {

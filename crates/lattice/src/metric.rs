@@ -112,22 +112,21 @@ pub(crate) fn check_motif_symmetry(
     let w = inverse * rotation * basis;
     let reach = tolerance.max(1e-9) * cell[0].norm().min(cell[1].norm());
     let o = Vector2::from(origin);
-    let mut operations: Vec<(String, Box<dyn Fn(Vector2<f64>) -> Vector2<f64>>)> = Vec::new();
+    // (description, fractional matrix, fractional translation), acting as f ↦ W·f + t.
+    let mut operations: Vec<(String, Matrix2<f64>, Vector2<f64>)> = Vec::new();
     if order > 1 {
-        operations.push((
-            format!("the {order}-fold rotation"),
-            Box::new(move |f| w * (f - o) + o),
-        ));
+        operations.push((format!("the {order}-fold rotation"), w, o - w * o));
     }
     if matches!(group, PlaneGroup::Cm | PlaneGroup::C2mm) {
         operations.push((
             "the centring translation (1/2, 1/2)".into(),
-            Box::new(|f| f + Vector2::new(0.5, 0.5)),
+            Matrix2::identity(),
+            Vector2::new(0.5, 0.5),
         ));
     }
-    for (what, operation) in &operations {
+    for (what, matrix, translation) in &operations {
         for (index, site) in motif.iter().enumerate() {
-            let image = operation(Vector2::from(site.fractional));
+            let image = matrix * Vector2::from(site.fractional) + translation;
             let lands_on_a_site = motif.iter().any(|other| {
                 let d = image - Vector2::from(other.fractional);
                 let wrapped = d.map(|v| v - v.round());

@@ -310,8 +310,13 @@ mod tests {
         assert!((s.nearest_neighbour_distance() - 3e-10).abs() < 1e-15);
         assert!(build_lattice("square", None).is_err());
         assert!(build_lattice("graphite", Some(2.46)).is_err());
-        let e = build_lattice("kagome", None).unwrap_err().to_string();
+        let e = build_lattice("lieb", None).unwrap_err().to_string();
         assert!(e.contains("unknown lattice"), "{e}");
+        // A catalogue entry without a known constant names the flag that gives it.
+        let e = build_lattice("kagome", None).unwrap_err().to_string();
+        assert!(e.contains("--lattice kagome needs --nn"), "{e}");
+        let k = build_lattice("kagome", Some(3e-10)).unwrap();
+        assert!((k.nearest_neighbour_distance() - 3e-10).abs() < 1e-16);
     }
 
     #[test]
