@@ -432,7 +432,7 @@ pub fn run_file(
     let target = output;
     let staged = StagedOutput::prepare(target, config.overwrite)?;
     let output = staged.path();
-    let pair = correct::read_pair(input, retrace, &config.geometry)?;
+    let pair = correct::read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
     let geometry = pair.geometry().clone();
     let mask = correct::load_mask(&config, &geometry)?;
     let correct::Resolved {

@@ -45,18 +45,21 @@ pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomically(path, |w| w.write_all(bytes).map_err(WriteError::from))
 }
 
-/// The scan pair to analyse: the file's topography (trace and retrace when present), or
-/// the first file's trace with the second file's image as retrace.
+/// The scan pair to analyse: the file's channel named `channel` (default: its topography;
+/// trace and retrace when present), or the first file's trace with the second file's image
+/// of the same channel as retrace. An unknown channel name is an error listing the file's
+/// channels.
 pub fn read_pair(
     input: &Path,
     retrace: Option<&Path>,
     overrides: &dhct_sm4_io::GeometryOverrides,
+    channel: Option<&str>,
 ) -> Result<ScanPair> {
     let file = dhct_sm4_io::read_path_with_limits(input, overrides, &crate::read_limits::get())
         .with_context(|| format!("cannot read {}", input.display()))?;
     let pair = file
-        .topography()
-        .with_context(|| format!("{} holds no topography image", input.display()))?
+        .channel_or_topography(channel)
+        .with_context(|| input.display().to_string())?
         .clone();
     let Some(retrace_path) = retrace else {
         return Ok(pair);
@@ -65,8 +68,8 @@ pub fn read_pair(
         dhct_sm4_io::read_path_with_limits(retrace_path, overrides, &crate::read_limits::get())
             .with_context(|| format!("cannot read {}", retrace_path.display()))?;
     let other_pair = other
-        .topography()
-        .with_context(|| format!("{} holds no topography image", retrace_path.display()))?;
+        .channel_or_topography(channel)
+        .with_context(|| retrace_path.display().to_string())?;
     let retrace = other_pair
         .image(ScanPass::Retrace)
         .or_else(|| other_pair.image(ScanPass::Trace))
@@ -222,7 +225,12 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let bar = progress_bar(request.progress);
     let start = Instant::now();
     bar.set_message("reading");
-    let pair = read_pair(request.input, request.retrace, &request.config.geometry)?;
+    let pair = read_pair(
+        request.input,
+        request.retrace,
+        &request.config.geometry,
+        request.config.channel.as_deref(),
+    )?;
     let read_s = start.elapsed().as_secs_f64();
     let corrected = analyse(
         AnalyseRequest {
