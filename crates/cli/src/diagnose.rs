@@ -451,7 +451,7 @@ pub fn run_file(
     let target = output;
     let staged = StagedOutput::prepare(target, config.overwrite)?;
     let output = staged.path();
-    let pair = setup::read_pair(input, retrace, &config.geometry)?;
+    let pair = setup::read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
     let geometry = pair.geometry().clone();
     let mask = setup::load_mask(&config, &geometry)?;
     let setup::Resolved {

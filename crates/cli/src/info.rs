@@ -77,9 +77,49 @@ fn source_note(source: ValueSource) -> &'static str {
     }
 }
 
+/// One line per channel: name, unit, directions and size (`--channel NAME` picks one).
+fn channel_list(summary: &FileSummary) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "channels ({}; pick one with --channel NAME):",
+        summary.channels.len()
+    );
+    let width = summary
+        .channels
+        .iter()
+        .map(|c| c.name.chars().count())
+        .max()
+        .unwrap_or(0);
+    for c in &summary.channels {
+        let g = c.geometry;
+        let mut passes = Vec::new();
+        if c.trace {
+            passes.push(format!("trace {:?}", g.trace_fast()).to_lowercase());
+        }
+        if c.retrace {
+            passes.push(format!("retrace {:?}", g.trace_fast().reversed()).to_lowercase());
+        }
+        let unit = if c.unit.is_empty() { "-" } else { c.unit };
+        let _ = writeln!(
+            out,
+            "  {:width$}  [{unit}]  {}, slow {}  {} x {} px, {} x {}",
+            c.name,
+            passes.join(" + "),
+            format!("{:?}", g.slow_direction()).to_lowercase(),
+            g.columns(),
+            g.rows(),
+            si(c.width_m, "m"),
+            si(c.height_m, "m"),
+        );
+    }
+    out
+}
+
 fn human(summary: &FileSummary) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "{}: {}", summary.path.display(), summary.format);
+    out.push_str(&channel_list(summary));
     for (key, value) in summary.metadata {
         // Multi-line values (RHK session texts, comments) stay indented under their key.
         let value: Vec<&str> = value

@@ -71,7 +71,8 @@ enum Command {
     /// corrected images (TIFF, GSF, PNG), features.csv, model.json, unit-cell images and a
     /// self-contained report.html into OUTDIR.
     Correct {
-        /// The image file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF).
+        /// The image file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF, Createc DAT, Omicron
+        /// MATRIX, WSxM).
         input: PathBuf,
         /// A separate file holding the retrace image, if the input has none.
         retrace: Option<PathBuf>,
@@ -142,7 +143,8 @@ enum Command {
         options: CorrectArgs,
     },
     /// Show the channels, sizes, scan geometry and timing of an STM file
-    /// (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF; detected from content).
+    /// (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF, Createc DAT, Omicron MATRIX, WSxM;
+    /// detected from content).
     Info {
         /// The file to describe.
         file: PathBuf,
@@ -188,6 +190,10 @@ struct CorrectArgs {
     /// lattice file (TOML/JSON; its numbers may be rounded).
     #[arg(long)]
     lattice: Option<String>,
+    /// The channel to analyse, e.g. Z or Current (case-insensitive; a whole name first, else
+    /// a part of one; `dhct info FILE` lists them). Default: the topography.
+    #[arg(long)]
+    channel: Option<String>,
     /// Nearest-neighbour distance, e.g. 2.46A or 0.246nm (a bare number is metres), or
     /// `auto`: the distance the image shows in the file's units. Presets with a known
     /// constant (graphite, sam-sqrt3, honeycomb, si111-7x7) need none; for the others it
@@ -240,6 +246,7 @@ impl CorrectArgs {
         };
         Ok(base.overridden_by(correct::CorrectConfig {
             lattice: self.lattice.clone(),
+            channel: self.channel.clone(),
             nn: self.nn.clone(),
             calibrate: self.calibrate.then_some(true),
             trust_inputs: self.trust_inputs.then_some(true),

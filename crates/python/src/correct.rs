@@ -70,7 +70,14 @@ fn input_pair(
     })?;
     let start = Instant::now();
     let pair = py
-        .detach(|| cli::read_pair(&path, retrace.as_deref(), &config.geometry))
+        .detach(|| {
+            cli::read_pair(
+                &path,
+                retrace.as_deref(),
+                &config.geometry,
+                config.channel.as_deref(),
+            )
+        })
         .map_err(|e| to_py::<ReadError>(&e))?;
     let label = path.display().to_string();
     let retrace_label = retrace.map(|p| p.display().to_string());

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use dhct_scan::{ImageChannel, ScanDirection, ScanFile, ScanGeometry, ScanPair, ScanPass};
+use dhct_scan::{ImageChannel, ScanDirection, ScanGeometry, ScanPair, ScanPass};
 use dhct_sm4_io::GeometryOverrides;
 use numpy::{PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -80,33 +80,6 @@ fn source(s: dhct_scan::ValueSource) -> &'static str {
     }
 }
 
-/// The channel named `channel` (case-insensitive, whole name first, then a part of it), or
-/// the topography when `None`.
-fn pick_channel(file: &ScanFile, channel: Option<&str>) -> Result<ScanPair, String> {
-    let names = || {
-        file.pairs
-            .iter()
-            .map(|p| format!("'{}'", p.name()))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let found = match channel {
-        None => file.topography(),
-        Some(wanted) => {
-            let wanted = wanted.to_lowercase();
-            let lower = |p: &&ScanPair| p.name().to_lowercase();
-            file.pairs
-                .iter()
-                .find(|p| lower(p) == wanted)
-                .or_else(|| file.pairs.iter().find(|p| lower(p).contains(&wanted)))
-        }
-    };
-    found.cloned().ok_or_else(|| match channel {
-        None => "the file holds no image".to_string(),
-        Some(c) => format!("no channel '{c}' in the file; it holds {}", names()),
-    })
-}
-
 /// Reads `path` (any supported format, detected from content) with `overrides` applied.
 pub fn read_scan(
     py: Python<'_>,
@@ -117,8 +90,10 @@ pub fn read_scan(
     let read = py.detach(|| dhct_sm4_io::read_path_with(&path, &overrides));
     let file =
         read.map_err(|e| ReadError::new_err(format!("cannot read {}: {e}", path.display())))?;
-    let pair = pick_channel(&file, channel.as_deref())
-        .map_err(|e| ReadError::new_err(format!("{}: {e}", path.display())))?;
+    let pair = file
+        .channel_or_topography(channel.as_deref())
+        .map_err(|e| ReadError::new_err(format!("{}: {e}", path.display())))?
+        .clone();
     Ok(Scan {
         pair,
         format: Some(file.format.name().to_string()),

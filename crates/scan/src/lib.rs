@@ -39,6 +39,7 @@
 //! ```
 
 mod channel;
+mod choice;
 mod direction;
 mod error;
 mod file;
@@ -47,6 +48,7 @@ mod hysteresis;
 mod pair;
 
 pub use channel::ImageChannel;
+pub use choice::NoSuchChannel;
 pub use direction::{Axis, ScanDirection, ScanPass};
 pub use error::GeometryError;
 pub use file::{FileFormat, ScanFile};

@@ -210,7 +210,10 @@ fn real_nanosurf_stm_file() {
     // beside the other non-redistributable files.
     let path = Path::new(&dir).join("stm-nanosurf-nid.nid");
     if !path.is_file() {
-        eprintln!("note: {} is absent; skipping the real Nanosurf STM file test", path.display());
+        eprintln!(
+            "note: {} is absent; skipping the real Nanosurf STM file test",
+            path.display()
+        );
         return;
     }
     check_real(

@@ -72,6 +72,10 @@ fn not_a_scan(path: &Path) -> Option<String> {
         Some(FileFormat::Png) => {
             Some("a PNG picture (a mask?), not a scan: name it to dhct correct to use it".into())
         }
+        Some(FileFormat::OmicronMatrix) if !dhct_sm4_io::matrix::is_data_file(&head) => Some(
+            "an Omicron MATRIX parameter file: it is read with the session's *_mtrx data files"
+                .into(),
+        ),
         Some(_) => None,
     }
 }

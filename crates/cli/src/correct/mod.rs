@@ -171,7 +171,12 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let bar = progress_bar(request.progress);
     let start = Instant::now();
     bar.set_message("reading");
-    let pair = read_pair(request.input, request.retrace, &request.config.geometry)?;
+    let pair = read_pair(
+        request.input,
+        request.retrace,
+        &request.config.geometry,
+        request.config.channel.as_deref(),
+    )?;
     let read_s = start.elapsed().as_secs_f64();
     let corrected = analyse(
         AnalyseRequest {

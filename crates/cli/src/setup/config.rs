@@ -66,6 +66,9 @@ pub struct CorrectConfig {
     pub plane_group: Option<PlaneGroup>,
     /// Colour map of the pictures.
     pub colormap: Option<Colormap>,
+    /// The channel to analyse, by name (case-insensitive; a whole name first, else a part
+    /// of one); default: the topography.
+    pub channel: Option<String>,
     /// Scan geometry replacing the file's (SI units).
     pub geometry: GeometryOverrides,
     /// The pipeline options given, as written: merged key by key onto the lattice's
@@ -146,7 +149,8 @@ impl CorrectConfig {
             mask,
             mask_polygon,
             plane_group,
-            colormap
+            colormap,
+            channel
         );
         if let Some(pipeline) = other.pipeline {
             let mut table = self.pipeline.take().unwrap_or_default();

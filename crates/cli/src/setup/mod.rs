@@ -17,18 +17,21 @@ pub use inputs::{
     CALIBRATE_PITCH_TOLERANCE, PRESET_PITCH_TOLERANCE, Resolved, explain, resolve, with_measured_nn,
 };
 
-/// The scan pair to analyse: the file's topography (trace and retrace when present), or
-/// the first file's trace with the second file's image as retrace.
+/// The scan pair to analyse: the file's channel named `channel` (default: its topography;
+/// trace and retrace when present), or the first file's trace with the second file's image
+/// of the same channel as retrace. An unknown channel name is an error listing the file's
+/// channels.
 pub fn read_pair(
     input: &Path,
     retrace: Option<&Path>,
     overrides: &dhct_sm4_io::GeometryOverrides,
+    channel: Option<&str>,
 ) -> Result<ScanPair> {
     let file = dhct_sm4_io::read_path_with_limits(input, overrides, &crate::read_limits::get())
         .with_context(|| format!("cannot read {}", input.display()))?;
     let pair = file
-        .topography()
-        .with_context(|| format!("{} holds no topography image", input.display()))?
+        .channel_or_topography(channel)
+        .with_context(|| input.display().to_string())?
         .clone();
     let Some(retrace_path) = retrace else {
         return Ok(pair);
@@ -37,8 +40,8 @@ pub fn read_pair(
         dhct_sm4_io::read_path_with_limits(retrace_path, overrides, &crate::read_limits::get())
             .with_context(|| format!("cannot read {}", retrace_path.display()))?;
     let other_pair = other
-        .topography()
-        .with_context(|| format!("{} holds no topography image", retrace_path.display()))?;
+        .channel_or_topography(channel)
+        .with_context(|| retrace_path.display().to_string())?;
     let retrace = other_pair
         .image(ScanPass::Retrace)
         .or_else(|| other_pair.image(ScanPass::Trace))
