@@ -23,7 +23,7 @@ pub struct ColourBar {
 /// Width added on the right for a colour bar, px.
 const COLOUR_BAR_MARGIN: usize = 96;
 
-/// `png` (a `width × height` px picture) as an SVG document of the same pixel size plus a
+/// `png` (a `width × height` px picture, embedded once with SVG 2's `href`) as an SVG document of the same pixel size plus a
 /// colour bar margin; `metres_per_px` (x, y of the embedded picture) adds a scale bar.
 pub fn picture_svg(
     png: &[u8],
@@ -40,12 +40,10 @@ pub fn picture_svg(
         };
     let data = base64::engine::general_purpose::STANDARD.encode(png);
     let mut svg = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" xmlns:xlink=\"http://www.w3.org/1999/xlink\" \
-         width=\"{total_width}\" height=\"{height}\" viewBox=\"0 0 {total_width} {height}\" \
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{total_width}\" height=\"{height}\" viewBox=\"0 0 {total_width} {height}\" \
          font-family=\"sans-serif\"><rect width=\"100%\" height=\"100%\" fill=\"white\"/>\
          <image class=\"picture\" x=\"0\" y=\"0\" width=\"{width}\" height=\"{height}\" \
-         preserveAspectRatio=\"none\" xlink:href=\"data:image/png;base64,{data}\" \
-         href=\"data:image/png;base64,{data}\"/>"
+         preserveAspectRatio=\"none\" href=\"data:image/png;base64,{data}\"/>"
     );
     if let Some([x, _]) = metres_per_px.filter(|[x, y]| x.is_finite() && y.is_finite())
         && x > 0.0
