@@ -215,7 +215,7 @@ fn channel_count(h: &Header, experiment: &str) -> Result<usize, ReadError> {
 
 /// Refuses scan modes other than `REGULAR MAPPING` (line 17).
 fn check_scan_mode(h: &Header) -> Result<(), ReadError> {
-    if h.line(17).to_ascii_uppercase() != "REGULAR MAPPING" {
+    if !h.line(17).eq_ignore_ascii_case("REGULAR MAPPING") {
         return Err(ReadError::unsupported(
             FORMAT,
             format!(
