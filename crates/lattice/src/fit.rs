@@ -96,8 +96,9 @@ pub const MAX_DISC_DOUBLINGS: usize = 40;
 /// Largest RMS deviation of the features used in an indexing disc, as a fraction of the
 /// nearest-neighbour distance: points scattered at random lie within half a lattice
 /// constant of some site of a hexagonal lattice 90 % of the time, but with an RMS deviation
-/// of about a third of it; a lattice's features deviate by a few per cent.
-pub const MAX_RMS_DEVIATION_FRACTION: f64 = 0.2;
+/// of about a third of it; a lattice's features deviate by a few per cent, a raw distorted
+/// image's (the HOPG terrace before correction) by up to about a fifth.
+pub const MAX_RMS_DEVIATION_FRACTION: f64 = 0.25;
 
 /// Gauss–Newton iterations of the final fit.
 pub const MAX_GAUSS_NEWTON_ITERATIONS: usize = 20;
