@@ -56,7 +56,7 @@ fn flat_tiny_missing_and_lattice_free_images_are_clear_errors() {
         "{error}"
     );
     assert!(
-        error.to_string().contains("--nn"),
+        error.to_string().contains("nearest-neighbour distance"),
         "says what to check: {error}"
     );
 
