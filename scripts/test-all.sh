@@ -20,7 +20,8 @@ if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
 py="$venv/bin/python"
-"$py" -m pip install --quiet --disable-pip-version-check maturin numpy pytest pandas dask distributed
+"$py" -m pip install --quiet --disable-pip-version-check maturin numpy pytest pandas dask distributed \
+    createc pyyaml access2thematrix SciFiReaders
 # The dev profile reuses what `cargo test --workspace` just built; --force-reinstall
 # rebuilds the package even when its version did not change.
 MATURIN_PEP517_ARGS="--profile dev" "$py" -m pip install --quiet --disable-pip-version-check \
