@@ -20,10 +20,11 @@ if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
 py="$venv/bin/python"
-# gwyfile, NSFopen and pySPM are the independent readers test_crosscheck_*.py compare with;
-# tifffile reads the corrected TIFFs' pixel size back.
+# The independent readers the test_crosscheck_*.py tests compare with: gwyfile (.gwy),
+# NSFopen (.nid), pySPM (Nanoscope), createc (Createc .dat), access2thematrix (MATRIX),
+# SciFiReaders (WSxM); tifffile reads the corrected TIFFs' pixel size back.
 "$py" -m pip install --quiet --disable-pip-version-check maturin numpy pytest pandas dask distributed \
-    gwyfile NSFopen pySPM tifffile
+    gwyfile NSFopen pySPM tifffile createc pyyaml access2thematrix SciFiReaders
 # The dev profile reuses what `cargo test --workspace` just built; --force-reinstall
 # rebuilds the package even when its version did not change.
 MATURIN_PEP517_ARGS="--profile dev" "$py" -m pip install --quiet --disable-pip-version-check \

@@ -130,8 +130,8 @@ def read(
     fast: Optional[str] = None,
     slow: Optional[str] = None,
 ) -> Scan:
-    """Reads a scan file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF; detected from
-    content).
+    """Reads a scan file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF, Createc DAT,
+    Omicron MATRIX with its parameter file beside it, WSxM; detected from content).
 
     ``channel`` picks a channel by name (case-insensitive, whole name first, then a part
     of it); by default the topography. The geometry options replace what the file says:
