@@ -12,7 +12,7 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
 use crate::DistortionError;
-use dhct_numerics::lm::{LmOptions, fit_residuals};
+use dhct_numerics::lm::{Bounds, LmOptions, fit_residuals_within};
 
 /// Options of the neighbour search; [`NeighbourOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -231,11 +231,12 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
             r[i] = model - g;
         }
     };
-    let fit = fit_residuals(
+    let fit = fit_residuals_within(
         &residuals,
         m,
         &p0,
         &vec![1.0; m],
+        Some(rdf_bounds(ns)),
         &LmOptions {
             max_iterations: 300,
             ..LmOptions::default()
@@ -244,7 +245,7 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
     .ok_or(DistortionError::FitFailed("RDF"))?;
     let p = fit.params;
     let a = p[2 * ns] * a0;
-    if !(a > 0.5 * a0 && a < 1.5 * a0) {
+    if !(a > 0.5 * a0 && a < 1.5 * a0) || p[..ns].iter().all(|amp| *amp <= 0.0) {
         return Err(DistortionError::FitFailed("RDF"));
     }
     let widths_m: Vec<f64> = (0..ns).map(|k| p[ns + k].abs() * a0).collect();
@@ -258,6 +259,20 @@ pub fn fit_rdf(rdf: &Rdf, shells_m: &[f64]) -> Result<RdfFit, DistortionError> {
             .collect(),
         widths_m,
     })
+}
+
+/// Where the RDF fit may look (units of the nominal NN distance): peaks of non-negative
+/// height, widths between 0.1 % and 30 % of the NN distance, the NN distance itself within
+/// the ±50 % that [`fit_rdf`] accepts. Without them a shell can run off to a huge width or
+/// a negative height and drag the fit to nonsense.
+fn rdf_bounds(ns: usize) -> Bounds {
+    let mut lower = vec![0.0; ns];
+    lower.extend(std::iter::repeat_n(1e-3, ns));
+    lower.push(0.5);
+    let mut upper = vec![f64::INFINITY; ns];
+    upper.extend(std::iter::repeat_n(0.3, ns));
+    upper.push(1.5);
+    Bounds { lower, upper }
 }
 
 /// The distinct nearest-neighbour distances of `lattice` (metres), ascending

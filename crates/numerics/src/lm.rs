@@ -219,10 +219,37 @@ pub fn forward_difference<R: Residuals + ?Sized>(
     DMatrix::from_fn(m, n, |i, j| columns[j][i])
 }
 
-/// `Σ wᵢ rᵢ²` of `m` residuals with weights `w` as an [`LmProblem`].
+/// Box bounds on the parameters: `lower[k] ≤ p[k] ≤ upper[k]` (use ±∞ for a free side).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bounds {
+    /// Lower bound of each parameter.
+    pub lower: Vec<f64>,
+    /// Upper bound of each parameter.
+    pub upper: Vec<f64>,
+}
+
+impl Bounds {
+    /// Clamps `p` into the box; `false` when `p` has the wrong length or a NaN.
+    pub fn clamp(&self, p: &mut [f64]) -> bool {
+        if p.len() != self.lower.len() || p.len() != self.upper.len() {
+            return false;
+        }
+        for ((v, lo), hi) in p.iter_mut().zip(&self.lower).zip(&self.upper) {
+            if v.is_nan() {
+                return false;
+            }
+            *v = v.max(*lo).min(*hi);
+        }
+        true
+    }
+}
+
+/// `Σ wᵢ rᵢ²` of `m` residuals with weights `w` as an [`LmProblem`], optionally inside
+/// box [`Bounds`].
 pub struct ResidualProblem<'a, R: Residuals + ?Sized> {
     residuals: &'a R,
     weights: Vec<f64>,
+    bounds: Option<Bounds>,
     /// The residuals at `at` (the last point evaluated).
     r: Vec<f64>,
     at: Vec<f64>,
@@ -235,9 +262,16 @@ impl<'a, R: Residuals + ?Sized> ResidualProblem<'a, R> {
         ResidualProblem {
             residuals,
             weights,
+            bounds: None,
             r: vec![f64::NAN; m],
             at: Vec::new(),
         }
+    }
+
+    /// Keeps every trial point inside `bounds` (projection after each step).
+    pub fn with_bounds(mut self, bounds: Bounds) -> Self {
+        self.bounds = Some(bounds);
+        self
     }
 
     /// The (unweighted) residuals at `p`.
@@ -273,6 +307,10 @@ impl<R: Residuals + ?Sized> LmProblem for ResidualProblem<'_, R> {
         let jacobian = self.jacobian_at(p);
         weighted_normal_equations(&jacobian, &self.r, &self.weights)
     }
+
+    fn project(&self, p: &mut [f64]) -> bool {
+        self.bounds.as_ref().is_none_or(|b| b.clamp(p))
+    }
 }
 
 /// What [`fit_residuals`] found.
@@ -298,7 +336,20 @@ pub fn fit_residuals<R: Residuals + ?Sized>(
     weights: &[f64],
     options: &LmOptions,
 ) -> Option<ResidualFit> {
+    fit_residuals_within(residuals, m, p0, weights, None, options)
+}
+
+/// [`fit_residuals`] with the parameters kept inside `bounds` (when given).
+pub fn fit_residuals_within<R: Residuals + ?Sized>(
+    residuals: &R,
+    m: usize,
+    p0: &[f64],
+    weights: &[f64],
+    bounds: Option<Bounds>,
+    options: &LmOptions,
+) -> Option<ResidualFit> {
     let mut problem = ResidualProblem::new(residuals, m, weights.to_vec());
+    problem.bounds = bounds;
     let fit = minimise(&mut problem, p0, options)?;
     let r = problem.residuals_at(&fit.params).to_vec();
     Some(ResidualFit {
@@ -373,6 +424,30 @@ mod tests {
     fn a_bound_holds_the_fit_at_the_boundary() {
         let fit = minimise(&mut Bounded, &[0.0], &LmOptions::default()).unwrap();
         assert!((fit.params[0] - 2.0).abs() < 1e-12, "{:?}", fit.params);
+    }
+
+    #[test]
+    fn residual_bounds_hold_and_a_free_side_stays_free() {
+        // Unbounded minimum at (3, −4); the box caps the first at 2, the second is free.
+        let residuals = |p: &[f64], r: &mut [f64]| {
+            r[0] = p[0] - 3.0;
+            r[1] = p[1] + 4.0;
+        };
+        let bounds = Bounds {
+            lower: vec![f64::NEG_INFINITY; 2],
+            upper: vec![2.0, f64::INFINITY],
+        };
+        let fit = fit_residuals_within(
+            &residuals,
+            2,
+            &[0.0, 0.0],
+            &[1.0, 1.0],
+            Some(bounds),
+            &LmOptions::default(),
+        )
+        .unwrap();
+        assert!((fit.params[0] - 2.0).abs() < 1e-12, "{:?}", fit.params);
+        assert!((fit.params[1] + 4.0).abs() < 1e-9, "{:?}", fit.params);
     }
 
     #[test]
