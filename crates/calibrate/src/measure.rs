@@ -47,6 +47,10 @@ impl LatticeShape {
     }
 }
 
+/// How far (degrees) from 60° a centred-rectangular cell is still described as a
+/// stretched hexagonal one.
+const NEAR_HEXAGONAL_DEG: f64 = 10.0;
+
 /// One spectral peak indexed by the measured lattice.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Reflection {
@@ -84,11 +88,19 @@ pub struct ImageLattice {
 
 impl ImageLattice {
     /// "a hexagonal lattice with cell vectors 2.470 Å and 2.466 Å at 60.1° (± 0.2°) in
-    /// file units".
+    /// file units". A centred-rectangular cell within 10° of 60° is named for what it most
+    /// likely is, a hexagonal lattice that the scan (or a wrong pixel size) has stretched.
     pub fn describe(&self) -> String {
+        let shape = if self.shape == LatticeShape::CentredRectangular
+            && (self.angle_deg - 60.0).abs() <= NEAR_HEXAGONAL_DEG
+        {
+            "a stretched hexagonal (centred-rectangular)"
+        } else {
+            self.shape.describe()
+        };
         format!(
             "{} lattice with cell vectors {} ± {} and {} ± {} at {:.1}° ± {:.1}° in file units",
-            self.shape.describe(),
+            shape,
             length(self.lengths_m[0]),
             length(self.lengths_sigma_m[0]),
             length(self.lengths_m[1]),
@@ -350,4 +362,41 @@ pub fn conventional(reduced: Matrix2<f64>) -> Matrix2<f64> {
         v = -v;
     }
     Matrix2::from_columns(&[u, v])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lattice(lengths_m: [f64; 2], angle_deg: f64) -> ImageLattice {
+        ImageLattice {
+            vectors_m: [[lengths_m[0], 0.0], [0.0, lengths_m[1]]],
+            lengths_m,
+            lengths_sigma_m: [1e-12; 2],
+            angle_deg,
+            angle_sigma_deg: 0.3,
+            shape: LatticeShape::of(lengths_m, angle_deg),
+            reflections: Vec::new(),
+            indexed_power_fraction: 1.0,
+            peaks: 6,
+        }
+    }
+
+    #[test]
+    fn a_stretched_hexagonal_lattice_is_named_as_one() {
+        let stretched = lattice([5.09e-10, 5.18e-10], 64.2);
+        assert_eq!(stretched.shape, LatticeShape::CentredRectangular);
+        assert!(
+            stretched.describe().starts_with("a stretched hexagonal"),
+            "{}",
+            stretched.describe()
+        );
+        let centred = lattice([5.0e-10, 5.0e-10], 75.0);
+        assert!(centred.describe().starts_with("a centred-rectangular"));
+        assert!(
+            lattice([2.46e-10, 2.46e-10], 60.5)
+                .describe()
+                .starts_with("a hexagonal")
+        );
+    }
 }

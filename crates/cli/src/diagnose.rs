@@ -8,14 +8,16 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, GapLocation,
-    ValidationOptions, VerdictKind, diagnose, validate,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, GapLocation, PassImage,
+    ValidationOptions, VerdictKind, diagnose, sub_feature_view, validate,
 };
 use dhct_distortion::PassInput;
-use dhct_features::{Feature, find_features_in_pair};
+use dhct_features::{
+    Feature, FeatureOptions, FeatureSet, find_features_in_pair, unlevelled_fitted_image,
+};
 use dhct_lattice::Lattice;
 use dhct_pipeline::PipelineOptions;
-use dhct_scan::ScanGeometry;
+use dhct_scan::{ScanGeometry, ScanPair};
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
@@ -38,6 +40,62 @@ pub fn write_stdout(text: &str) -> Result<()> {
             Err(e).context("writing to standard output")
         }
         _ => Ok(()),
+    }
+}
+
+/// The diagnosis of a `dhct correct` run: on its features, options and mask, with the
+/// image view below one feature (what `correct --diagnose` writes as diagnosis.json).
+pub fn diagnosis_of(corrected: &crate::correct::Corrected) -> Result<DiagnosisReport> {
+    let passes = &corrected.analysis.passes;
+    let sets: Vec<&[Feature]> = passes
+        .iter()
+        .map(|p| p.features.features.as_slice())
+        .collect();
+    let report = diagnose_features(
+        &sets,
+        corrected.pair.geometry(),
+        corrected.lattice.as_ref(),
+        corrected.mask.as_ref(),
+        &corrected.options,
+    )?;
+    let feature_sets: Vec<&FeatureSet> = passes.iter().map(|p| &p.features).collect();
+    Ok(with_sub_feature_view(
+        report,
+        &corrected.pair,
+        &feature_sets,
+        &corrected.options.features,
+        corrected.mask.as_ref(),
+    ))
+}
+
+/// Adds the image view below one feature (slice displacements) to `report`; `sets` are the
+/// features found in the pair's images with `options`.
+pub fn with_sub_feature_view(
+    report: DiagnosisReport,
+    pair: &ScanPair,
+    sets: &[&FeatureSet],
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> DiagnosisReport {
+    let geometry = pair.geometry();
+    let images: Vec<(&FeatureSet, Array2<f64>)> = sets
+        .iter()
+        .filter_map(|set| {
+            let raw = &pair.image(set.pass)?.z;
+            Some((*set, unlevelled_fitted_image(raw, options, mask).ok()?))
+        })
+        .collect();
+    let passes: Vec<PassImage> = images
+        .iter()
+        .map(|(set, image)| PassImage {
+            pass: set.pass,
+            image: image.view(),
+            features: &set.features,
+        })
+        .collect();
+    match sub_feature_view(&passes, geometry) {
+        Some(view) => report.with_sub_feature_view(view),
+        None => report,
     }
 }
 
@@ -262,6 +320,10 @@ fn verdict_html(html: &mut Html, report: &DiagnosisReport) {
         .text(" ")
         .text(&v.summary)
         .close("p");
+    if let Some(view) = report.sub_feature.as_ref().filter(|v| !v.vibration_found) {
+        // A vibration found is already in the verdict's words.
+        html.element("p", &format!("Image view: {}.", view.describe()));
+    }
     if !v.remaining.is_empty() {
         let rows: Vec<Vec<String>> = v
             .remaining
@@ -460,6 +522,8 @@ pub fn run_file(
     let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
     let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
     let report = diagnose_features(&refs, &geometry, lattice.as_ref(), mask.as_ref(), &options)?;
+    let set_refs: Vec<&FeatureSet> = sets.iter().collect();
+    let report = with_sub_feature_view(report, &pair, &set_refs, &options.features, mask.as_ref());
     write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
     let (section, figures) = diagnosis_section(&report, &geometry);
     write_figure_files(output, &figures)?;

@@ -373,6 +373,7 @@ pub fn diagnose(
         added,
         final_model: final_summary,
         final_location,
+        sub_feature: None,
         noise,
         residuals,
     })

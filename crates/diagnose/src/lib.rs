@@ -70,6 +70,7 @@ mod noise;
 mod report;
 mod select;
 mod spectrum;
+mod sub_feature;
 pub mod synth;
 mod terms;
 mod validate;
@@ -88,6 +89,9 @@ pub use report::{
 };
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
+pub use sub_feature::{
+    PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView, sub_feature_view,
+};
 pub use validate::{
     CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,
     validate,

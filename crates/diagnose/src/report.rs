@@ -164,6 +164,10 @@ pub struct DiagnosisReport {
     pub final_location: Option<GapLocation>,
     /// Per-feature residuals.
     pub residuals: Vec<FeatureResidual>,
+    /// The image view below one feature (slice displacements), when the images were
+    /// given ([`DiagnosisReport::with_sub_feature_view`]).
+    #[serde(default)]
+    pub sub_feature: Option<crate::SubFeatureView>,
 }
 
 impl DiagnosisReport {
@@ -195,6 +199,9 @@ impl fmt::Display for DiagnosisReport {
             self.verdict.name(),
             self.verdict_details.summary
         )?;
+        if let Some(view) = &self.sub_feature {
+            writeln!(f, "{}", view.describe())?;
+        }
         writeln!(
             f,
             "features: {} in, {} used, {} not indexed, {} outliers",

@@ -32,8 +32,8 @@ pub struct SpectralPeak {
 
 /// Frequency grid: from 2/T to half the inverse median spacing of consecutive times,
 /// oversampled ×2, at most 12 000 points.
-fn grid(observations: &[Observation]) -> Option<(f64, f64, usize)> {
-    let mut t: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
+fn grid(times_s: &[f64]) -> Option<(f64, f64, usize)> {
+    let mut t: Vec<f64> = times_s.to_vec();
     t.sort_by(f64::total_cmp);
     let span = t.last()? - t.first()?;
     if span <= 0.0 || t.len() < 8 {
@@ -58,12 +58,18 @@ fn grid(observations: &[Observation]) -> Option<(f64, f64, usize)> {
 
 /// Power at every grid frequency; `weighted` = `[x0, y0, x1, y1, …]`.
 pub(crate) fn periodogram(observations: &[Observation], weighted: &[f64]) -> Vec<(f64, f64)> {
-    let Some((f0, df, count)) = grid(observations) else {
+    let times: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
+    periodogram_at(&times, weighted)
+}
+
+/// [`periodogram`] of samples taken at `times_s` (seconds since frame start).
+pub(crate) fn periodogram_at(times_s: &[f64], weighted: &[f64]) -> Vec<(f64, f64)> {
+    let Some((f0, df, count)) = grid(times_s) else {
         return Vec::new();
     };
-    let n = observations.len() as f64;
+    let n = times_s.len() as f64;
     let mean = |axis: usize| {
-        (0..observations.len())
+        (0..times_s.len())
             .map(|i| weighted[2 * i + axis])
             .sum::<f64>()
             / n
@@ -71,10 +77,10 @@ pub(crate) fn periodogram(observations: &[Observation], weighted: &[f64]) -> Vec
     let (mx, my) = (mean(0), mean(1));
     // Σ r cos θ, Σ r sin θ per axis and Σ cos 2θ, Σ sin 2θ, by phasor recurrence.
     let mut acc = vec![[0.0f64; 6]; count];
-    for (i, o) in observations.iter().enumerate() {
+    for (i, &t) in times_s.iter().enumerate() {
         let (rx, ry) = (weighted[2 * i] - mx, weighted[2 * i + 1] - my);
-        let theta0 = std::f64::consts::TAU * f0 * o.time_s;
-        let dtheta = std::f64::consts::TAU * df * o.time_s;
+        let theta0 = std::f64::consts::TAU * f0 * t;
+        let dtheta = std::f64::consts::TAU * df * t;
         let (mut s, mut c) = theta0.sin_cos();
         let (ds, dc) = dtheta.sin_cos();
         for (k, a) in acc.iter_mut().enumerate() {
@@ -114,7 +120,8 @@ pub(crate) fn periodogram(observations: &[Observation], weighted: &[f64]) -> Vec
         .collect()
 }
 
-fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
+/// Indices of the `count` highest local maxima of `p` (frequency, power), highest first.
+pub(crate) fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..p.len())
         .filter(|&k| (k == 0 || p[k].1 >= p[k - 1].1) && (k + 1 == p.len() || p[k].1 >= p[k + 1].1))
         .collect();

@@ -61,5 +61,6 @@ pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{
     correct_lines, correct_lines_in_place, remove_background, subtract_polynomial,
+    unlevelled_fitted_image,
 };
 pub use watershed::{Region, watershed_regions};

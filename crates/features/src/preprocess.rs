@@ -7,7 +7,7 @@ use dhct_scan::Axis;
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
 
-use crate::{Background, FeatureError, LineCorrection};
+use crate::{Background, FeatureError, FeatureOptions, LineCorrection, Polarity};
 
 /// Subtracts a least-squares polynomial surface of total order `order` (1 = plane), fitted
 /// to the finite pixels where `mask` is true (all finite pixels without a mask).
@@ -173,6 +173,23 @@ pub fn remove_background(
         Background::Plane => subtract_polynomial(z, 1, mask),
         Background::Polynomial(order) => subtract_polynomial(z, order, mask),
     }
+}
+
+/// The image the feature fits see, without the line correction: background removed and,
+/// for dark features, negated (so every feature is a positive Gaussian on its local level).
+/// A line's own level stays in: the slices of `dhct-diagnose` read a line's displacement
+/// from it, and levelling each line by its median would mix the features' displacements
+/// into the level.
+pub fn unlevelled_fitted_image(
+    z: &Array2<f64>,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> Result<Array2<f64>, FeatureError> {
+    let mut signed = remove_background(z, options.background, mask)?;
+    if options.polarity == Polarity::Dark {
+        signed.mapv_inplace(|v| -v);
+    }
+    Ok(signed)
 }
 
 #[cfg(test)]

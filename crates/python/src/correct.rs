@@ -357,21 +357,7 @@ impl Correction {
     /// writes as diagnosis.json), as JSON text.
     fn diagnose_json(&self, py: Python<'_>) -> PyResult<String> {
         let c = &self.inner;
-        let report = py.detach(|| {
-            let sets: Vec<&[dhct_features::Feature]> = c
-                .analysis
-                .passes
-                .iter()
-                .map(|p| p.features.features.as_slice())
-                .collect();
-            dhct_cli::diagnose::diagnose_features(
-                &sets,
-                c.pair.geometry(),
-                c.lattice.as_ref(),
-                c.mask.as_ref(),
-                &c.options,
-            )
-        });
+        let report = py.detach(|| dhct_cli::diagnose::diagnosis_of(c));
         report
             .map(|r| r.to_json())
             .map_err(|e| to_py::<AnalysisError>(&e))

@@ -302,19 +302,7 @@ fn write_resolved_config(dir: &Path, corrected: &Corrected, colormap: Colormap) 
 /// section.
 fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<crate::report::page::Html> {
     let geometry = corrected.pair.geometry();
-    let sets: Vec<&[dhct_features::Feature]> = corrected
-        .analysis
-        .passes
-        .iter()
-        .map(|p| p.features.features.as_slice())
-        .collect();
-    let diagnosis = crate::diagnose::diagnose_features(
-        &sets,
-        geometry,
-        corrected.lattice.as_ref(),
-        corrected.mask.as_ref(),
-        &corrected.options,
-    )?;
+    let diagnosis = crate::diagnose::diagnosis_of(corrected)?;
     write_bytes(&dir.join("diagnosis.json"), diagnosis.to_json().as_bytes())?;
     let (section, diagnosis_figures) = crate::diagnose::diagnosis_section(&diagnosis, geometry);
     write_figure_files(dir, &diagnosis_figures)?;
