@@ -250,7 +250,24 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
         SweepSize::Full => 512,
     };
     let base = base(pixels);
-    let case = |axis, level: String, input, expect| Case {
+    let mut cases = vec![case(
+        "baseline",
+        format!("{pixels}² graphite, 2 pm noise"),
+        simulated(base.clone()),
+        Expect::Analysis,
+    )];
+    cases.extend(noise_cases(size, &base));
+    cases.extend(drift_cases(size, &base));
+    cases.extend(lattice_cases(pixels, &base));
+    cases.extend(size_cases(size, &base));
+    cases.extend(pass_and_mask_cases(&base));
+    cases.extend(no_lattice_cases(&base));
+    cases
+}
+
+/// A case on `axis` at `level` with the simulated lattice, no mask and line levelling.
+fn case(axis: &'static str, level: String, input: Input, expect: Expect) -> Case {
+    Case {
         axis,
         level,
         input,
@@ -258,18 +275,16 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
         mask: MaskKind::None,
         expect,
         no_line_levelling: false,
-    };
-    let mut cases = vec![case(
-        "baseline",
-        format!("{pixels}² graphite, 2 pm noise"),
-        simulated(base.clone()),
-        Expect::Analysis,
-    )];
-    // Noise: the feature height is 40 pm.
+    }
+}
+
+/// White noise of increasing rms (the feature height is 40 pm).
+fn noise_cases(size: SweepSize, base: &SimulationConfig) -> Vec<Case> {
     let noise_pm: &[f64] = match size {
         SweepSize::Quick => &[5.0, 10.0, 20.0, 40.0],
         SweepSize::Full => &[5.0, 10.0, 15.0, 20.0, 30.0, 40.0, 80.0],
     };
+    let mut cases = Vec::new();
     for &pm in noise_pm {
         let expect = if pm <= 10.0 {
             Expect::Analysis
@@ -283,13 +298,18 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
             expect,
         ));
     }
-    // Drift against the slow scan as a fraction of the slow-scan speed (the slow scale
-    // changes by that fraction; the paper's Fig. 3 shows 20 %).
+    cases
+}
+
+/// Drift against the slow scan as a fraction of the slow-scan speed (the slow scale
+/// changes by that fraction; the paper's Fig. 3 shows 20 %).
+fn drift_cases(size: SweepSize, base: &SimulationConfig) -> Vec<Case> {
     let fractions: &[f64] = match size {
         SweepSize::Quick => &[0.0, 0.1, 0.2, 0.3, 0.5],
         SweepSize::Full => &[0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5],
     };
-    let slow = slow_speed_m_per_s(&base);
+    let slow = slow_speed_m_per_s(base);
+    let mut cases = Vec::new();
     for &fraction in fractions {
         // Up to 40 % a first model (from the k nearest raw neighbours when the NN window
         // selects too few) and the neighbours found again in the corrected frame recover
@@ -311,6 +331,13 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
             expect,
         ));
     }
+    cases
+}
+
+/// Other lattice types at the same pitch (`pixels`² unless the cell needs more), and two
+/// without line levelling.
+fn lattice_cases(pixels: usize, base: &SimulationConfig) -> Vec<Case> {
+    let mut cases = Vec::new();
     // Lattice type, at the same pitch; the SAM cell is large, so its image is larger.
     // Graphene with the default median line levelling is measured, not required: the
     // levelling shifts its features by ~0.9 px rms along y and the lattice fit then fails
@@ -368,23 +395,35 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
             )
         });
     }
-    // Image size.
+    cases
+}
+
+/// Image sizes at the same pitch (and line and frame times).
+fn size_cases(size: SweepSize, base: &SimulationConfig) -> Vec<Case> {
     let sizes: &[usize] = match size {
         SweepSize::Quick => &[96, 128, 512],
         SweepSize::Full => &[96, 128, 256, 1024, 2048],
     };
-    for &n in sizes {
-        cases.push(case(
-            "size",
-            format!("{n}²"),
-            simulated(with_size(base.clone(), n)),
-            if n >= 128 {
-                Expect::Analysis
-            } else {
-                Expect::Either
-            },
-        ));
-    }
+    sizes
+        .iter()
+        .map(|&n| {
+            case(
+                "size",
+                format!("{n}²"),
+                simulated(with_size(base.clone(), n)),
+                if n >= 128 {
+                    Expect::Analysis
+                } else {
+                    Expect::Either
+                },
+            )
+        })
+        .collect()
+}
+
+/// One pass missing, and masks with holes, two regions or too little left.
+fn pass_and_mask_cases(base: &SimulationConfig) -> Vec<Case> {
+    let mut cases = Vec::new();
     // Missing passes.
     for (level, trace, retrace) in [("trace only", true, false), ("retrace only", false, true)] {
         cases.push(case(
@@ -410,43 +449,48 @@ pub fn cases(size: SweepSize) -> Vec<Case> {
             ..case("mask", level.into(), simulated(base.clone()), expect)
         });
     }
-    // No lattice, or the wrong one.
-    cases.push(case(
-        "no lattice",
-        "pure noise".into(),
-        Input::PureNoise {
-            config: base.clone(),
-            sigma_m: 20e-12,
-        },
-        Expect::Error,
-    ));
-    cases.push(case(
-        "no lattice",
-        "flat".into(),
-        Input::Flat {
-            config: base.clone(),
-        },
-        Expect::Error,
-    ));
-    cases.push(Case {
-        analyse_as: Some(LatticeConfig::Square { a_m: 5e-10 }),
-        ..case(
-            "no lattice",
-            "graphite analysed as square 5 Å".into(),
-            simulated(base.clone()),
-            Expect::Either,
-        )
-    });
-    cases.push(case(
-        "bad pixels",
-        "bottom 10 % of rows NaN".into(),
-        Input::NanRows {
-            config: base.clone(),
-            fraction: 0.1,
-        },
-        Expect::Either,
-    ));
     cases
+}
+
+/// No lattice (noise, a flat image), the wrong lattice, and rows of missing data.
+fn no_lattice_cases(base: &SimulationConfig) -> Vec<Case> {
+    vec![
+        case(
+            "no lattice",
+            "pure noise".into(),
+            Input::PureNoise {
+                config: base.clone(),
+                sigma_m: 20e-12,
+            },
+            Expect::Error,
+        ),
+        case(
+            "no lattice",
+            "flat".into(),
+            Input::Flat {
+                config: base.clone(),
+            },
+            Expect::Error,
+        ),
+        Case {
+            analyse_as: Some(LatticeConfig::Square { a_m: 5e-10 }),
+            ..case(
+                "no lattice",
+                "graphite analysed as square 5 Å".into(),
+                simulated(base.clone()),
+                Expect::Either,
+            )
+        },
+        case(
+            "bad pixels",
+            "bottom 10 % of rows NaN".into(),
+            Input::NanRows {
+                config: base.clone(),
+                fraction: 0.1,
+            },
+            Expect::Either,
+        ),
+    ]
 }
 
 /// Gaussian white noise from a fixed seed (xorshift64* and Box–Muller; no dependency).

@@ -244,169 +244,163 @@ fn log_grid(lo: f64, hi: f64, count: usize) -> Vec<f64> {
 
 /// Every proposal of `candidate` on top of the current model (empty if not applicable).
 pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
-    let g = ctx.geometry;
     let t_max = frame_end(ctx);
-    let sim = |c: EffectConfig| sim_term(&c);
-    let mut out = Vec::new();
-    let mut push = |p: Option<Proposal>| {
-        if let Some(p) = p {
-            out.push(p);
-        }
+    // A new term from the simulator's effect `config`, every parameter screened from zero.
+    let fresh = |config: EffectConfig, mask: Vec<bool>| {
+        sim_term(&config).and_then(|e| zero_term_proposal(candidate, ctx, e, mask))
     };
-    match candidate {
-        Candidate::LineDrift => {
-            if let Some(e) = sim(EffectConfig::LineDrift(LineDrift {
+    let found: Vec<Option<Proposal>> = match candidate {
+        Candidate::LineDrift => vec![fresh(
+            EffectConfig::LineDrift(LineDrift {
                 velocity_m_per_s: [0.0, 0.0],
-            })) {
-                push(term_proposal(
-                    candidate,
-                    String::new(),
-                    ctx,
-                    Term::all_free(e, candidate.name()),
-                    vec![true, true],
-                    None,
-                    0,
-                ));
-            }
-        }
-        Candidate::ExponentialCreep | Candidate::SecondCreep => {
-            for (time_constant, start) in onset_grid(candidate, ctx) {
-                push(onset_proposal(candidate, time_constant, start, ctx));
-            }
-        }
-        Candidate::AsymmetricHysteresis => {
-            let found = ctx
-                .model
-                .terms
-                .iter()
-                .position(|t| t.effect.name() == "fast-hysteresis");
-            if let Some(k) = found
-                && let Some(EffectConfig::FastHysteresis(h)) = ctx.model.terms[k].effect.config()
-                && let Some(e) = sim(EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis {
-                    trace: h.law.clone(),
-                    retrace: h.law.clone(),
-                }))
-            {
-                let n = h.law.parameter_count();
-                let mut mask = vec![false; n];
-                mask.extend(vec![true; n]);
-                push(term_proposal(
-                    candidate,
-                    String::new(),
-                    ctx,
-                    Term::all_free(e, candidate.name()),
-                    mask,
-                    Some(k),
-                    0,
-                ));
-            }
-        }
-        Candidate::SlowHysteresis => {
-            for tau in log_grid(2.0 * g.line_period(), 0.3 * t_max, 16) {
-                if let Some(e) = sim(EffectConfig::SlowHysteresis(SlowScanHysteresis {
-                    law: HysteresisLaw::Exponential {
-                        amplitude: 0.0,
-                        time_constant_s: tau,
-                    },
-                })) {
-                    push(term_proposal(
-                        candidate,
-                        format!("τ = {tau:.3} s"),
-                        ctx,
-                        Term::all_free(e, candidate.name()),
-                        vec![true, false],
-                        None,
-                        1,
-                    ));
-                }
-            }
-        }
+            }),
+            vec![true, true],
+        )],
+        Candidate::ExponentialCreep | Candidate::SecondCreep => onset_grid(candidate, ctx)
+            .into_iter()
+            .map(|(time_constant, start)| onset_proposal(candidate, time_constant, start, ctx))
+            .collect(),
+        Candidate::AsymmetricHysteresis => vec![asymmetric_hysteresis_proposal(ctx)],
+        Candidate::SlowHysteresis => slow_hysteresis_proposals(ctx, t_max),
         Candidate::Vibration => {
             let (peaks, searched) =
                 periodogram_peaks(ctx.observations, ctx.residuals, 5, MIN_VIBRATION_CYCLES);
-            for f in peaks {
-                push(vibration_proposal(ctx, f, searched));
-            }
+            peaks
+                .into_iter()
+                .map(|f| vibration_proposal(ctx, f, searched))
+                .collect()
         }
-        Candidate::TipChange => {
-            // Every half-line start, then refined to the feature times around the best.
-            let step = g.line_period();
-            let mut t = step;
-            while t < t_max {
-                push(tip_proposal(ctx, t));
-                t += step;
-            }
-        }
-        Candidate::HeightCoupling => {
-            let spread = ctx
-                .observations
-                .iter()
-                .map(|o| o.terrace_height_m)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
-                    (lo.min(z), hi.max(z))
-                });
-            if spread.1 - spread.0 > 0.0
-                && let Some(e) = sim(EffectConfig::HeightCoupling(HeightCoupling {
-                    lateral_per_height: [0.0, 0.0],
-                }))
-            {
-                push(term_proposal(
-                    candidate,
-                    String::new(),
-                    ctx,
-                    Term::all_free(e, candidate.name()),
-                    vec![true, true],
-                    None,
-                    0,
-                ));
-            }
-        }
-        Candidate::ScanCoupling => {
-            if let Some(e) = sim(EffectConfig::ScanCoupling(ScanCoupling {
+        Candidate::TipChange => tip_change_proposals(ctx, t_max),
+        Candidate::HeightCoupling => vec![height_coupling_proposal(ctx)],
+        Candidate::ScanCoupling => vec![fresh(
+            EffectConfig::ScanCoupling(ScanCoupling {
                 slow_to_fast: 0.0,
                 fast_to_slow: 0.0,
-            })) {
-                push(term_proposal(
-                    candidate,
-                    String::new(),
-                    ctx,
-                    Term::all_free(e, candidate.name()),
-                    vec![true, true],
-                    None,
-                    0,
-                ));
-            }
-        }
+            }),
+            vec![true, true],
+        )],
         Candidate::HigherOrderDrift => {
             let e = Box::new(CubicDrift {
                 jerk_m_per_s3: [0.0, 0.0],
             });
-            push(term_proposal(
-                candidate,
-                String::new(),
-                ctx,
-                Term::all_free(e, candidate.name()),
-                vec![true, true],
-                None,
-                0,
-            ));
+            vec![zero_term_proposal(candidate, ctx, e, vec![true, true])]
         }
         Candidate::LocalStrain => {
             let e = Box::new(QuadraticField {
                 coefficients_m: [0.0; 6],
             });
-            push(term_proposal(
+            vec![zero_term_proposal(candidate, ctx, e, vec![true; 6])]
+        }
+    };
+    found.into_iter().flatten().collect()
+}
+
+/// A proposal appending the term `effect` (parameters at zero), screening the parameters in
+/// `mask`, with no shape searched.
+fn zero_term_proposal(
+    candidate: Candidate,
+    ctx: &Context,
+    effect: Box<dyn ModelTerm>,
+    mask: Vec<bool>,
+) -> Option<Proposal> {
+    term_proposal(
+        candidate,
+        String::new(),
+        ctx,
+        Term::all_free(effect, candidate.name()),
+        mask,
+        None,
+        0,
+    )
+}
+
+/// Trace and retrace each with their own copy of the current fast-scan hysteresis law
+/// (replacing it; the retrace's parameters screened), if the model has one.
+fn asymmetric_hysteresis_proposal(ctx: &Context) -> Option<Proposal> {
+    let candidate = Candidate::AsymmetricHysteresis;
+    let k = ctx
+        .model
+        .terms
+        .iter()
+        .position(|t| t.effect.name() == "fast-hysteresis")?;
+    let Some(EffectConfig::FastHysteresis(h)) = ctx.model.terms[k].effect.config() else {
+        return None;
+    };
+    let e = sim_term(&EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis {
+        trace: h.law.clone(),
+        retrace: h.law.clone(),
+    }))?;
+    let n = h.law.parameter_count();
+    let mut mask = vec![false; n];
+    mask.extend(vec![true; n]);
+    term_proposal(
+        candidate,
+        String::new(),
+        ctx,
+        Term::all_free(e, candidate.name()),
+        mask,
+        Some(k),
+        0,
+    )
+}
+
+/// Slow-scan hysteresis with an exponential law, one proposal per time constant of a log
+/// grid from two line periods to 0.3 × `t_max` (s); the amplitude is screened.
+fn slow_hysteresis_proposals(ctx: &Context, t_max: f64) -> Vec<Option<Proposal>> {
+    let candidate = Candidate::SlowHysteresis;
+    log_grid(2.0 * ctx.geometry.line_period(), 0.3 * t_max, 16)
+        .into_iter()
+        .map(|tau| {
+            let e = sim_term(&EffectConfig::SlowHysteresis(SlowScanHysteresis {
+                law: HysteresisLaw::Exponential {
+                    amplitude: 0.0,
+                    time_constant_s: tau,
+                },
+            }))?;
+            term_proposal(
                 candidate,
-                String::new(),
+                format!("τ = {tau:.3} s"),
                 ctx,
                 Term::all_free(e, candidate.name()),
-                vec![true; 6],
+                vec![true, false],
                 None,
-                0,
-            ));
-        }
+                1,
+            )
+        })
+        .collect()
+}
+
+/// A tip change at every line start up to `t_max` (s); the round refines the best to
+/// the feature times around it.
+fn tip_change_proposals(ctx: &Context, t_max: f64) -> Vec<Option<Proposal>> {
+    // Every half-line start, then refined to the feature times around the best.
+    let step = ctx.geometry.line_period();
+    let mut out = Vec::new();
+    let mut t = step;
+    while t < t_max {
+        out.push(tip_proposal(ctx, t));
+        t += step;
     }
     out
+}
+
+/// Lateral shift proportional to the terrace height, if the terrace height varies.
+fn height_coupling_proposal(ctx: &Context) -> Option<Proposal> {
+    let spread = ctx
+        .observations
+        .iter()
+        .map(|o| o.terrace_height_m)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
+            (lo.min(z), hi.max(z))
+        });
+    if spread.1 - spread.0 > 0.0 {
+        let e = sim_term(&EffectConfig::HeightCoupling(HeightCoupling {
+            lateral_per_height: [0.0, 0.0],
+        }))?;
+        zero_term_proposal(Candidate::HeightCoupling, ctx, e, vec![true, true])
+    } else {
+        None
+    }
 }
 
 /// The range the base creep's `t0` is profiled over ([`crate::fit::fit_profiled`]): from one

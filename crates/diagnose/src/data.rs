@@ -10,8 +10,9 @@
 
 use dhct_distortion::{DhctOptions, DistortionModel, PassInput, analyse, correct_features};
 use dhct_features::Feature;
-use dhct_lattice::{Lattice, LatticeFit, LatticeFitOptions, fit_lattice};
+use dhct_lattice::{IndexedPoint, Lattice, LatticeFit, LatticeFitOptions, fit_lattice};
 use dhct_scan::{ScanGeometry, ScanPass};
+use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
@@ -118,6 +119,46 @@ pub(crate) fn predict_controller(
     [u[0] * px, u[1] * py]
 }
 
+/// The features inside their masks (pixel under the feature's centre), per non-empty set,
+/// with their indices in the input set.
+struct Masked {
+    /// Per kept set, the input index of each feature kept.
+    original: Vec<Vec<usize>>,
+    /// Per kept set, the features kept.
+    sets: Vec<Vec<Feature>>,
+}
+
+impl Masked {
+    fn new(inputs: &[PassInput]) -> Masked {
+        let mut original: Vec<Vec<usize>> = Vec::new();
+        let mut owned: Vec<Vec<Feature>> = Vec::new();
+        for input in inputs {
+            let mut idx = Vec::new();
+            let mut kept = Vec::new();
+            for (i, f) in input.features.iter().enumerate() {
+                let inside = input.mask.is_none_or(|m| {
+                    let (r, c) = (f.y_px.round(), f.x_px.round());
+                    r >= 0.0
+                        && c >= 0.0
+                        && m.get((r as usize, c as usize)).copied().unwrap_or(false)
+                });
+                if inside {
+                    idx.push(i);
+                    kept.push(f.clone());
+                }
+            }
+            if !kept.is_empty() {
+                original.push(idx);
+                owned.push(kept);
+            }
+        }
+        Masked {
+            original,
+            sets: owned,
+        }
+    }
+}
+
 /// Runs the base stage on `sets` (controller frame, each of one pass).
 pub(crate) fn prepare(
     inputs: &[PassInput],
@@ -129,27 +170,8 @@ pub(crate) fn prepare(
     let raw: Vec<&[Feature]> = inputs.iter().map(|i| i.features).collect();
     check(&raw)?;
     // Apply the masks (pixel under the feature's centre); keep the original indices.
-    let mut original: Vec<Vec<usize>> = Vec::new();
-    let mut owned: Vec<Vec<Feature>> = Vec::new();
-    for input in inputs {
-        let mut idx = Vec::new();
-        let mut kept = Vec::new();
-        for (i, f) in input.features.iter().enumerate() {
-            let inside = input.mask.is_none_or(|m| {
-                let (r, c) = (f.y_px.round(), f.x_px.round());
-                r >= 0.0 && c >= 0.0 && m.get((r as usize, c as usize)).copied().unwrap_or(false)
-            });
-            if inside {
-                idx.push(i);
-                kept.push(f.clone());
-            }
-        }
-        if !kept.is_empty() {
-            original.push(idx);
-            owned.push(kept);
-        }
-    }
-    let sets: Vec<&[Feature]> = owned.iter().map(|s| s.as_slice()).collect();
+    let masked = Masked::new(inputs);
+    let sets: Vec<&[Feature]> = masked.sets.iter().map(|s| s.as_slice()).collect();
     let input_features: usize = raw.iter().map(|s| s.len()).sum();
     if input_features < MIN_FEATURES {
         return Err(DiagnoseError::TooFewFeatures {
@@ -158,6 +180,35 @@ pub(crate) fn prepare(
             needed: MIN_FEATURES,
         });
     }
+    let (model, fit) = fit_dhct(&sets, geometry, lattice, dhct)?;
+    let base = BaseStage::new(&model, &fit, geometry, lattice, &sets);
+    let (observations, dhct_gap, unindexed) =
+        base.observe(&sets, &masked.original, max_deviation_fraction);
+    if observations.len() < MIN_FEATURES {
+        return Err(DiagnoseError::TooFewFeatures {
+            what: "diagnosis (indexed features)",
+            found: observations.len(),
+            needed: MIN_FEATURES,
+        });
+    }
+    Ok(Prepared {
+        observations,
+        dhct_model: model,
+        lattice_fit: fit,
+        dhct_gap,
+        unindexed,
+        input_features,
+    })
+}
+
+/// The DHCT fit of `sets` ([`analyse`]) and the lattice fitted to the features it
+/// corrected (sample frame).
+fn fit_dhct(
+    sets: &[&[Feature]],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    dhct: &DhctOptions,
+) -> Result<(DistortionModel, LatticeFit), DiagnoseError> {
     let inputs: Vec<PassInput> = sets
         .iter()
         .map(|s| PassInput {
@@ -178,68 +229,110 @@ pub(crate) fn prepare(
         .collect();
     let refs: Vec<&[[f64; 2]]> = corrected.iter().map(|c| c.as_slice()).collect();
     let fit = fit_lattice(lattice, &refs, &LatticeFitOptions::default())?;
-    let nn = lattice.nearest_neighbour_distance() * fit.scale[0].abs().max(fit.scale[1].abs());
-    let z0_median =
-        dhct_numerics::robust::finite_median(sets.iter().flat_map(|s| s.iter().map(|f| f.z0)))
-            .unwrap_or(0.0);
-    let [a1, a2] = lattice.primitive_vectors();
-    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
-    let mut observations = Vec::new();
-    let mut dhct_gap = Vec::new();
-    let mut unindexed = 0;
-    for (s, set) in sets.iter().enumerate() {
-        for (i, f) in set.iter().enumerate() {
-            let Some(p) = fit.points.get(s).and_then(|pts| pts.get(i)) else {
-                unindexed += 1;
-                continue;
-            };
-            if p.deviation_m[0].hypot(p.deviation_m[1]) > max_deviation_fraction * nn {
-                unindexed += 1;
-                continue;
-            }
-            let x = a1 * p.n as f64 + a2 * p.m as f64 + lattice.site_position(p.site);
-            let site = fit.site_position(lattice, p.n, p.m, p.site, 0);
-            let predicted = predict_controller(&model, geometry, f.pass, site, [f.x_px, f.y_px]);
-            dhct_gap.push([f.x_px * px - predicted[0], f.y_px * py - predicted[1]]);
-            let sigma = |v: f64, pitch: f64| {
-                if v.is_finite() && v > 0.0 {
-                    v * pitch
-                } else {
-                    f64::NAN
-                }
-            };
-            observations.push(Observation {
-                set: s,
-                index: original[s][i],
-                pass: f.pass,
-                controller_m: [f.x_px * px, f.y_px * py],
-                time_s: f.time_s,
-                line_time_s: f.line_time_s,
-                terrace_height_m: if f.z0.is_finite() {
-                    f.z0 - z0_median
-                } else {
-                    0.0
-                },
-                apparent_height: f.height,
-                fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
-                indices: (p.n, p.m, p.site),
-                lattice_vector_m: [x.x, x.y],
-            });
+    Ok((model, fit))
+}
+
+/// What turns the features into observations: the base stage's fits, the scan, the
+/// lattice and its primitive vectors (metres), and the median background level `z0` of
+/// every feature.
+struct BaseStage<'a> {
+    model: &'a DistortionModel,
+    fit: &'a LatticeFit,
+    geometry: &'a ScanGeometry,
+    lattice: &'a dyn Lattice,
+    primitive: [Vector2<f64>; 2],
+    z0_median: f64,
+}
+
+impl<'a> BaseStage<'a> {
+    fn new(
+        model: &'a DistortionModel,
+        fit: &'a LatticeFit,
+        geometry: &'a ScanGeometry,
+        lattice: &'a dyn Lattice,
+        sets: &[&[Feature]],
+    ) -> BaseStage<'a> {
+        let z0_median =
+            dhct_numerics::robust::finite_median(sets.iter().flat_map(|s| s.iter().map(|f| f.z0)))
+                .unwrap_or(0.0);
+        BaseStage {
+            model,
+            fit,
+            geometry,
+            lattice,
+            primitive: lattice.primitive_vectors(),
+            z0_median,
         }
     }
-    if observations.len() < MIN_FEATURES {
-        return Err(DiagnoseError::TooFewFeatures {
-            what: "diagnosis (indexed features)",
-            found: observations.len(),
-            needed: MIN_FEATURES,
-        });
+
+    /// Every indexed feature of `sets` within `max_deviation_fraction` of the NN distance
+    /// of its site, as an observation, with the DHCT sim's gap (controller frame, metres);
+    /// and the number of features dropped. `original` maps back to the input indices.
+    fn observe(
+        &self,
+        sets: &[&[Feature]],
+        original: &[Vec<usize>],
+        max_deviation_fraction: f64,
+    ) -> (Vec<Observation>, Vec<[f64; 2]>, usize) {
+        let (fit, lattice, geometry) = (self.fit, self.lattice, self.geometry);
+        let nn = lattice.nearest_neighbour_distance() * fit.scale[0].abs().max(fit.scale[1].abs());
+        let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+        let mut observations = Vec::new();
+        let mut dhct_gap = Vec::new();
+        let mut unindexed = 0;
+        for (s, set) in sets.iter().enumerate() {
+            for (i, f) in set.iter().enumerate() {
+                let Some(p) = fit.points.get(s).and_then(|pts| pts.get(i)) else {
+                    unindexed += 1;
+                    continue;
+                };
+                if p.deviation_m[0].hypot(p.deviation_m[1]) > max_deviation_fraction * nn {
+                    unindexed += 1;
+                    continue;
+                }
+                let site = fit.site_position(lattice, p.n, p.m, p.site, 0);
+                let predicted =
+                    predict_controller(self.model, geometry, f.pass, site, [f.x_px, f.y_px]);
+                dhct_gap.push([f.x_px * px - predicted[0], f.y_px * py - predicted[1]]);
+                observations.push(self.observation((s, original[s][i]), f, p));
+            }
+        }
+        (observations, dhct_gap, unindexed)
     }
-    Ok(Prepared {
-        observations,
-        dhct_model: model,
-        lattice_fit: fit,
-        dhct_gap,
-        unindexed,
-        input_features,
-    })
+
+    /// The observation of feature `f` (input `index` of set `set`) indexed as `p`.
+    fn observation(
+        &self,
+        (set, index): (usize, usize),
+        f: &Feature,
+        p: &IndexedPoint,
+    ) -> Observation {
+        let (px, py) = (self.geometry.pitch_x(), self.geometry.pitch_y());
+        let [a1, a2] = self.primitive;
+        let x = a1 * p.n as f64 + a2 * p.m as f64 + self.lattice.site_position(p.site);
+        let sigma = |v: f64, pitch: f64| {
+            if v.is_finite() && v > 0.0 {
+                v * pitch
+            } else {
+                f64::NAN
+            }
+        };
+        Observation {
+            set,
+            index,
+            pass: f.pass,
+            controller_m: [f.x_px * px, f.y_px * py],
+            time_s: f.time_s,
+            line_time_s: f.line_time_s,
+            terrace_height_m: if f.z0.is_finite() {
+                f.z0 - self.z0_median
+            } else {
+                0.0
+            },
+            apparent_height: f.height,
+            fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
+            indices: (p.n, p.m, p.site),
+            lattice_vector_m: [x.x, x.y],
+        }
+    }
 }

@@ -9,17 +9,17 @@ use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
-use crate::base::choose_hysteresis;
+use crate::base::{BaseChoice, choose_hysteresis};
 use crate::candidates::{Candidate, creep_t0_bounds};
-use crate::data::{MIN_FEATURES, Observation, prepare};
+use crate::data::{MIN_FEATURES, Observation, Prepared, prepare};
 use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::location::locate;
 use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
-use crate::noise::{estimate, robust_sigma};
+use crate::noise::{NoiseFloor, estimate, robust_sigma};
 use crate::report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
-use crate::select::{Current, CvScheme, Folds, SelectionOptions, round};
+use crate::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
 use crate::verdict::decide;
 
 /// Options of [`diagnose`].
@@ -110,6 +110,33 @@ fn summary(f: &Fitted, sigma: [f64; 2]) -> ModelSummary {
     }
 }
 
+/// The position-level base fit and what it decided.
+struct BaseFit {
+    /// The base model (hysteresis law chosen by BIC) fitted to every indexed feature.
+    first: Fitted,
+    /// The hysteresis law chosen, with every law's BIC.
+    base_choice: BaseChoice,
+    /// Per indexed feature, whether it was kept (not an outlier of `first`).
+    keep: Vec<bool>,
+    /// The features kept.
+    observations: Vec<Observation>,
+    /// The base model fitted in full to the features kept at the final noise floor.
+    base: Fitted,
+    /// The final noise floor.
+    noise: NoiseFloor,
+    /// Range of the base creep's `t0`, seconds.
+    t0_bounds: (f64, f64),
+}
+
+/// What the greedy selection found (besides the final model).
+struct Greedy {
+    rounds: Vec<GreedyRound>,
+    added: Vec<AddedEffect>,
+    /// The first round's best refitted candidate, and the gap/noise with it.
+    top: Option<Candidate>,
+    top_gap: Option<f64>,
+}
+
 /// Diagnoses the sim-to-real gap of one scan.
 ///
 /// `inputs` are the features of each image (each set of one pass, controller frame, with
@@ -130,8 +157,74 @@ pub fn diagnose(
         &options.dhct,
         options.max_deviation_fraction,
     )?;
-    let all = prepared.observations.clone();
-    // Start model: the DHCT fit and the lattice fit.
+    let fitted = fit_base(&prepared, geometry, options)?;
+    let (observations, base, sigma) = (&fitted.observations, &fitted.base, fitted.noise.sigma_m);
+    let base_summary = summary(base, sigma);
+    let location = options
+        .locate
+        .then(|| locate(observations, &base.residuals, sigma, geometry));
+    let folds = Folds::new(
+        observations,
+        geometry,
+        options.cv_scheme,
+        options.cv_blocks,
+        options.cv_folds,
+    );
+    let context = Current {
+        fitted: base,
+        geometry,
+        observations,
+        sigma,
+        folds: &folds,
+        nn_distance_m: lattice.nearest_neighbour_distance(),
+        t0_bounds: fitted.t0_bounds,
+    };
+    let (current, greedy) = select_effects(&context, options)?;
+    let final_summary = summary(&current, sigma);
+    let final_location = options
+        .locate
+        .then(|| locate(observations, &current.residuals, sigma, geometry));
+    let verdict = decide(
+        base_summary.gap.gap_to_noise,
+        final_summary.gap.gap_to_noise,
+        greedy.added.iter().map(|a| a.candidate).collect(),
+        final_location.as_ref(),
+        observations.len(),
+        fitted.noise.source,
+    );
+    let residuals = feature_residuals(&prepared, &fitted, &current);
+    let all = &prepared.observations;
+    Ok(DiagnosisReport {
+        verdict: verdict.kind,
+        verdict_details: verdict,
+        base_choice: fitted.base_choice,
+        features_in: prepared.input_features,
+        features_used: observations.len(),
+        unindexed: prepared.unindexed,
+        outliers: all.len() - observations.len(),
+        dhct: GapSummary::of(&prepared.dhct_gap, sigma, 0),
+        base: base_summary.clone(),
+        location,
+        rounds: greedy.rounds,
+        shrink: Shrink {
+            before: base_summary.gap.gap_to_noise,
+            top: greedy.top,
+            after_top: greedy.top_gap,
+            after_greedy: final_summary.gap.gap_to_noise,
+        },
+        added: greedy.added,
+        final_model: final_summary,
+        final_location,
+        sub_feature: None,
+        noise: fitted.noise,
+        residuals,
+    })
+}
+
+/// The start model: the DHCT fit's drift, creep (its `t0` profiled, not fitted) and
+/// fast-scan hysteresis (if any) as terms, and the lattice fit's origin and angle (and
+/// scales, if they are fitted).
+fn start_model(prepared: &Prepared, fit_lattice_scale: bool) -> GlobalModel {
     let d = &prepared.dhct_model;
     let mut terms = Vec::new();
     let drift = EffectConfig::ThermalDrift(ThermalDrift {
@@ -158,48 +251,48 @@ pub fn diagnose(
         terms.push(Term::all_free(e, "fast-hysteresis"));
     }
     let lf = &prepared.lattice_fit;
-    let start = GlobalModel {
+    GlobalModel {
         terms,
         lattice: LatticeParams {
             origin_m: lf.origin_m,
             angle_rad: lf.angle_rad,
-            scale: if options.fit_lattice_scale {
+            scale: if fit_lattice_scale {
                 lf.scale
             } else {
                 [1.0, 1.0]
             },
-            fit_scale: options.fit_lattice_scale,
+            fit_scale: fit_lattice_scale,
         },
-    };
+    }
+}
+
+/// The position-level base fit: the hysteresis law chosen by BIC (at the noise floor of
+/// the DHCT gap), outliers of that fit dropped, then the base model fitted again to the
+/// rest and refitted in full at the noise floor of its residuals.
+fn fit_base(
+    prepared: &Prepared,
+    geometry: &ScanGeometry,
+    options: &DiagnoseOptions,
+) -> Result<BaseFit, DiagnoseError> {
+    let all = &prepared.observations;
+    // Start model: the DHCT fit and the lattice fit.
+    let start = start_model(prepared, options.fit_lattice_scale);
     let iterations = options.selection.max_iterations;
     // Noise floor: first from the DHCT gap, then from the base fit's residuals.
-    let mut sigma = estimate(&all, &prepared.dhct_gap, geometry).sigma_m;
-    let t0_bounds = creep_t0_bounds(geometry, &all);
+    let mut sigma = estimate(all, &prepared.dhct_gap, geometry).sigma_m;
+    let t0_bounds = creep_t0_bounds(geometry, all);
     // The hysteresis law chosen by the data (BIC), part of the base model from here on.
     let (first, base_choice) = choose_hysteresis(
         &start,
-        &d.hysteresis,
+        &prepared.dhct_model.hysteresis,
         geometry,
-        &all,
+        all,
         sigma,
         iterations,
         t0_bounds,
     )?;
-    sigma = estimate(&all, &first.residuals, geometry).sigma_m;
-    // Outliers relative to the residuals' own robust spread (not the noise floor), so that
-    // a large unmodelled effect is not thrown away as outliers.
-    let spread = [0, 1].map(|a| {
-        let v: Vec<f64> = first.residuals.iter().map(|r| r[a]).collect();
-        robust_sigma(&v).max(sigma[a])
-    });
-    let keep: Vec<bool> = first
-        .residuals
-        .iter()
-        .map(|r| {
-            ((r[0] / spread[0]).powi(2) + (r[1] / spread[1]).powi(2)).sqrt()
-                <= options.outlier_sigma
-        })
-        .collect();
+    sigma = estimate(all, &first.residuals, geometry).sigma_m;
+    let keep = inliers(&first.residuals, sigma, options.outlier_sigma);
     let observations: Vec<Observation> = all
         .iter()
         .zip(&keep)
@@ -213,7 +306,7 @@ pub fn diagnose(
             needed: MIN_FEATURES,
         });
     }
-    let mut base = fit(
+    let base = fit(
         first.model.clone(),
         geometry,
         &observations,
@@ -221,60 +314,89 @@ pub fn diagnose(
         iterations,
     )?;
     let noise = estimate(&observations, &base.residuals, geometry);
-    sigma = noise.sigma_m;
-    // The base model and every accepted extension, fitted in full at the final noise floor.
-    let refit = |model: GlobalModel| {
-        fit_profiled(
-            model,
-            geometry,
-            &observations,
-            sigma,
-            2 * iterations,
-            t0_bounds,
-        )
-    };
-    base = refit(base.model)?;
-    let base_summary = summary(&base, sigma);
-    let location = options
-        .locate
-        .then(|| locate(&observations, &base.residuals, sigma, geometry));
-    let folds = Folds::new(
-        &observations,
+    let base = refit(
+        base.model,
         geometry,
-        options.cv_scheme,
-        options.cv_blocks,
-        options.cv_folds,
-    );
+        &observations,
+        noise.sigma_m,
+        iterations,
+        t0_bounds,
+    )?;
+    Ok(BaseFit {
+        first,
+        base_choice,
+        keep,
+        observations,
+        base,
+        noise,
+        t0_bounds,
+    })
+}
 
-    // Greedy selection.
-    let mut current = base.clone();
+/// Which residuals (metres) are not outliers: within `outlier_sigma` (both axes combined)
+/// of the residuals' own robust spread, at least the noise floor `sigma` — not of the
+/// floor itself, so that a large unmodelled effect is not thrown away as outliers.
+fn inliers(residuals: &[[f64; 2]], sigma: [f64; 2], outlier_sigma: f64) -> Vec<bool> {
+    let spread = [0, 1].map(|a| {
+        let v: Vec<f64> = residuals.iter().map(|r| r[a]).collect();
+        robust_sigma(&v).max(sigma[a])
+    });
+    residuals
+        .iter()
+        .map(|r| ((r[0] / spread[0]).powi(2) + (r[1] / spread[1]).powi(2)).sqrt() <= outlier_sigma)
+        .collect()
+}
+
+/// The base model and every accepted extension, fitted in full at the final noise floor
+/// (twice the iterations, the base creep's `t0` profiled within `t0_bounds`).
+fn refit(
+    model: GlobalModel,
+    geometry: &ScanGeometry,
+    observations: &[Observation],
+    sigma: [f64; 2],
+    iterations: usize,
+    t0_bounds: (f64, f64),
+) -> Result<Fitted, DiagnoseError> {
+    fit_profiled(
+        model,
+        geometry,
+        observations,
+        sigma,
+        2 * iterations,
+        t0_bounds,
+    )
+}
+
+/// The greedy selection: each round scores the remaining candidates on top of the current
+/// model (`context.fitted` at first) and adds the best that passes, refitted in full,
+/// until none passes, none is left or `max_effects` were added. Returns the final model.
+fn select_effects(
+    context: &Current,
+    options: &DiagnoseOptions,
+) -> Result<(Fitted, Greedy), DiagnoseError> {
+    let sigma = context.sigma;
+    let mut current = context.fitted.clone();
     let mut remaining = options.candidates.clone();
-    let mut rounds = Vec::new();
-    let mut added = Vec::new();
-    let mut top_gap = None;
-    let mut top = None;
+    let mut greedy = Greedy {
+        rounds: Vec::new(),
+        added: Vec::new(),
+        top: None,
+        top_gap: None,
+    };
     for k in 0..options.selection.max_effects {
         if remaining.is_empty() {
             break;
         }
-        let scored = round(
-            &Current {
-                fitted: &current,
-                geometry,
-                observations: &observations,
-                sigma,
-                folds: &folds,
-                nn_distance_m: lattice.nearest_neighbour_distance(),
-                t0_bounds,
-            },
-            &remaining,
-            &options.selection,
-        );
+        let state = Current {
+            fitted: &current,
+            ..*context
+        };
+        let scored = round(&state, &remaining, &options.selection);
         if k == 0
             && let Some(s) = scored.iter().find(|s| s.fitted.is_some())
         {
-            top = Some(s.score.candidate);
-            top_gap = s
+            greedy.top = Some(s.score.candidate);
+            greedy.top_gap = s
                 .fitted
                 .as_ref()
                 .map(|f| GapSummary::of(&f.residuals, sigma, f.model.free_count()).gap_to_noise);
@@ -286,29 +408,18 @@ pub fn diagnose(
                 .fitted
                 .clone()
                 .unwrap_or_else(|| unreachable!("filtered on Some"));
-            let from = current.model.terms.len();
-            // A replaced term (asymmetric hysteresis) sits at its old index.
-            let index = f
-                .model
-                .terms
-                .iter()
-                .position(|t| t.label == w.score.candidate.name())
-                .unwrap_or(from);
-            let parameters = f
-                .parameters(0)
-                .into_iter()
-                .filter(|p| f.model.terms[index].effect.name() == p.effect)
-                .collect();
-            added.push(AddedEffect {
-                candidate: w.score.candidate,
-                shape: w.score.shape.clone(),
-                parameters,
-                gap_after: GapSummary::of(&f.residuals, sigma, f.model.free_count()),
-            });
-            current = refit(f.model)?;
+            greedy.added.push(added_effect(w, &f, &current, sigma));
+            current = refit(
+                f.model,
+                context.geometry,
+                context.observations,
+                sigma,
+                options.selection.max_iterations,
+                context.t0_bounds,
+            )?;
             remaining.retain(|c| *c != w.score.candidate);
         }
-        rounds.push(GreedyRound {
+        greedy.rounds.push(GreedyRound {
             scores: scored.into_iter().map(|s| s.score).collect(),
             accepted,
         });
@@ -316,19 +427,42 @@ pub fn diagnose(
             break;
         }
     }
-    let final_summary = summary(&current, sigma);
-    let final_location = options
-        .locate
-        .then(|| locate(&observations, &current.residuals, sigma, geometry));
-    let verdict = decide(
-        base_summary.gap.gap_to_noise,
-        final_summary.gap.gap_to_noise,
-        added.iter().map(|a| a.candidate).collect(),
-        final_location.as_ref(),
-        observations.len(),
-        noise.source,
-    );
-    // Per-feature residuals (outliers carry the base fit's prediction).
+    Ok((current, greedy))
+}
+
+/// The effect `w` added to `current`, as fitted in `f` (its parameters, and the gap after
+/// it at the noise floor `sigma`).
+fn added_effect(w: &Scored, f: &Fitted, current: &Fitted, sigma: [f64; 2]) -> AddedEffect {
+    let from = current.model.terms.len();
+    // A replaced term (asymmetric hysteresis) sits at its old index.
+    let index = f
+        .model
+        .terms
+        .iter()
+        .position(|t| t.label == w.score.candidate.name())
+        .unwrap_or(from);
+    let parameters = f
+        .parameters(0)
+        .into_iter()
+        .filter(|p| f.model.terms[index].effect.name() == p.effect)
+        .collect();
+    AddedEffect {
+        candidate: w.score.candidate,
+        shape: w.score.shape.clone(),
+        parameters,
+        gap_after: GapSummary::of(&f.residuals, sigma, f.model.free_count()),
+    }
+}
+
+/// Per-feature residuals of the DHCT sim, the base fit and the final model (outliers carry
+/// the first base fit's residual for both).
+fn feature_residuals(
+    prepared: &Prepared,
+    fitted: &BaseFit,
+    current: &Fitted,
+) -> Vec<FeatureResidual> {
+    let all = &prepared.observations;
+    let (keep, first, base) = (&fitted.keep, &fitted.first, &fitted.base);
     let mut residuals = Vec::with_capacity(all.len());
     let mut used = 0;
     for (i, o) in all.iter().enumerate() {
@@ -352,29 +486,5 @@ pub fn diagnose(
             outlier,
         });
     }
-    Ok(DiagnosisReport {
-        verdict: verdict.kind,
-        verdict_details: verdict,
-        base_choice,
-        features_in: prepared.input_features,
-        features_used: observations.len(),
-        unindexed: prepared.unindexed,
-        outliers: all.len() - observations.len(),
-        dhct: GapSummary::of(&prepared.dhct_gap, sigma, 0),
-        base: base_summary.clone(),
-        location,
-        rounds,
-        shrink: Shrink {
-            before: base_summary.gap.gap_to_noise,
-            top,
-            after_top: top_gap,
-            after_greedy: final_summary.gap.gap_to_noise,
-        },
-        added,
-        final_model: final_summary,
-        final_location,
-        sub_feature: None,
-        noise,
-        residuals,
-    })
+    residuals
 }

@@ -191,8 +191,45 @@ fn pm(v: f64) -> String {
     format!("{:.2}", v * 1e12)
 }
 
+/// `rms x × y pm, gap/noise, χ²/dof` of a gap.
+fn gap_line(s: &GapSummary) -> String {
+    format!(
+        "rms {} × {} pm, gap/noise {:.2}, χ²/dof {:.2}",
+        pm(s.rms_m[0]),
+        pm(s.rms_m[1]),
+        s.gap_to_noise,
+        s.chi2_per_dof
+    )
+}
+
+/// Where the noise floor comes from, in words.
+fn floor_source(source: FloorSource) -> &'static str {
+    match source {
+        FloorSource::Localisation => "the features' localisation uncertainty",
+        FloorSource::LocalisationRaisedToSuccessive => {
+            "localisation, raised to the successive differences"
+        }
+        FloorSource::SuccessiveDifferences => "successive differences",
+        FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
+    }
+}
+
 impl fmt::Display for DiagnosisReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.write_overview(f)?;
+        self.write_base(f)?;
+        if let Some(loc) = &self.location {
+            write_location(f, loc)?;
+        }
+        self.write_rounds(f)?;
+        self.write_added(f)?;
+        self.write_shrink(f)
+    }
+}
+
+impl DiagnosisReport {
+    /// The verdict, the feature counts and the noise floor (pm).
+    fn write_overview(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
             "verdict: {} — {}",
@@ -214,27 +251,20 @@ impl fmt::Display for DiagnosisReport {
              trace/retrace {} (not used)",
             pm(n.sigma_m[0]),
             pm(n.sigma_m[1]),
-            match n.source {
-                FloorSource::Localisation => "the features' localisation uncertainty",
-                FloorSource::LocalisationRaisedToSuccessive =>
-                    "localisation, raised to the successive differences",
-                FloorSource::SuccessiveDifferences => "successive differences",
-                FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
-            },
+            floor_source(n.source),
             n.localisation.describe(),
             n.successive_differences.describe(),
             n.trace_retrace.describe(),
+        )
+    }
+
+    /// The DHCT sim's gap, the base hysteresis law chosen and the base fit's gap.
+    fn write_base(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "DHCT sim gap (controller frame): {}",
+            gap_line(&self.dhct)
         )?;
-        let g = |s: &GapSummary| {
-            format!(
-                "rms {} × {} pm, gap/noise {:.2}, χ²/dof {:.2}",
-                pm(s.rms_m[0]),
-                pm(s.rms_m[1]),
-                s.gap_to_noise,
-                s.chi2_per_dof
-            )
-        };
-        writeln!(f, "DHCT sim gap (controller frame): {}", g(&self.dhct))?;
         writeln!(
             f,
             "base hysteresis law (BIC): {} ({})",
@@ -246,39 +276,15 @@ impl fmt::Display for DiagnosisReport {
                 .collect::<Vec<_>>()
                 .join(", ")
         )?;
-        writeln!(f, "base position-level fit:        {}", g(&self.base.gap))?;
-        if let Some(loc) = &self.location {
-            writeln!(f, "where the base gap concentrates:")?;
-            for b in loc.hot_spots.iter().take(6) {
-                writeln!(
-                    f,
-                    "  {:<28} n={:<5} χ²/dof {:.2} (z {:.1}), mean ({}, {}) pm",
-                    b.label,
-                    b.count,
-                    b.chi2_per_dof,
-                    b.excess_z,
-                    pm(b.mean_m[0]),
-                    pm(b.mean_m[1])
-                )?;
-            }
-            if let Some(p) = loc.spectrum.peaks.first() {
-                writeln!(
-                    f,
-                    "  strongest spectral peak {:.4} Hz, power {:.1}, false-alarm p {:.2e}",
-                    p.frequency_hz, p.power, p.false_alarm_probability
-                )?;
-            }
-            for c in &loc.change_points {
-                writeln!(
-                    f,
-                    "  jump at {:.2} s: ({}, {}) pm, statistic {:.0}",
-                    c.time_s,
-                    pm(c.jump_m[0]),
-                    pm(c.jump_m[1]),
-                    c.statistic
-                )?;
-            }
-        }
+        writeln!(
+            f,
+            "base position-level fit:        {}",
+            gap_line(&self.base.gap)
+        )
+    }
+
+    /// One table per greedy round: every candidate's scores.
+    fn write_rounds(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for (k, r) in self.rounds.iter().enumerate() {
             writeln!(
                 f,
@@ -303,13 +309,18 @@ impl fmt::Display for DiagnosisReport {
                 )?;
             }
         }
+        Ok(())
+    }
+
+    /// Each effect added, with the gap after it and its parameters.
+    fn write_added(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for a in &self.added {
             writeln!(
                 f,
                 "added {} ({}): {}",
                 a.candidate,
                 a.shape,
-                g(&a.gap_after)
+                gap_line(&a.gap_after)
             )?;
             for p in &a.parameters {
                 match p.sigma {
@@ -318,6 +329,12 @@ impl fmt::Display for DiagnosisReport {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Gap/noise before, after the top candidate and after the greedy set (last line, no
+    /// newline).
+    fn write_shrink(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let s = &self.shrink;
         writeln!(
             f,
@@ -328,4 +345,40 @@ impl fmt::Display for DiagnosisReport {
             s.after_greedy
         )
     }
+}
+
+/// Where the base gap concentrates: the hottest bins, the strongest spectral peak, the
+/// jumps (pm, Hz, s).
+fn write_location(f: &mut fmt::Formatter<'_>, loc: &GapLocation) -> fmt::Result {
+    writeln!(f, "where the base gap concentrates:")?;
+    for b in loc.hot_spots.iter().take(6) {
+        writeln!(
+            f,
+            "  {:<28} n={:<5} χ²/dof {:.2} (z {:.1}), mean ({}, {}) pm",
+            b.label,
+            b.count,
+            b.chi2_per_dof,
+            b.excess_z,
+            pm(b.mean_m[0]),
+            pm(b.mean_m[1])
+        )?;
+    }
+    if let Some(p) = loc.spectrum.peaks.first() {
+        writeln!(
+            f,
+            "  strongest spectral peak {:.4} Hz, power {:.1}, false-alarm p {:.2e}",
+            p.frequency_hz, p.power, p.false_alarm_probability
+        )?;
+    }
+    for c in &loc.change_points {
+        writeln!(
+            f,
+            "  jump at {:.2} s: ({}, {}) pm, statistic {:.0}",
+            c.time_s,
+            pm(c.jump_m[0]),
+            pm(c.jump_m[1]),
+            c.statistic
+        )?;
+    }
+    Ok(())
 }

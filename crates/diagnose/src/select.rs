@@ -347,192 +347,282 @@ fn refit_start(
     best.map(|(_, m)| m)
 }
 
+/// What every candidate of a round is measured against: the current model's weighted
+/// residuals `r` (`[x0, y0, …]`, in noise σ), its Jacobian `J` and an orthonormal basis `Q`
+/// of it, `χ²₀` and the held-out mean squares under both fold schemes.
+struct Baseline<'a> {
+    current: &'a Current<'a>,
+    r: DVector<f64>,
+    j: &'a DMatrix<f64>,
+    q: DMatrix<f64>,
+    /// Number of residuals.
+    n: f64,
+    chi2_0: f64,
+    cv0_interleaved: f64,
+    cv0_blocks: f64,
+}
+
+impl<'a> Baseline<'a> {
+    fn new(current: &'a Current<'a>) -> Baseline<'a> {
+        let fitted = current.fitted;
+        let r = weighted(&fitted.residuals, current.sigma);
+        let j = &fitted.jacobian;
+        let q = j.clone().qr().q();
+        let n = r.len() as f64;
+        let chi2_0 = r.norm_squared();
+        let cv0_interleaved =
+            cv_mean_square(j, &r, &current.folds.interleaved, current.folds.count);
+        let cv0_blocks = cv_mean_square(j, &r, &current.folds.blocks, current.folds.count);
+        Baseline {
+            current,
+            r,
+            j,
+            q,
+            n,
+            chi2_0,
+            cv0_interleaved,
+            cv0_blocks,
+        }
+    }
+
+    /// The current model's held-out mean square on the folds `c` is tested with.
+    fn cv0(&self, c: Candidate) -> f64 {
+        let folds = self.current.folds;
+        if std::ptr::eq(folds.of(c), folds.interleaved.as_slice()) {
+            self.cv0_interleaved
+        } else {
+            self.cv0_blocks
+        }
+    }
+}
+
+/// A candidate's best proposal by linearised χ² reduction: the proposal, its gain, its
+/// screened coefficients and the number of shapes searched.
+type Screened = (Proposal, f64, Vec<f64>, usize);
+
+/// A candidate's score, with what its full refit starts from: the best proposal, its
+/// screened coefficients and its complexity.
+struct Entry {
+    scored: Scored,
+    proposal: Option<Proposal>,
+    beta: Vec<f64>,
+    complexity: Complexity,
+}
+
 /// Scores every candidate in `candidates` on top of `current`; sorted best first.
 pub(crate) fn round(
     current: &Current,
     candidates: &[Candidate],
     options: &SelectionOptions,
 ) -> Vec<Scored> {
-    let fitted = current.fitted;
-    let r = weighted(&fitted.residuals, current.sigma);
-    let j = &fitted.jacobian;
-    let q = j.clone().qr().q();
-    let n = r.len() as f64;
-    let chi2_0 = r.norm_squared();
-    let cv0_interleaved = cv_mean_square(j, &r, &current.folds.interleaved, current.folds.count);
-    let cv0_blocks = cv_mean_square(j, &r, &current.folds.blocks, current.folds.count);
-    let cv0 = |c: Candidate| {
-        if std::ptr::eq(current.folds.of(c), current.folds.interleaved.as_slice()) {
-            cv0_interleaved
-        } else {
-            cv0_blocks
-        }
-    };
-
-    let r_slice: Vec<f64> = r.iter().copied().collect();
+    let base = Baseline::new(current);
+    let r_slice: Vec<f64> = base.r.iter().copied().collect();
     let ctx = Context {
-        model: &fitted.model,
+        model: &current.fitted.model,
         geometry: current.geometry,
         observations: current.observations,
         sigma: current.sigma,
         residuals: &r_slice,
     };
-    let screened: Vec<(Proposal, f64, Vec<f64>, usize)> = candidates
+    let screened: Vec<Screened> = candidates
         .par_iter()
-        .filter_map(|&c| {
-            let mut best: Option<(Proposal, f64, Vec<f64>)> = None;
-            let all = proposals(c, &ctx);
-            let mut searched = all.len();
-            // Screens `p` and keeps it if it gains the most so far.
-            let keep_best = |best: &mut Option<(Proposal, f64, Vec<f64>)>, p: Proposal| {
-                let (gain, beta) = screen(&q, &r, &p.columns);
-                if best.as_ref().is_none_or(|b| gain > b.1) {
-                    *best = Some((p, gain, beta));
-                }
-            };
-            for p in all {
-                keep_best(&mut best, p);
-            }
-            // A tip change is refined to the feature times near the best line start.
-            if c == Candidate::TipChange
-                && let Some((p, _, _)) = &best
-                && let Some(t) = p
-                    .shape
-                    .strip_prefix("t = ")
-                    .and_then(|s| s.trim_end_matches(" s").parse::<f64>().ok())
-            {
-                let lp = current.geometry.line_period();
-                let mut times: Vec<f64> = current
-                    .observations
-                    .iter()
-                    .map(|o| o.time_s)
-                    .filter(|x| (x - t).abs() < lp)
-                    .collect();
-                times.sort_by(f64::total_cmp);
-                times.dedup();
-                searched += times.len();
-                for tt in times {
-                    if let Some(p) = tip_proposal(&ctx, tt + 1e-9) {
-                        keep_best(&mut best, p);
-                    }
-                }
-            }
-            // A creep onset is refined around the best coarse grid point.
-            if let Some((p, _, _)) = &best
-                && let Some((tau, start)) = p.onset
-            {
-                let finer = onset_refinement(c, tau, start, &ctx);
-                searched += finer.len();
-                for (tau, start) in finer {
-                    if let Some(p) = onset_proposal(c, tau, start, &ctx) {
-                        keep_best(&mut best, p);
-                    }
-                }
-            }
-            best.map(|(p, gain, beta)| (p, gain, beta, searched))
-        })
+        .filter_map(|&c| screen_candidate(c, &ctx, &base))
         .collect();
-    let mut scored: Vec<(Scored, Option<Proposal>, Vec<f64>, Complexity)> = screened
+    let mut scored: Vec<Entry> = screened
         .into_iter()
-        .map(|(p, gain, beta, searched)| {
-            let complexity = Complexity {
-                columns: p.columns.ncols(),
-                shape: p.extra_parameters,
-                searched: p.searched.unwrap_or(searched),
-            };
-            let k = complexity.parameters();
-            let chi2 = chi2_0 - gain;
-            let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, complexity);
-            let cv = cv_mean_square(
-                &hcat(j, &p.columns),
-                &r,
-                current.folds.of(p.candidate),
-                current.folds.count,
-            );
-            let score = CandidateScore {
-                candidate: p.candidate,
-                shape: p.shape.clone(),
-                added_parameters: k,
-                chi2,
-                delta_chi2: gain,
-                delta_bic,
-                delta_aic,
-                cv_ratio: cv / cv0(p.candidate),
-                refitted: false,
-                passes: false,
-            };
-            (
-                Scored {
-                    score,
-                    fitted: None,
-                },
-                Some(p),
-                beta,
-                complexity,
-            )
-        })
+        .map(|s| screened_entry(s, &base))
         .collect();
-    scored.sort_by(|a, b| a.0.score.delta_bic.total_cmp(&b.0.score.delta_bic));
+    scored.sort_by(|a, b| {
+        a.scored
+            .score
+            .delta_bic
+            .total_cmp(&b.scored.score.delta_bic)
+    });
     // Full refits of the best few.
     let top = options.refit_top.min(scored.len());
-    let jtj_pinv = pinv_sym(&(j.transpose() * j));
+    let jtj_pinv = pinv_sym(&(base.j.transpose() * base.j));
     let refits: Vec<Option<Fitted>> = scored[..top]
         .par_iter()
-        .map(|(_, p, beta, _)| {
-            let p = p.as_ref()?;
-            let model = refit_start(current, p, beta, j, &jtj_pinv)?;
-            let r = fit_profiled(
-                model,
-                current.geometry,
-                current.observations,
-                current.sigma,
-                options.max_iterations,
-                current.t0_bounds,
-            );
-            if let Err(e) = &r
-                && std::env::var_os("DHCT_DEBUG").is_some()
-            {
-                eprintln!("refit failed: {e}");
-            }
-            // A refit that left the candidate's domain describes another effect.
-            r.ok().filter(|f| {
-                within_domain(
-                    p.candidate,
-                    &f.model,
-                    current.geometry,
-                    current.nn_distance_m,
-                )
-            })
-        })
+        .map(|entry| refit_candidate(&base, entry, &jtj_pinv, options))
         .collect();
-    for ((s, _, _, complexity), refit) in scored.iter_mut().zip(refits) {
+    for (entry, refit) in scored.iter_mut().zip(refits) {
         let Some(f) = refit else { continue };
-        let rf = weighted(&f.residuals, current.sigma);
-        let chi2 = rf.norm_squared();
-        if std::env::var_os("DHCT_DEBUG").is_some() {
-            eprintln!(
-                "{}: refit χ² {chi2} vs screened {}",
-                s.score.candidate, s.score.chi2
-            );
-        }
-        let (delta_bic, delta_aic) = criteria(n, chi2_0, chi2, *complexity);
-        let cv = cv_mean_square(
-            &f.jacobian,
-            &rf,
-            current.folds.of(s.score.candidate),
-            current.folds.count,
-        );
-        s.score.chi2 = chi2;
-        s.score.delta_chi2 = chi2_0 - chi2;
-        s.score.delta_bic = delta_bic;
-        s.score.delta_aic = delta_aic;
-        s.score.cv_ratio = cv / cv0(s.score.candidate);
-        s.score.refitted = true;
-        s.fitted = Some(f);
+        rescore(&mut entry.scored, f, entry.complexity, &base);
     }
+    rank(scored, options)
+}
+
+/// Screens every proposal of candidate `c` and keeps the one that gains the most; a tip
+/// change's best is then refined to the feature times near it, a creep onset around the
+/// best coarse grid point. `None` when the candidate has no proposal.
+fn screen_candidate(c: Candidate, ctx: &Context, base: &Baseline) -> Option<Screened> {
+    let current = base.current;
+    let mut best: Option<(Proposal, f64, Vec<f64>)> = None;
+    let all = proposals(c, ctx);
+    let mut searched = all.len();
+    // Screens `p` and keeps it if it gains the most so far.
+    let keep_best = |best: &mut Option<(Proposal, f64, Vec<f64>)>, p: Proposal| {
+        let (gain, beta) = screen(&base.q, &base.r, &p.columns);
+        if best.as_ref().is_none_or(|b| gain > b.1) {
+            *best = Some((p, gain, beta));
+        }
+    };
+    for p in all {
+        keep_best(&mut best, p);
+    }
+    // A tip change is refined to the feature times near the best line start.
+    if c == Candidate::TipChange
+        && let Some((p, _, _)) = &best
+        && let Some(t) = p
+            .shape
+            .strip_prefix("t = ")
+            .and_then(|s| s.trim_end_matches(" s").parse::<f64>().ok())
+    {
+        let times = times_near(current.observations, t, current.geometry.line_period());
+        searched += times.len();
+        for tt in times {
+            if let Some(p) = tip_proposal(ctx, tt + 1e-9) {
+                keep_best(&mut best, p);
+            }
+        }
+    }
+    // A creep onset is refined around the best coarse grid point.
+    if let Some((p, _, _)) = &best
+        && let Some((tau, start)) = p.onset
+    {
+        let finer = onset_refinement(c, tau, start, ctx);
+        searched += finer.len();
+        for (tau, start) in finer {
+            if let Some(p) = onset_proposal(c, tau, start, ctx) {
+                keep_best(&mut best, p);
+            }
+        }
+    }
+    best.map(|(p, gain, beta)| (p, gain, beta, searched))
+}
+
+/// The distinct feature times (s) within `line_period` of `t`, in increasing order.
+fn times_near(observations: &[Observation], t: f64, line_period: f64) -> Vec<f64> {
+    let mut times: Vec<f64> = observations
+        .iter()
+        .map(|o| o.time_s)
+        .filter(|x| (x - t).abs() < line_period)
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    times
+}
+
+/// The linearised score of a screened proposal: χ², ΔBIC/ΔAIC with its complexity, and
+/// the CV ratio of the current Jacobian extended by the proposal's columns.
+fn screened_entry((p, gain, beta, searched): Screened, base: &Baseline) -> Entry {
+    let current = base.current;
+    let complexity = Complexity {
+        columns: p.columns.ncols(),
+        shape: p.extra_parameters,
+        searched: p.searched.unwrap_or(searched),
+    };
+    let k = complexity.parameters();
+    let chi2 = base.chi2_0 - gain;
+    let (delta_bic, delta_aic) = criteria(base.n, base.chi2_0, chi2, complexity);
+    let cv = cv_mean_square(
+        &hcat(base.j, &p.columns),
+        &base.r,
+        current.folds.of(p.candidate),
+        current.folds.count,
+    );
+    let score = CandidateScore {
+        candidate: p.candidate,
+        shape: p.shape.clone(),
+        added_parameters: k,
+        chi2,
+        delta_chi2: gain,
+        delta_bic,
+        delta_aic,
+        cv_ratio: cv / base.cv0(p.candidate),
+        refitted: false,
+        passes: false,
+    };
+    Entry {
+        scored: Scored {
+            score,
+            fitted: None,
+        },
+        proposal: Some(p),
+        beta,
+        complexity,
+    }
+}
+
+/// The full refit of an entry's proposal from [`refit_start`] (base `t0` profiled); `None`
+/// when it fails or leaves the candidate's domain (it then describes another effect).
+fn refit_candidate(
+    base: &Baseline,
+    entry: &Entry,
+    jtj_pinv: &DMatrix<f64>,
+    options: &SelectionOptions,
+) -> Option<Fitted> {
+    let current = base.current;
+    let p = entry.proposal.as_ref()?;
+    let model = refit_start(current, p, &entry.beta, base.j, jtj_pinv)?;
+    let r = fit_profiled(
+        model,
+        current.geometry,
+        current.observations,
+        current.sigma,
+        options.max_iterations,
+        current.t0_bounds,
+    );
+    if let Err(e) = &r
+        && std::env::var_os("DHCT_DEBUG").is_some()
+    {
+        eprintln!("refit failed: {e}");
+    }
+    // A refit that left the candidate's domain describes another effect.
+    r.ok().filter(|f| {
+        within_domain(
+            p.candidate,
+            &f.model,
+            current.geometry,
+            current.nn_distance_m,
+        )
+    })
+}
+
+/// Replaces the screened scores of `s` by those of its full refit `f`.
+fn rescore(s: &mut Scored, f: Fitted, complexity: Complexity, base: &Baseline) {
+    let current = base.current;
+    let rf = weighted(&f.residuals, current.sigma);
+    let chi2 = rf.norm_squared();
+    if std::env::var_os("DHCT_DEBUG").is_some() {
+        eprintln!(
+            "{}: refit χ² {chi2} vs screened {}",
+            s.score.candidate, s.score.chi2
+        );
+    }
+    let (delta_bic, delta_aic) = criteria(base.n, base.chi2_0, chi2, complexity);
+    let cv = cv_mean_square(
+        &f.jacobian,
+        &rf,
+        current.folds.of(s.score.candidate),
+        current.folds.count,
+    );
+    s.score.chi2 = chi2;
+    s.score.delta_chi2 = base.chi2_0 - chi2;
+    s.score.delta_bic = delta_bic;
+    s.score.delta_aic = delta_aic;
+    s.score.cv_ratio = cv / base.cv0(s.score.candidate);
+    s.score.refitted = true;
+    s.fitted = Some(f);
+}
+
+/// Marks the entries that pass both acceptance tests and ranks them: passing first, then
+/// by ΔBIC.
+fn rank(scored: Vec<Entry>, options: &SelectionOptions) -> Vec<Scored> {
     let mut out: Vec<Scored> = scored
         .into_iter()
-        .map(|(mut s, _, _, _)| {
+        .map(|entry| {
+            let mut s = entry.scored;
             s.score.passes = s.score.cv_ratio < 1.0 - options.min_cv_gain
                 && s.score.delta_bic < -options.min_delta_bic;
             s

@@ -17,7 +17,7 @@ use crate::model::{
     Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
 };
 use crate::{DistortionError, LocalDistortion};
-use dhct_numerics::lm::{LmOptions, Residuals, fit_residuals};
+use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
 use dhct_numerics::robust::{huber_weights, mad_sigma_about};
 
 /// Which hysteresis law to fit.
@@ -165,6 +165,57 @@ fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The drift/creep fit's data, one entry per local distortion: feature times `t` (s), the
+/// secant offsets to its neighbours (s; empty without secants), the acceleration column
+/// `secant(t²/2)` and the measured drift velocities `dx`, `dy` (nm/s).
+struct DriftData<'a> {
+    t: Vec<f64>,
+    offsets: Vec<&'a [f64]>,
+    quadratic: Vec<f64>,
+    dx: Vec<f64>,
+    dy: Vec<f64>,
+}
+
+impl<'a> DriftData<'a> {
+    fn new(local: &'a [LocalDistortion], secant_mode: bool) -> DriftData<'a> {
+        let t: Vec<f64> = local.iter().map(|l| l.time_s).collect();
+        let offsets: Vec<&[f64]> = local
+            .iter()
+            .map(|l| {
+                if secant_mode {
+                    l.neighbour_dt_s.as_slice()
+                } else {
+                    &[]
+                }
+            })
+            .collect();
+        let dx: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[0] * NM).collect();
+        let dy: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[1] * NM).collect();
+        // The acceleration column does not depend on any parameter: computed once.
+        let quadratic: Vec<f64> = t
+            .iter()
+            .zip(&offsets)
+            .map(|(&t, offsets)| secant(|x| 0.5 * x * x, t, offsets))
+            .collect();
+        DriftData {
+            t,
+            offsets,
+            quadratic,
+            dx,
+            dy,
+        }
+    }
+
+    /// The creep column `secant(ln(1 + t/t0))` for the time constant `t0` (s).
+    fn creep_column(&self, t0: f64) -> Vec<f64> {
+        self.t
+            .iter()
+            .zip(&self.offsets)
+            .map(|(&t, offsets)| secant(|x| (x / t0).ln_1p(), t, offsets))
+            .collect()
+    }
+}
+
 fn fit_drift(
     local: &[LocalDistortion],
     frame_duration_s: f64,
@@ -172,47 +223,52 @@ fn fit_drift(
     robust_rounds: usize,
     secant_mode: bool,
 ) -> Result<(DriftCreep, Vec<Parameter>, FitDiagnostics), DistortionError> {
-    let t: Vec<f64> = local.iter().map(|l| l.time_s).collect();
-    let offsets: Vec<&[f64]> = local
-        .iter()
-        .map(|l| {
-            if secant_mode {
-                l.neighbour_dt_s.as_slice()
-            } else {
-                &[]
-            }
-        })
-        .collect();
-    let dx: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[0] * NM).collect();
-    let dy: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[1] * NM).collect();
-    let m = t.len();
-    // The acceleration column does not depend on any parameter: computed once.
-    let quadratic: Vec<f64> = t
-        .iter()
-        .zip(&offsets)
-        .map(|(&t, offsets)| secant(|x| 0.5 * x * x, t, offsets))
-        .collect();
-    let creep_column = |t0: f64| -> Vec<f64> {
-        t.iter()
-            .zip(&offsets)
-            .map(|(&t, offsets)| secant(|x| (x / t0).ln_1p(), t, offsets))
-            .collect()
+    let data = DriftData::new(local, secant_mode);
+    let span = frame_duration_s.max(1e-9);
+    let (start, t0_start) = drift_start(&data, span)?;
+    // t0 is bounded to [one line's scanning time, 100 frames]: creep faster than the slow
+    // axis samples time cannot be resolved (t0 → 0 makes ln(1 + t/t0) diverge, the Matlab's
+    // singularity), and beyond 100 frames it is indistinguishable from v + a·t. A logistic
+    // map of ln t0 keeps the fit unconstrained ([`LogisticLog`]).
+    let t0_map = LogisticLog {
+        lo: line_scan_time_s.max(1e-6).ln(),
+        hi: (100.0 * span).ln(),
     };
+    let mut p0 = start.to_vec();
+    p0.push(t0_map.parameter(t0_start));
+    let residuals = DriftProblem {
+        t: &data.t,
+        offsets: &data.offsets,
+        quadratic: &data.quadratic,
+        dx: &data.dx,
+        dy: &data.dy,
+        t0_map,
+    };
+    let (fit, weights) = drift_irls(&residuals, p0, robust_rounds)?;
+    drift_result(&fit, &weights, t0_map)
+}
+
+/// The start of the drift/creep fit: a log-spaced grid of `t0` over 10⁻³..10² × `span`
+/// (the frame duration, s), the other six parameters (nm/s units) solved linearly at each
+/// point. Returns `[v_x, a_x, C_x, v_y, a_y, C_y]` and `t0` (s) of the smallest squared
+/// error.
+fn drift_start(data: &DriftData, span: f64) -> Result<([f64; 6], f64), DistortionError> {
+    let (dx, dy) = (&data.dx, &data.dy);
+    let m = data.t.len();
     // Start: grid over t0 (in parallel; the first best in grid order wins), linear in the
     // rest.
-    let span = frame_duration_s.max(1e-9);
     let grid: Vec<Option<(f64, [f64; 6], f64)>> = (0..=48)
         .into_par_iter()
         .map(|k| {
             let t0 = span * 10f64.powf(-3.0 + 5.0 * k as f64 / 48.0);
-            let log = creep_column(t0);
+            let log = data.creep_column(t0);
             let design = DMatrix::from_fn(m, 3, |i, j| match j {
                 0 => 1.0,
-                1 => quadratic[i],
+                1 => data.quadratic[i],
                 _ => log[i],
             });
-            let px = linear_ls(&design, &DVector::from_column_slice(&dx))?;
-            let py = linear_ls(&design, &DVector::from_column_slice(&dy))?;
+            let px = linear_ls(&design, &DVector::from_column_slice(dx))?;
+            let py = linear_ls(&design, &DVector::from_column_slice(dy))?;
             let fx = &design * &px;
             let fy = &design * &py;
             let sse: f64 = (0..m)
@@ -231,28 +287,22 @@ fn fit_drift(
     let Some((_, start, t0_start)) = best else {
         return Err(DistortionError::FitFailed("drift/creep"));
     };
-    // t0 is bounded to [one line's scanning time, 100 frames]: creep faster than the slow
-    // axis samples time cannot be resolved (t0 → 0 makes ln(1 + t/t0) diverge, the Matlab's
-    // singularity), and beyond 100 frames it is indistinguishable from v + a·t. A logistic
-    // map of ln t0 keeps the fit unconstrained ([`LogisticLog`]).
-    let t0_map = LogisticLog {
-        lo: line_scan_time_s.max(1e-6).ln(),
-        hi: (100.0 * span).ln(),
-    };
-    let mut p0 = start.to_vec();
-    p0.push(t0_map.parameter(t0_start));
-    let residuals = DriftProblem {
-        t: &t,
-        offsets: &offsets,
-        quadratic: &quadratic,
-        dx: &dx,
-        dy: &dy,
-        t0_map,
-    };
+    Ok((start, t0_start))
+}
+
+/// Huber IRLS of the drift/creep fit from `p0`, x and y residuals each weighted by their
+/// own robust scale. Returns the last fit, its normal matrix evaluated once more with the
+/// final weights, and those weights.
+fn drift_irls(
+    residuals: &DriftProblem,
+    mut p0: Vec<f64>,
+    robust_rounds: usize,
+) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
+    let m = residuals.t.len();
     let mut weights = vec![1.0; 2 * m];
     let mut result = None;
     for round in 0..=robust_rounds.max(1) {
-        let fit = fit_residuals(&residuals, 2 * m, &p0, &weights, &iterations(200))
+        let fit = fit_residuals(residuals, 2 * m, &p0, &weights, &iterations(200))
             .ok_or(DistortionError::FitFailed("drift/creep"))?;
         p0.clone_from(&fit.params);
         let (rx, ry) = fit.residuals.split_at(m);
@@ -271,17 +321,19 @@ fn fit_drift(
     }
     let fit = result.ok_or(DistortionError::FitFailed("drift/creep"))?;
     // One more evaluation of the normal matrix with the final weights.
-    let fit =
-        fit_residuals(&residuals, 2 * m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
+    let fit = fit_residuals(residuals, 2 * m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
+    Ok((fit, weights))
+}
+
+/// The drift/creep model, its parameters in SI units (m/s, m/s², m, s) with their scaled
+/// uncertainties, and the fit's degeneracies and bounds hit, from the final fit.
+fn drift_result(
+    fit: &ResidualFit,
+    weights: &[f64],
+    t0_map: LogisticLog,
+) -> Result<(DriftCreep, Vec<Parameter>, FitDiagnostics), DistortionError> {
     let p = &fit.params;
-    let chi2: f64 = fit
-        .residuals
-        .iter()
-        .zip(&weights)
-        .map(|(r, w)| w * r * r)
-        .sum();
-    let scale2 = chi2 / (2 * m).saturating_sub(7).max(1) as f64;
-    let s = sigmas(&fit.inverse_normal, scale2, 7);
+    let s = scaled_sigmas(fit, weights, 7);
     let t0 = t0_map.t0(p[6]);
     let t0_sigma = t0_map.derivative(p[6]) * s[6];
     let drift = DriftCreep {
@@ -316,6 +368,19 @@ fn fit_drift(
         },
     };
     Ok((drift, parameters, diagnostics))
+}
+
+/// 1σ uncertainties of the first `n` parameters of `fit`: `σ̂²·(JᵀWJ)⁻¹` with `σ̂²` the
+/// weighted χ² per degree of freedom (at least one).
+fn scaled_sigmas(fit: &ResidualFit, weights: &[f64], n: usize) -> Vec<f64> {
+    let chi2: f64 = fit
+        .residuals
+        .iter()
+        .zip(weights)
+        .map(|(r, w)| w * r * r)
+        .sum();
+    let scale2 = chi2 / fit.residuals.len().saturating_sub(n).max(1) as f64;
+    sigmas(&fit.inverse_normal, scale2, n)
 }
 
 /// Correlation beyond which two parameters count as nearly degenerate (only a combination
@@ -441,40 +506,111 @@ impl Residuals for DriftProblem<'_> {
     }
 }
 
+/// The hysteresis fit's data, one entry per local distortion: line times `tau` (s), the
+/// measured fast-axis scales `s` and the secant offsets to the neighbours (s; empty
+/// without secants).
+struct HysteresisData<'a> {
+    tau: Vec<f64>,
+    s: Vec<f64>,
+    offsets: Vec<&'a [f64]>,
+}
+
+impl<'a> HysteresisData<'a> {
+    fn new(local: &'a [LocalDistortion], secant_mode: bool) -> HysteresisData<'a> {
+        let tau: Vec<f64> = local.iter().map(|l| l.line_time_s).collect();
+        let s: Vec<f64> = local.iter().map(|l| l.scale).collect();
+        let offsets: Vec<&[f64]> = local
+            .iter()
+            .map(|l| {
+                if secant_mode {
+                    l.neighbour_dtau_s.as_slice()
+                } else {
+                    &[]
+                }
+            })
+            .collect();
+        HysteresisData { tau, s, offsets }
+    }
+
+    /// Writes `law`'s predicted scale (its secant over the neighbours where there are
+    /// offsets) minus the measured scale into `r`.
+    fn residuals(&self, law: &HysteresisLaw, r: &mut [f64]) {
+        let (tau, s, offsets) = (&self.tau, &self.s, &self.offsets);
+        for i in 0..tau.len() {
+            let predicted = if offsets[i].is_empty() {
+                law.scale(tau[i])
+            } else {
+                1.0 + secant(|x| law.excess_integral(x), tau[i], offsets[i])
+            };
+            r[i] = predicted - s[i];
+        }
+    }
+}
+
+/// The hysteresis law of `choice` with the fitted parameters `p` (a quartic's time scale
+/// defaults to `line_scan_time_s`; the exponential's `p[1]` is `ln τ_h`).
+fn hysteresis_law(choice: HysteresisChoice, line_scan_time_s: f64, p: &[f64]) -> HysteresisLaw {
+    match choice {
+        HysteresisChoice::None => HysteresisLaw::none(),
+        HysteresisChoice::Quartic { time_scale_s } => HysteresisLaw::Quartic {
+            coefficients: [p[0], p[1], p[2], p[3], p[4]],
+            time_scale_s: time_scale_s.unwrap_or(line_scan_time_s),
+        },
+        HysteresisChoice::Power => HysteresisLaw::Power { k: p[0], n: p[1] },
+        HysteresisChoice::Exponential => HysteresisLaw::Exponential {
+            amplitude: p[0],
+            time_constant_s: p[1].exp(),
+        },
+    }
+}
+
 fn fit_hysteresis(
     local: &[LocalDistortion],
     line_scan_time_s: f64,
     options: &FitOptions,
 ) -> Result<(HysteresisLaw, Vec<Parameter>), DistortionError> {
-    let tau: Vec<f64> = local.iter().map(|l| l.line_time_s).collect();
-    let s: Vec<f64> = local.iter().map(|l| l.scale).collect();
-    let offsets: Vec<&[f64]> = local
-        .iter()
-        .map(|l| {
-            if options.secant {
-                l.neighbour_dtau_s.as_slice()
-            } else {
-                &[]
-            }
-        })
-        .collect();
-    let m = tau.len();
-    let law_of = |p: &[f64]| -> HysteresisLaw {
-        match options.hysteresis {
-            HysteresisChoice::None => HysteresisLaw::none(),
-            HysteresisChoice::Quartic { time_scale_s } => HysteresisLaw::Quartic {
-                coefficients: [p[0], p[1], p[2], p[3], p[4]],
-                time_scale_s: time_scale_s.unwrap_or(line_scan_time_s),
-            },
-            HysteresisChoice::Power => HysteresisLaw::Power { k: p[0], n: p[1] },
-            HysteresisChoice::Exponential => HysteresisLaw::Exponential {
-                amplitude: p[0],
-                time_constant_s: p[1].exp(),
-            },
-        }
+    let data = HysteresisData::new(local, options.secant);
+    let m = data.tau.len();
+    let law_of = |p: &[f64]| hysteresis_law(options.hysteresis, line_scan_time_s, p);
+    let Some(p0) = hysteresis_start(&data, options.hysteresis, line_scan_time_s)? else {
+        return Ok((HysteresisLaw::none(), Vec::new()));
     };
-    let p0: Vec<f64> = match options.hysteresis {
-        HysteresisChoice::None => return Ok((HysteresisLaw::none(), Vec::new())),
+    let n = p0.len();
+    if m < n + 3 {
+        return Err(DistortionError::TooFewFeatures {
+            what: "hysteresis model",
+            found: m,
+            needed: n + 3,
+        });
+    }
+    let residuals = |p: &[f64], r: &mut [f64]| data.residuals(&law_of(p), r);
+    let (fit, weights) = hysteresis_irls(&residuals, m, p0, options.robust_rounds)?;
+    let sg = scaled_sigmas(&fit, &weights, n);
+    let p = &fit.params;
+    let law = law_of(p);
+    if let HysteresisLaw::Power { k, n } = law
+        && !(k > 0.0 && n > -1.0)
+    {
+        // ∫S dτ diverges at τ = 0 for n ≤ −1.
+        return Err(DistortionError::FitFailed(
+            "hysteresis (the power law left its domain k > 0, n > −1)",
+        ));
+    }
+    Ok((law, hysteresis_parameters(options.hysteresis, p, &sg)))
+}
+
+/// The start of the hysteresis fit for `choice` (`None` for no hysteresis): linear least
+/// squares for the quartic and (in logs) the power law, a grid over the time constant for
+/// the exponential.
+fn hysteresis_start(
+    data: &HysteresisData,
+    choice: HysteresisChoice,
+    line_scan_time_s: f64,
+) -> Result<Option<Vec<f64>>, DistortionError> {
+    let (tau, s) = (&data.tau, &data.s);
+    let m = tau.len();
+    let p0: Vec<f64> = match choice {
+        HysteresisChoice::None => return Ok(None),
         HysteresisChoice::Quartic { time_scale_s } => {
             let ts = time_scale_s.unwrap_or(line_scan_time_s);
             let design = DMatrix::from_fn(m, 5, |i, j| (tau[i] / ts).powi(j as i32));
@@ -488,7 +624,7 @@ fn fit_hysteresis(
         HysteresisChoice::Power => {
             let pts: Vec<(f64, f64)> = tau
                 .iter()
-                .zip(&s)
+                .zip(s)
                 .filter(|(t, s)| **t > 0.0 && **s > 0.0)
                 .map(|(t, s)| (t.ln(), s.ln()))
                 .collect();
@@ -497,54 +633,49 @@ fn fit_hysteresis(
             let q = linear_ls(&design, &y).ok_or(DistortionError::FitFailed("hysteresis"))?;
             vec![q[0].exp(), q[1]]
         }
-        HysteresisChoice::Exponential => {
-            let mut best = (f64::INFINITY, 0.0, line_scan_time_s.ln());
-            for k in 0..=40 {
-                let th = line_scan_time_s * 10f64.powf(-3.0 + 4.0 * k as f64 / 40.0);
-                let e: Vec<f64> = tau.iter().map(|t| (-t / th).exp()).collect();
-                let ee: f64 = e.iter().map(|e| e * e).sum();
-                let ey: f64 = e.iter().zip(&s).map(|(e, s)| e * (s - 1.0)).sum();
-                let a = ey / ee.max(1e-300);
-                let sse: f64 = e
-                    .iter()
-                    .zip(&s)
-                    .map(|(e, s)| (a * e - (s - 1.0)).powi(2))
-                    .sum();
-                if sse < best.0 {
-                    best = (sse, a, th.ln());
-                }
-            }
-            vec![best.1, best.2]
-        }
+        HysteresisChoice::Exponential => exponential_start(tau, s, line_scan_time_s),
     };
-    let n = p0.len();
-    if m < n + 3 {
-        return Err(DistortionError::TooFewFeatures {
-            what: "hysteresis model",
-            found: m,
-            needed: n + 3,
-        });
+    Ok(Some(p0))
+}
+
+/// `[A, ln τ_h]` of `S = 1 + A·exp(−τ/τ_h)` minimising the squared error over a grid of
+/// `τ_h` from 10⁻³ to 10 line scan times (s), `A` solved linearly at each point.
+fn exponential_start(tau: &[f64], s: &[f64], line_scan_time_s: f64) -> Vec<f64> {
+    let mut best = (f64::INFINITY, 0.0, line_scan_time_s.ln());
+    for k in 0..=40 {
+        let th = line_scan_time_s * 10f64.powf(-3.0 + 4.0 * k as f64 / 40.0);
+        let e: Vec<f64> = tau.iter().map(|t| (-t / th).exp()).collect();
+        let ee: f64 = e.iter().map(|e| e * e).sum();
+        let ey: f64 = e.iter().zip(s).map(|(e, s)| e * (s - 1.0)).sum();
+        let a = ey / ee.max(1e-300);
+        let sse: f64 = e
+            .iter()
+            .zip(s)
+            .map(|(e, s)| (a * e - (s - 1.0)).powi(2))
+            .sum();
+        if sse < best.0 {
+            best = (sse, a, th.ln());
+        }
     }
-    let residuals = |p: &[f64], r: &mut [f64]| {
-        let law = law_of(p);
-        for i in 0..m {
-            let predicted = if offsets[i].is_empty() {
-                law.scale(tau[i])
-            } else {
-                1.0 + secant(|x| law.excess_integral(x), tau[i], offsets[i])
-            };
-            r[i] = predicted - s[i];
-        }
-    };
-    let mut p = p0;
+    vec![best.1, best.2]
+}
+
+/// Huber IRLS of the `m` hysteresis residuals from `p0`. Returns the last fit, its normal
+/// matrix evaluated once more with the final weights, and those weights.
+fn hysteresis_irls<R: Residuals>(
+    residuals: &R,
+    m: usize,
+    mut p: Vec<f64>,
+    robust_rounds: usize,
+) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
     let mut weights = vec![1.0; m];
     let mut last = None;
-    for round in 0..=options.robust_rounds.max(1) {
-        let fit = fit_residuals(&residuals, m, &p, &weights, &iterations(200))
+    for round in 0..=robust_rounds.max(1) {
+        let fit = fit_residuals(residuals, m, &p, &weights, &iterations(200))
             .ok_or(DistortionError::FitFailed("hysteresis"))?;
         p.clone_from(&fit.params);
         let sigma = robust_scale(&fit.residuals).max(1e-300);
-        let h = if options.robust_rounds > 0 && round > 0 {
+        let h = if robust_rounds > 0 && round > 0 {
             huber_weights(&fit.residuals, sigma)
         } else {
             vec![1.0; m]
@@ -553,26 +684,14 @@ fn fit_hysteresis(
         last = Some(fit);
     }
     let fit = last.ok_or(DistortionError::FitFailed("hysteresis"))?;
-    let fit = fit_residuals(&residuals, m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
-    let chi2: f64 = fit
-        .residuals
-        .iter()
-        .zip(&weights)
-        .map(|(r, w)| w * r * r)
-        .sum();
-    let scale2 = chi2 / m.saturating_sub(n).max(1) as f64;
-    let sg = sigmas(&fit.inverse_normal, scale2, n);
-    let p = &fit.params;
-    let law = law_of(p);
-    if let HysteresisLaw::Power { k, n } = law
-        && !(k > 0.0 && n > -1.0)
-    {
-        // ∫S dτ diverges at τ = 0 for n ≤ −1.
-        return Err(DistortionError::FitFailed(
-            "hysteresis (the power law left its domain k > 0, n > −1)",
-        ));
-    }
-    let parameters = match options.hysteresis {
+    let fit = fit_residuals(residuals, m, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
+    Ok((fit, weights))
+}
+
+/// The reported hysteresis parameters of `choice` (the exponential's time constant in
+/// seconds, its uncertainty propagated from `ln τ_h`).
+fn hysteresis_parameters(choice: HysteresisChoice, p: &[f64], sg: &[f64]) -> Vec<Parameter> {
+    match choice {
         HysteresisChoice::None => Vec::new(),
         HysteresisChoice::Quartic { .. } => (0..5)
             .map(|k| parameter(&format!("c{k}"), p[k], sg[k], "1"))
@@ -585,8 +704,7 @@ fn fit_hysteresis(
             parameter("amplitude", p[0], sg[0], "1"),
             parameter("time_constant", p[1].exp(), p[1].exp() * sg[1], "s"),
         ],
-    };
-    Ok((law, parameters))
+    }
 }
 
 /// LM options with at most `max_iterations` steps (0: only the covariance at the start).

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use dhct_scan::{ImageChannel, ScanGeometry, ScanPair, ScanPass};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
@@ -143,6 +143,54 @@ impl Prepared {
     }
 }
 
+/// Wall clock for the stages of one search.
+struct Stopwatch(Instant);
+
+impl Stopwatch {
+    fn start() -> Stopwatch {
+        Stopwatch(Instant::now())
+    }
+
+    /// Stores the seconds since the previous lap (or the start) in `slot`.
+    fn lap(&mut self, slot: &mut f64) {
+        let now = Instant::now();
+        *slot = (now - self.0).as_secs_f64();
+        self.0 = now;
+    }
+}
+
+/// The image made ready for the correlation and the fits.
+struct Preprocessed {
+    /// +1 for bright features, −1 for dark: the flattened image was multiplied by it.
+    sign: f64,
+    /// Lines corrected, background removed, times `sign` (NaN where data are missing).
+    signed: Array2<f64>,
+    /// `signed` with its missing pixels set to its median; `None` if none were missing.
+    filled: Option<Array2<f64>>,
+}
+
+/// What every region's Gaussian fit shares (pixels).
+struct FitWindow {
+    /// Radius of the fit disc around a region's peak.
+    radius: f64,
+    /// `(row, column)` offsets of the pixels within `radius` of the peak.
+    offsets: Vec<(i64, i64)>,
+    /// Starting width σ of the Gaussian.
+    sigma_start: f64,
+    /// Nearest-neighbour distance (the upper width bound).
+    nn_px: f64,
+}
+
+/// A fitted region that passed the status and edge checks.
+struct Candidate {
+    fit: GaussianFit,
+    pixel_count: usize,
+    ncc_peak: f64,
+}
+
+/// Finds and fits the features of one image with the kernel and correlation plan of
+/// `prepared`: checks, preprocessing, correlation, segmentation, Gaussian fits, screening
+/// and bookkeeping (each stage timed). Also returns the correlation map.
 fn find_prepared(
     image: &ImageChannel,
     geometry: &ScanGeometry,
@@ -151,6 +199,73 @@ fn find_prepared(
     mask: Option<&Array2<bool>>,
     prepared: &Prepared,
 ) -> Result<(FeatureSet, Array2<f64>), FeatureError> {
+    check_sizes(image, geometry, mask)?;
+    let (rows, columns) = image.z.dim();
+    let (kh, kw) = prepared.kernel.values().dim();
+    let finite = count_finite(image, kh * kw)?;
+    let mut timings = StageTimings::default();
+    let mut clock = Stopwatch::start();
+    let pre = preprocess(image, geometry, options, mask, finite)?;
+    clock.lap(&mut timings.preprocess_s);
+    let ncc = prepared
+        .plan
+        .apply(pre.filled.as_ref().unwrap_or(&pre.signed).view());
+    clock.lap(&mut timings.correlation_s);
+
+    let regions = watershed_regions(&ncc, options.threshold);
+    let candidates = regions.len();
+    let mut rejected = Vec::new();
+    let kept = area_filter(regions, options.area_filter, columns, &mut rejected);
+    clock.lap(&mut timings.segmentation_s);
+
+    let window = fit_window(options, prepared);
+    let fits = fit_regions(&kept, &pre.signed, &ncc, &window);
+    clock.lap(&mut timings.fitting_s);
+
+    let edge_margin = (kh.max(kw) / 2) as f64;
+    let accepted = screen_fits(
+        &kept,
+        fits,
+        (rows, columns),
+        edge_margin,
+        &ncc,
+        &mut rejected,
+    );
+    let duplicates = mark_duplicates(&accepted, options.duplicate_fraction * prepared.nn_px)?;
+    let mut features = assemble_features(
+        accepted,
+        duplicates,
+        geometry,
+        pass,
+        pre.sign,
+        &mut rejected,
+    );
+    drop_shallow(&mut features, options.min_relative_height, &mut rejected);
+    features.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    for (id, f) in features.iter_mut().enumerate() {
+        f.id = id;
+    }
+    check_found(&features, pass, candidates, options, &rejected)?;
+    clock.lap(&mut timings.bookkeeping_s);
+    Ok((
+        FeatureSet {
+            pass,
+            features,
+            rejected,
+            candidates,
+            kernel_sigma_px: prepared.kernel_sigma_px,
+            timings,
+        },
+        ncc,
+    ))
+}
+
+/// Checks that the image has its geometry's size and the mask, if any, the image's.
+fn check_sizes(
+    image: &ImageChannel,
+    geometry: &ScanGeometry,
+    mask: Option<&Array2<bool>>,
+) -> Result<(), FeatureError> {
     let (rows, columns) = image.z.dim();
     if rows != geometry.rows() || columns != geometry.columns() {
         return Err(FeatureError::BadParameter(format!(
@@ -164,21 +279,19 @@ fn find_prepared(
             "mask size differs from the image size".into(),
         ));
     }
-    let Prepared {
-        kernel,
-        kernel_sigma_px,
-        nn_px,
-        plan,
-    } = prepared;
-    let (kernel_sigma_px, nn_px) = (*kernel_sigma_px, *nn_px);
-    let (kh, kw) = kernel.values().dim();
+    Ok(())
+}
 
+/// The number of finite pixels; an error if fewer than half the image or four kernels'
+/// worth (`kernel_len` pixels each) are finite, or if the image is flat.
+fn count_finite(image: &ImageChannel, kernel_len: usize) -> Result<usize, FeatureError> {
+    let (rows, columns) = image.z.dim();
     // Missing data: NaN pixels are excluded from fits and filled for the correlation.
     let (finite, low, high) = image.z.iter().filter(|v| v.is_finite()).fold(
         (0usize, f64::INFINITY, f64::NEG_INFINITY),
         |(n, lo, hi), &v| (n + 1, lo.min(v), hi.max(v)),
     );
-    if finite < (rows * columns) / 2 || finite < 4 * kh * kw {
+    if finite < (rows * columns) / 2 || finite < 4 * kernel_len {
         return Err(FeatureError::MissingData {
             finite,
             total: rows * columns,
@@ -187,13 +300,20 @@ fn find_prepared(
     if low == high {
         return Err(FeatureError::FlatImage);
     }
-    let mut timings = StageTimings::default();
-    let mut clock = Instant::now();
-    let mut lap = |slot: &mut f64| {
-        let now = Instant::now();
-        *slot = (now - clock).as_secs_f64();
-        clock = now;
-    };
+    Ok(finite)
+}
+
+/// Line correction, background removal (fitted where `mask` is true) and the polarity
+/// sign; fills missing pixels with the median for the correlation when fewer than all
+/// pixels are `finite`.
+fn preprocess(
+    image: &ImageChannel,
+    geometry: &ScanGeometry,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+    finite: usize,
+) -> Result<Preprocessed, FeatureError> {
+    let (rows, columns) = image.z.dim();
     let mut lined = image.z.clone();
     correct_lines_in_place(&mut lined, geometry.fast_axis(), options.line_correction);
     let flattened = remove_background(&lined, options.background, mask)?;
@@ -214,97 +334,130 @@ fn find_prepared(
         let fill = *values.select_nth_unstable_by(middle, f64::total_cmp).1;
         Some(signed.mapv(|v| if v.is_finite() { v } else { fill }))
     };
-    lap(&mut timings.preprocess_s);
-    let ncc = plan.apply(filled.as_ref().unwrap_or(&signed).view());
-    lap(&mut timings.correlation_s);
+    Ok(Preprocessed {
+        sign,
+        signed,
+        filled,
+    })
+}
 
-    let regions = watershed_regions(&ncc, options.threshold);
-    let candidates = regions.len();
-    let mut rejected = Vec::new();
-    let kept = area_filter(regions, options.area_filter, columns, &mut rejected);
-
-    lap(&mut timings.segmentation_s);
-    let edge_margin = (kh.max(kw) / 2) as f64;
-    let sigma_start = if kernel_sigma_px.is_finite() {
-        kernel_sigma_px
+/// The fit disc and starting width for this search.
+fn fit_window(options: &FeatureOptions, prepared: &Prepared) -> FitWindow {
+    let nn_px = prepared.nn_px;
+    let sigma_start = if prepared.kernel_sigma_px.is_finite() {
+        prepared.kernel_sigma_px
     } else {
         nn_px / 4.0
     };
     // Each region identifies one feature; the fit uses a disc of radius 0.4·NN (by default) around the
     // region's peak, so the pixel set is symmetric about the feature (a watershed basin's
     // shape depends on tie-breaking at saddles and would bias the centre).
-    let window_radius = (options.fit_radius_fraction * nn_px).max(2.0);
-    let window_offsets: Vec<(i64, i64)> = {
-        let reach = window_radius.ceil() as i64;
+    let radius = (options.fit_radius_fraction * nn_px).max(2.0);
+    let offsets: Vec<(i64, i64)> = {
+        let reach = radius.ceil() as i64;
         (-reach..=reach)
             .flat_map(|dr| (-reach..=reach).map(move |dc| (dr, dc)))
-            .filter(|&(dr, dc)| ((dr * dr + dc * dc) as f64) <= window_radius * window_radius)
+            .filter(|&(dr, dc)| ((dr * dr + dc * dc) as f64) <= radius * radius)
             .collect()
     };
-    let z_values = signed.as_standard_layout();
-    let fits: Vec<_> = kept
-        .par_iter()
-        .map(|region| {
-            let (peak_row, peak_col) = (
-                (region.peak / columns) as i64,
-                (region.peak % columns) as i64,
-            );
-            let capacity = window_offsets.len();
-            let (mut xs, mut ys, mut zs) = (
-                Vec::with_capacity(capacity),
-                Vec::with_capacity(capacity),
-                Vec::with_capacity(capacity),
-            );
-            for &(dr, dc) in &window_offsets {
-                let (r, c) = (peak_row + dr, peak_col + dc);
-                if r < 0 || c < 0 || r >= rows as i64 || c >= columns as i64 {
-                    continue;
-                }
-                let z = z_values[[r as usize, c as usize]];
-                if z.is_finite() {
-                    xs.push(c as f64);
-                    ys.push(r as f64);
-                    zs.push(z);
-                }
-            }
-            let (x, y) = (peak_col as f64, peak_row as f64);
-            let start = subpixel_peak(&ncc, peak_row as usize, peak_col as usize);
-            let limits = FitLimits {
-                x_range: (x - window_radius, x + window_radius),
-                y_range: (y - window_radius, y + window_radius),
-                sigma_range: (0.25, nn_px.max(1.0)),
-                max_iterations: 100,
-                shape: FitShape::Elliptical,
-            };
-            let mut fit = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &limits);
-            if fit.status == FitStatus::BadShape {
-                // Noise (e.g. scan-line streaks) can pull a free ellipse out of shape; a
-                // round atom is still well described by a circular Gaussian.
-                let circular = FitLimits {
-                    shape: FitShape::Circular,
-                    ..limits
-                };
-                let retry = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &circular);
-                if matches!(
-                    retry.status,
-                    FitStatus::Converged | FitStatus::IterationLimit
-                ) {
-                    fit = GaussianFit {
-                        status: FitStatus::ConvergedCircular,
-                        ..retry
-                    };
-                }
-            }
-            (fit, xs.len())
-        })
-        .collect();
-
-    lap(&mut timings.fitting_s);
-    struct Candidate {
-        fit: crate::gaussian_fit::GaussianFit,
-        pixel_count: usize,
-        ncc_peak: f64,
+    FitWindow {
+        radius,
+        offsets,
+        sigma_start,
+        nn_px,
     }
+}
+
+/// Fits a Gaussian to each region's disc of `signed` (in parallel, in region order),
+/// returning each fit with the number of finite pixels it used.
+fn fit_regions(
+    kept: &[Region],
+    signed: &Array2<f64>,
+    ncc: &Array2<f64>,
+    window: &FitWindow,
+) -> Vec<(GaussianFit, usize)> {
+    let z_values = signed.as_standard_layout();
+    let z_values = z_values.view();
+    kept.par_iter()
+        .map(|region| fit_region(region, z_values, ncc, window))
+        .collect()
+}
+
+/// Fits one region: an elliptical Gaussian to the finite pixels of the disc around its
+/// peak, started at the correlation's sub-pixel peak, retried as circular if the ellipse
+/// came out of shape.
+fn fit_region(
+    region: &Region,
+    z_values: ArrayView2<f64>,
+    ncc: &Array2<f64>,
+    window: &FitWindow,
+) -> (GaussianFit, usize) {
+    let (rows, columns) = z_values.dim();
+    let (peak_row, peak_col) = (
+        (region.peak / columns) as i64,
+        (region.peak % columns) as i64,
+    );
+    let capacity = window.offsets.len();
+    let (mut xs, mut ys, mut zs) = (
+        Vec::with_capacity(capacity),
+        Vec::with_capacity(capacity),
+        Vec::with_capacity(capacity),
+    );
+    for &(dr, dc) in &window.offsets {
+        let (r, c) = (peak_row + dr, peak_col + dc);
+        if r < 0 || c < 0 || r >= rows as i64 || c >= columns as i64 {
+            continue;
+        }
+        let z = z_values[[r as usize, c as usize]];
+        if z.is_finite() {
+            xs.push(c as f64);
+            ys.push(r as f64);
+            zs.push(z);
+        }
+    }
+    let (x, y) = (peak_col as f64, peak_row as f64);
+    let start = subpixel_peak(ncc, peak_row as usize, peak_col as usize);
+    let limits = FitLimits {
+        x_range: (x - window.radius, x + window.radius),
+        y_range: (y - window.radius, y + window.radius),
+        sigma_range: (0.25, window.nn_px.max(1.0)),
+        max_iterations: 100,
+        shape: FitShape::Elliptical,
+    };
+    let sigma_start = window.sigma_start;
+    let mut fit = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &limits);
+    if fit.status == FitStatus::BadShape {
+        // Noise (e.g. scan-line streaks) can pull a free ellipse out of shape; a
+        // round atom is still well described by a circular Gaussian.
+        let circular = FitLimits {
+            shape: FitShape::Circular,
+            ..limits
+        };
+        let retry = fit_gaussian(&xs, &ys, &zs, start, sigma_start, &circular);
+        if matches!(
+            retry.status,
+            FitStatus::Converged | FitStatus::IterationLimit
+        ) {
+            fit = GaussianFit {
+                status: FitStatus::ConvergedCircular,
+                ..retry
+            };
+        }
+    }
+    (fit, xs.len())
+}
+
+/// Rejects the fits that failed, hit a bound, came out of shape or whose centre lies
+/// within `edge_margin` px of the border of an image of `(rows, columns)`; the rest become
+/// candidates carrying their region's correlation peak.
+fn screen_fits(
+    kept: &[Region],
+    fits: Vec<(GaussianFit, usize)>,
+    (rows, columns): (usize, usize),
+    edge_margin: f64,
+    ncc: &Array2<f64>,
+    rejected: &mut Vec<RejectedCandidate>,
+) -> Vec<Candidate> {
     let mut accepted = Vec::new();
     for (region, (fit, pixel_count)) in kept.iter().zip(fits) {
         let reason = match fit.status {
@@ -332,9 +485,12 @@ fn find_prepared(
             }),
         }
     }
+    accepted
+}
 
-    // Duplicates: of fits closer than the duplicate distance, keep the best-correlated.
-    let duplicate_px = options.duplicate_fraction * nn_px;
+/// Which candidates are duplicates: of fits closer than `duplicate_px`, all but the
+/// best-correlated (the first on ties). Nothing is a duplicate if `duplicate_px` is 0.
+fn mark_duplicates(accepted: &[Candidate], duplicate_px: f64) -> Result<Vec<bool>, FeatureError> {
     let mut is_duplicate = vec![false; accepted.len()];
     if duplicate_px > 0.0 && accepted.len() > 1 {
         let points: Vec<[f64; 2]> = accepted.iter().map(|c| [c.fit.x0, c.fit.y0]).collect();
@@ -362,7 +518,20 @@ fn find_prepared(
             }
         }
     }
+    Ok(is_duplicate)
+}
 
+/// Turns the non-duplicate candidates into features (positions in pixels and metres,
+/// heights back in the image's sign, acquisition times in seconds); duplicates are
+/// rejected.
+fn assemble_features(
+    accepted: Vec<Candidate>,
+    is_duplicate: Vec<bool>,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    sign: f64,
+    rejected: &mut Vec<RejectedCandidate>,
+) -> Vec<Feature> {
     let mut features = Vec::with_capacity(accepted.len());
     for (candidate, duplicate) in accepted.into_iter().zip(is_duplicate) {
         let fit = candidate.fit;
@@ -399,11 +568,18 @@ fn find_prepared(
             line_time_s: time.since_line_start,
         });
     }
-    drop_shallow(&mut features, options.min_relative_height, &mut rejected);
-    features.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
-    for (id, f) in features.iter_mut().enumerate() {
-        f.id = id;
-    }
+    features
+}
+
+/// An error if no feature survived or if their median correlation peak is below
+/// `options.min_median_ncc` (the image looks like noise).
+fn check_found(
+    features: &[Feature],
+    pass: ScanPass,
+    candidates: usize,
+    options: &FeatureOptions,
+    rejected: &[RejectedCandidate],
+) -> Result<(), FeatureError> {
     let pass_name = match pass {
         ScanPass::Trace => "trace",
         ScanPass::Retrace => "retrace",
@@ -413,7 +589,7 @@ fn find_prepared(
             pass: pass_name,
             candidates,
             threshold: options.threshold,
-            rejected: RejectionCounts::of(&rejected).to_string(),
+            rejected: RejectionCounts::of(rejected).to_string(),
         });
     }
     let mut peaks: Vec<f64> = features.iter().map(|f| f.ncc_peak).collect();
@@ -427,18 +603,7 @@ fn find_prepared(
             limit: options.min_median_ncc,
         });
     }
-    lap(&mut timings.bookkeeping_s);
-    Ok((
-        FeatureSet {
-            pass,
-            features,
-            rejected,
-            candidates,
-            kernel_sigma_px,
-            timings,
-        },
-        ncc,
-    ))
+    Ok(())
 }
 
 /// Sub-pixel position `(x, y)` of the correlation peak at `(row, col)` from a parabola
@@ -466,8 +631,6 @@ fn subpixel_peak(map: &Array2<f64>, row: usize, col: usize) -> (f64, f64) {
     (col as f64 + dx, row as f64 + dy)
 }
 
-/// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
-/// over regions larger than 10 px.
 /// Drops the features whose amplitude is below `fraction` × the 90th percentile of all
 /// amplitudes (the deepest or brightest kind is kept; `fraction` 0 keeps everything).
 fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<RejectedCandidate>) {
@@ -490,6 +653,8 @@ fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<R
     });
 }
 
+/// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
+/// over regions larger than 10 px.
 fn area_filter(
     regions: Vec<Region>,
     enabled: bool,

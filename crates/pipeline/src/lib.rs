@@ -39,7 +39,9 @@ mod analysis;
 mod calibration;
 mod error;
 mod options;
+mod region_fit;
 mod regions;
+mod unit_cells;
 mod warnings;
 
 pub use affine::AffineComparison;
@@ -61,22 +63,52 @@ pub use warnings::{
 
 use std::time::Instant;
 
+use dhct_calibrate::PairCalibration;
 use dhct_distortion::{
-    CorrectedFeature, DhctResult, DistortionError, PassInput, Rdf, analyse_seeded,
+    CorrectedFeature, DhctResult, DistortionError, DistortionModel, PassInput, Rdf, analyse_seeded,
     correct_features, correct_image, radial_distribution,
 };
 use dhct_features::{Feature, FeatureSet, find_features_in_pair_and_correlation};
-use dhct_lattice::{Lattice, angular_distribution, fit_lattice};
-use dhct_scan::{ScanPair, ScanPass};
-use dhct_unitcell::{
-    AveragedCell, ConfidenceEllipse, LocalCell, asymmetric_unit, average_unit_cell, local_cells,
-    operations, symmetrize, symmetry_residuals,
-};
+use dhct_lattice::Lattice;
+use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use ndarray::Array2;
 use rayon::prelude::*;
 
+use region_fit::{fit_regions, index_features};
+use unit_cells::unit_cell_analysis;
+
 /// Fewest features per image for the chain to start.
 pub const MIN_FEATURES: usize = 12;
+
+/// The calibration stage's result: the lattice the images show, or why it could not be
+/// measured.
+type Measured = Result<PairCalibration, String>;
+
+/// What every stage of [`run`] after the calibration reads: the images, the lattice, the
+/// mask (raw image's rows × columns, true = use), the options and the calibration.
+#[derive(Clone, Copy)]
+struct Inputs<'a> {
+    pair: &'a ScanPair,
+    lattice: &'a dyn Lattice,
+    mask: Option<&'a Array2<bool>>,
+    options: &'a PipelineOptions,
+    calibration: &'a Measured,
+}
+
+/// The correction kept (the fitted model, or the global affine map when the model did
+/// worse than it or could not be fitted), the features it corrected (sample frame) and the
+/// region fits made with them.
+struct Chosen {
+    dhct: DhctResult,
+    rejected_model: Option<DistortionModel>,
+    correction: CorrectionSource,
+    corrected_features: Vec<Vec<CorrectedFeature>>,
+    regions: Vec<RegionFit>,
+    skipped_regions: Vec<SkippedRegion>,
+    comparisons: Vec<AffineComparison>,
+    /// Per set, each feature's lattice index from the region fits (`None`: not indexed).
+    indices: Vec<Vec<Option<FeatureIndex>>>,
+}
 
 /// Runs the chain on `pair` (trace, and retrace when present) for `lattice`. `mask` (rows ×
 /// columns of the raw image, true = use) restricts the background fit, the model fit and the
@@ -92,6 +124,93 @@ pub fn run(
     let start = Instant::now();
     options.validate()?;
     let geometry = pair.geometry();
+    check_mask(mask, geometry)?;
+    let mut timings = StageTimings::default();
+
+    // 0. The lattice the image shows, checked against the inputs.
+    progress(Stage::Calibration);
+    let calibration = timed(&mut timings.calibration_s, || {
+        calibration::measure(pair, lattice, mask, &options.calibration)
+    })?;
+    let inputs = Inputs {
+        pair,
+        lattice,
+        mask,
+        options,
+        calibration: &calibration,
+    };
+
+    // 1. Features (the kernel sized from the lattice's spacing as the image shows it).
+    progress(Stage::Features);
+    let found = timed(&mut timings.features_s, || find_all_features(&inputs))?;
+
+    // 2. Model.
+    progress(Stage::Model);
+    let (dhct, model_failure) = timed(&mut timings.model_s, || {
+        fit_distortion_model(&inputs, &found)
+    })?;
+
+    // 3–4. Features corrected by the model and fitted per region; the global affine
+    // correction, fitted the same way, is the floor the model must beat.
+    progress(Stage::Correction);
+    let sets: Vec<&FeatureSet> = found.iter().map(|(s, _)| s).collect();
+    // The fitted model's weak spots, whichever correction is kept.
+    let fit_warnings = warnings::fit_warnings(&dhct);
+    let corrected_features = timed(&mut timings.correction_s, || {
+        correct_sets(&dhct.model, geometry, &sets)
+    });
+    progress(Stage::LatticeFit);
+    let model_failed = model_failure.is_some();
+    let chosen = timed(&mut timings.lattice_fit_s, || {
+        choose_correction(&inputs, &sets, dhct, model_failed, corrected_features)
+    })?;
+
+    // The images, with the correction chosen, and their lattices checked.
+    let (images, image_checks) = correct_images(&inputs, &sets, &chosen.dhct.model, &mut timings)?;
+
+    // 5. Unit cells.
+    progress(Stage::UnitCells);
+    let (unit_cell, unit_cell_note) = timed(&mut timings.unit_cells_s, || {
+        unit_cells(&inputs, &sets, &chosen.regions, &images)
+    });
+
+    let mut analysis = Analysis {
+        passes: pass_outputs(
+            &inputs,
+            &chosen.dhct,
+            found,
+            chosen.corrected_features,
+            images,
+            chosen.indices,
+        ),
+        dhct: chosen.dhct,
+        regions: chosen.regions,
+        skipped_regions: chosen.skipped_regions,
+        unit_cell,
+        unit_cell_note,
+        calibration,
+        affine: chosen.comparisons,
+        correction: chosen.correction,
+        rejected_model: chosen.rejected_model,
+        corrected_images: image_checks,
+        warnings: Vec::new(),
+        timings,
+    };
+    analysis.warnings = collect_warnings(&analysis, geometry, lattice, fit_warnings, model_failure);
+    analysis.timings.total_s = start.elapsed().as_secs_f64();
+    Ok(analysis)
+}
+
+/// Runs `stage`, adding its wall time (seconds) to `slot`.
+fn timed<T>(slot: &mut f64, stage: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let result = stage();
+    *slot += t.elapsed().as_secs_f64();
+    result
+}
+
+/// Checks that `mask`, if given, has the image's size and selects at least one pixel.
+fn check_mask(mask: Option<&Array2<bool>>, geometry: &ScanGeometry) -> Result<(), PipelineError> {
     if let Some(mask) = mask {
         let (rows, columns) = mask.dim();
         if (rows, columns) != (geometry.rows(), geometry.columns()) {
@@ -106,25 +225,22 @@ pub fn run(
             return Err(PipelineError::EmptyMask);
         }
     }
-    let mut timings = StageTimings::default();
+    Ok(())
+}
 
-    // 0. The lattice the image shows, checked against the inputs.
-    progress(Stage::Calibration);
-    let t = Instant::now();
-    let calibration = calibration::measure(pair, lattice, mask, &options.calibration)?;
-    timings.calibration_s = t.elapsed().as_secs_f64();
-
-    // 1. Features (the kernel sized from the lattice's spacing as the image shows it).
-    progress(Stage::Features);
-    let t = Instant::now();
-    let mut feature_options = options.features.clone();
+/// Step 1: the features of every image with its correlation map, the kernel sized from
+/// the lattice's nearest-neighbour distance (metres) as the image shows it (scaled by the
+/// calibration's mean scale when the lattice was measured). An error when an image has
+/// fewer than [`MIN_FEATURES`].
+fn find_all_features(inputs: &Inputs) -> Result<Vec<(FeatureSet, Array2<f64>)>, PipelineError> {
+    let mut feature_options = inputs.options.features.clone();
     if !feature_options.neighbour_distance.is_finite() {
-        feature_options.neighbour_distance = lattice.nearest_neighbour_distance();
+        feature_options.neighbour_distance = inputs.lattice.nearest_neighbour_distance();
     }
-    if let Ok(found) = &calibration {
+    if let Ok(found) = inputs.calibration {
         feature_options.neighbour_distance *= found.calibration.mean_scale;
     }
-    let found = find_features_in_pair_and_correlation(pair, &feature_options, mask)?;
+    let found = find_features_in_pair_and_correlation(inputs.pair, &feature_options, inputs.mask)?;
     for (set, _) in &found {
         if set.features.len() < MIN_FEATURES {
             return Err(PipelineError::TooFewFeatures {
@@ -134,16 +250,23 @@ pub fn run(
             });
         }
     }
-    timings.features_s = t.elapsed().as_secs_f64();
+    Ok(found)
+}
 
-    // 2. Model.
-    progress(Stage::Model);
-    let t = Instant::now();
-    let inputs: Vec<PassInput> = found
+/// Step 2: the drift/creep/hysteresis model, its neighbour search seeded with the pixel
+/// size the measured lattice implies. Returns the model, or the global affine correction
+/// with the reason the model failed.
+fn fit_distortion_model(
+    inputs: &Inputs,
+    found: &[(FeatureSet, Array2<f64>)],
+) -> Result<(DhctResult, Option<String>), PipelineError> {
+    let (geometry, lattice, calibration) =
+        (inputs.pair.geometry(), inputs.lattice, inputs.calibration);
+    let passes: Vec<PassInput> = found
         .iter()
         .map(|(set, _)| PassInput {
             features: &set.features,
-            mask,
+            mask: inputs.mask,
         })
         .collect();
     let seeded = calibration
@@ -153,55 +276,68 @@ pub fn run(
     // A model that cannot be fitted (too few features with full neighbour shells: a large
     // cell on a small frame) falls back to the global affine correction when the lattice
     // was measured: never worse than it.
-    let (dhct, model_failure) =
-        match analyse_seeded(&inputs, geometry, lattice, &options.dhct, seeded.as_ref()) {
-            Ok(dhct) => (dhct, None),
-            Err(e) => {
-                let affine = calibration
-                    .as_ref()
-                    .ok()
-                    .filter(|found| affine::trusted_alone(&found.calibration))
-                    .and_then(|found| affine::affine_model(geometry, &found.calibration));
-                match affine {
-                    Some(model) => (
-                        DhctResult {
-                            model,
-                            passes: Vec::new(),
-                        },
-                        Some(model_error(e, &found, lattice).to_string()),
-                    ),
-                    None => return Err(model_error(e, &found, lattice)),
-                }
+    match analyse_seeded(
+        &passes,
+        geometry,
+        lattice,
+        &inputs.options.dhct,
+        seeded.as_ref(),
+    ) {
+        Ok(dhct) => Ok((dhct, None)),
+        Err(e) => {
+            let affine = calibration
+                .as_ref()
+                .ok()
+                .filter(|found| affine::trusted_alone(&found.calibration))
+                .and_then(|found| affine::affine_model(geometry, &found.calibration));
+            match affine {
+                Some(model) => Ok((
+                    DhctResult {
+                        model,
+                        passes: Vec::new(),
+                    },
+                    Some(model_error(e, found, lattice).to_string()),
+                )),
+                None => Err(model_error(e, found, lattice)),
             }
-        };
-    timings.model_s = t.elapsed().as_secs_f64();
+        }
+    }
+}
 
-    // 3–4. Features corrected by the model and fitted per region; the global affine
-    // correction, fitted the same way, is the floor the model must beat.
-    progress(Stage::Correction);
-    let t = Instant::now();
-    let mut dhct = dhct;
-    // The fitted model's weak spots, whichever correction is kept.
-    let fit_warnings = warnings::fit_warnings(&dhct);
+/// Steps 3–4: the lattice fitted per region to the features `dhct` corrected. When the
+/// lattice was measured and the model was fitted, each region is compared with the global
+/// affine correction; if the affine map does better in the largest region it replaces the
+/// model, and the features are corrected and the regions fitted again. Every feature is
+/// then indexed from the region fits kept.
+fn choose_correction(
+    inputs: &Inputs,
+    sets: &[&FeatureSet],
+    mut dhct: DhctResult,
+    model_failed: bool,
+    mut corrected_features: Vec<Vec<CorrectedFeature>>,
+) -> Result<Chosen, PipelineError> {
+    let Inputs {
+        pair,
+        lattice,
+        mask,
+        options,
+        calibration,
+    } = *inputs;
+    let geometry = pair.geometry();
     let mut rejected_model = None;
-    let sets: Vec<&FeatureSet> = found.iter().map(|(s, _)| s).collect();
-    let mut corrected_features = correct_sets(&dhct.model, geometry, &sets);
-    timings.correction_s = t.elapsed().as_secs_f64();
-    progress(Stage::LatticeFit);
-    let t = Instant::now();
     let (mut regions, mut skipped_regions) =
-        fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
-    let mut correction = if model_failure.is_some() {
+        fit_regions(pair, lattice, mask, options, sets, &corrected_features)?;
+    let mut correction = if model_failed {
         CorrectionSource::Affine
     } else {
         CorrectionSource::DriftModel
     };
     let mut comparisons = Vec::new();
-    if let (Ok(found), None) = (&calibration, &model_failure) {
+    if let (Ok(found), false) = (calibration, model_failed) {
         let c = &found.calibration;
         comparisons = regions
             .iter()
-            .filter_map(|r| affine::compare(r, &sets, geometry, c, lattice, &options.lattice_fit))
+            .filter_map(|r| affine::compare(r, sets, geometry, c, lattice, &options.lattice_fit))
             .collect();
         // The largest region decides.
         if comparisons
@@ -210,76 +346,118 @@ pub fn run(
             && let Some(model) = affine::affine_model(geometry, c)
         {
             rejected_model = Some(std::mem::replace(&mut dhct.model, model));
-            corrected_features = correct_sets(&dhct.model, geometry, &sets);
+            corrected_features = correct_sets(&dhct.model, geometry, sets);
             (regions, skipped_regions) =
-                fit_regions(pair, lattice, mask, options, &sets, &corrected_features)?;
+                fit_regions(pair, lattice, mask, options, sets, &corrected_features)?;
             correction = CorrectionSource::Affine;
         }
     }
-    let mut indices: Vec<Vec<Option<FeatureIndex>>> =
-        sets.iter().map(|s| vec![None; s.features.len()]).collect();
-    for (r, region) in regions.iter().enumerate() {
-        for (k, members) in region.members.iter().enumerate() {
-            let pass_slot = sets
-                .iter()
-                .position(|s| s.pass == region.passes[k])
-                .expect("region sets are passes of the pair");
-            for (point, &feature) in region.fit.points[k].iter().zip(members) {
-                indices[pass_slot][feature] = Some(FeatureIndex {
-                    region: r,
-                    n: point.n,
-                    m: point.m,
-                    site: point.site,
-                    deviation_m: point.deviation_m,
-                });
-            }
-        }
-    }
-    timings.lattice_fit_s = t.elapsed().as_secs_f64();
+    let indices = index_features(sets, &regions);
+    Ok(Chosen {
+        dhct,
+        rejected_model,
+        correction,
+        corrected_features,
+        regions,
+        skipped_regions,
+        comparisons,
+        indices,
+    })
+}
 
-    // The images, with the correction chosen.
-    let t = Instant::now();
-    let images: Vec<Array2<f64>> = sets
-        .par_iter()
+/// The images, with the correction chosen (`model`), and their lattices measured as an
+/// outside check would measure them; the times are added to the correction and
+/// calibration stages.
+fn correct_images(
+    inputs: &Inputs,
+    sets: &[&FeatureSet],
+    model: &DistortionModel,
+    timings: &mut StageTimings,
+) -> Result<(Vec<Array2<f64>>, Vec<CorrectedImageCheck>), PipelineError> {
+    let images = timed(&mut timings.correction_s, || {
+        resample_images(inputs.pair, model, sets)
+    })?;
+    let checks = timed(&mut timings.calibration_s, || {
+        check_images(inputs, sets, &images)
+    });
+    Ok((images, checks))
+}
+
+/// Every image resampled onto the sample-frame grid by `model` (z unchanged; in `sets`
+/// order).
+fn resample_images(
+    pair: &ScanPair,
+    model: &DistortionModel,
+    sets: &[&FeatureSet],
+) -> Result<Vec<Array2<f64>>, PipelineError> {
+    let geometry = pair.geometry();
+    sets.par_iter()
         .map(|set| {
             let image = pair
                 .image(set.pass)
                 .expect("features were found in this image");
-            correct_image(&dhct.model, geometry, set.pass, &image.z).map_err(PipelineError::from)
+            correct_image(model, geometry, set.pass, &image.z).map_err(PipelineError::from)
         })
-        .collect::<Result<_, _>>()?;
-    timings.correction_s += t.elapsed().as_secs_f64();
-    // The corrected images measured as an outside check would measure them.
-    let t = Instant::now();
-    let image_checks = if calibration.is_ok() {
+        .collect()
+}
+
+/// Each corrected image's lattice, measured as an outside check would measure it; none
+/// when the raw images' lattice could not be measured.
+fn check_images(
+    inputs: &Inputs,
+    sets: &[&FeatureSet],
+    images: &[Array2<f64>],
+) -> Vec<CorrectedImageCheck> {
+    if inputs.calibration.is_ok() {
         let passes: Vec<(ScanPass, &Array2<f64>)> =
             sets.iter().map(|s| s.pass).zip(images.iter()).collect();
-        calibration::check_corrected(&passes, geometry, lattice)
+        calibration::check_corrected(&passes, inputs.pair.geometry(), inputs.lattice)
     } else {
         Vec::new()
-    };
-    timings.calibration_s += t.elapsed().as_secs_f64();
+    }
+}
+
+/// Step 5 (the unit cell of the corrected `images`), or the note why there is none.
+fn unit_cells(
+    inputs: &Inputs,
+    sets: &[&FeatureSet],
+    regions: &[RegionFit],
+    images: &[Array2<f64>],
+) -> (Option<UnitCellAnalysis>, Option<String>) {
+    let Inputs {
+        pair,
+        lattice,
+        options,
+        ..
+    } = *inputs;
+    let corrected_images: Vec<&Array2<f64>> = images.iter().collect();
+    match unit_cell_analysis(pair, lattice, options, sets, regions, &corrected_images) {
+        Ok(analysis) => (Some(analysis), None),
+        Err(note) => (None, Some(note)),
+    }
+}
+
+/// Each image's results: its features, correlation map (when kept), corrected features
+/// and image, lattice indices, and the RDF of the corrected features on the raw RDF's bins
+/// (paper Fig. 6).
+fn pass_outputs(
+    inputs: &Inputs,
+    dhct: &DhctResult,
+    found: Vec<(FeatureSet, Array2<f64>)>,
+    corrected_features: Vec<Vec<CorrectedFeature>>,
+    images: Vec<Array2<f64>>,
+    indices: Vec<Vec<Option<FeatureIndex>>>,
+) -> Vec<PassOutput> {
+    let (geometry, mask) = (inputs.pair.geometry(), inputs.mask);
     let corrected: Vec<(Vec<CorrectedFeature>, Array2<f64>)> =
         corrected_features.into_iter().zip(images).collect();
-
-    // 5. Unit cells.
-    progress(Stage::UnitCells);
-    let t = Instant::now();
-    let corrected_images: Vec<&Array2<f64>> = corrected.iter().map(|(_, z)| z).collect();
-    let (unit_cell, unit_cell_note) =
-        match unit_cell_analysis(pair, lattice, options, &sets, &regions, &corrected_images) {
-            Ok(analysis) => (Some(analysis), None),
-            Err(note) => (None, Some(note)),
-        };
-    timings.unit_cells_s = t.elapsed().as_secs_f64();
-
     // RDF of the corrected features on the raw RDF's bins (paper Fig. 6).
     let area = mask
         .map(|m| m.iter().filter(|&&v| v).count() as f64)
         .unwrap_or((geometry.rows() * geometry.columns()) as f64)
         * geometry.pitch_x()
         * geometry.pitch_y();
-    let passes: Vec<PassOutput> = found
+    found
         .into_iter()
         .zip(corrected)
         .zip(indices)
@@ -294,40 +472,44 @@ pub fn run(
             PassOutput {
                 pass: set.pass,
                 features: set,
-                correlation: options.keep_correlation.then_some(correlation),
+                correlation: inputs.options.keep_correlation.then_some(correlation),
                 corrected,
                 corrected_image: image,
                 indices,
                 rdf_corrected,
             }
         })
-        .collect();
-    let mut warnings = warnings::calibration_warnings(&calibration);
+        .collect()
+}
+
+/// The warnings of `analysis`, in report order: calibration, assumptions, the fitted
+/// model's weak spots (`fit_warnings`), its failure (`model_failure`), the affine
+/// comparison, plausibility of the result, the corrected images' lattices.
+fn collect_warnings(
+    analysis: &Analysis,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    fit_warnings: Vec<Warning>,
+    model_failure: Option<String>,
+) -> Vec<Warning> {
+    let mut warnings = warnings::calibration_warnings(&analysis.calibration);
     warnings.extend(warnings::assumption_warnings(geometry));
     warnings.extend(fit_warnings);
     warnings.extend(model_failure.map(warnings::model_failure_warning));
     warnings.extend(warnings::affine_warnings(
-        &comparisons,
-        correction == CorrectionSource::Affine,
+        &analysis.affine,
+        analysis.correction == CorrectionSource::Affine,
     ));
-    warnings.extend(warnings::plausibility_warnings(lattice, &regions, &passes));
-    warnings.extend(warnings::corrected_image_warnings(lattice, &image_checks));
-    timings.total_s = start.elapsed().as_secs_f64();
-    Ok(Analysis {
-        passes,
-        dhct,
-        regions,
-        skipped_regions,
-        unit_cell,
-        unit_cell_note,
-        calibration,
-        affine: comparisons,
-        correction,
-        rejected_model,
-        corrected_images: image_checks,
-        warnings,
-        timings,
-    })
+    warnings.extend(warnings::plausibility_warnings(
+        lattice,
+        &analysis.regions,
+        &analysis.passes,
+    ));
+    warnings.extend(warnings::corrected_image_warnings(
+        lattice,
+        &analysis.corrected_images,
+    ));
+    warnings
 }
 
 /// Every set's features moved to the sample frame by `model`.
@@ -427,299 +609,4 @@ fn corrected_rdf(
         .map(|(c, _)| [c.x_m, c.y_m])
         .collect();
     radial_distribution(&points, area_m2, r_max, bin).ok()
-}
-
-/// Whether the raw-frame position `(x, y)` px lies in region `label` with every point at
-/// `margin_px` around it too (8 directions).
-fn inside_region(
-    labels: &Array2<Option<u32>>,
-    label: u32,
-    x: f64,
-    y: f64,
-    margin_px: [f64; 2],
-) -> bool {
-    let (rows, columns) = labels.dim();
-    let at = |x: f64, y: f64| {
-        let (c, r) = (x.round(), y.round());
-        c >= 0.0
-            && r >= 0.0
-            && (c as usize) < columns
-            && (r as usize) < rows
-            && labels[[r as usize, c as usize]] == Some(label)
-    };
-    const D: f64 = std::f64::consts::FRAC_1_SQRT_2;
-    const DIRECTIONS: [(f64, f64); 9] = [
-        (0.0, 0.0),
-        (1.0, 0.0),
-        (-1.0, 0.0),
-        (0.0, 1.0),
-        (0.0, -1.0),
-        (D, D),
-        (-D, D),
-        (D, -D),
-        (-D, -D),
-    ];
-    DIRECTIONS
-        .iter()
-        .all(|(dx, dy)| at(x + dx * margin_px[0], y + dy * margin_px[1]))
-}
-
-fn fit_regions(
-    pair: &ScanPair,
-    lattice: &dyn Lattice,
-    mask: Option<&Array2<bool>>,
-    options: &PipelineOptions,
-    sets: &[&FeatureSet],
-    corrected: &[Vec<CorrectedFeature>],
-) -> Result<(Vec<RegionFit>, Vec<SkippedRegion>), PipelineError> {
-    let geometry = pair.geometry();
-    let (labels, sizes) = match mask {
-        Some(mask) => label_regions(mask),
-        None => (
-            Array2::from_elem((geometry.rows(), geometry.columns()), Some(0)),
-            vec![geometry.rows() * geometry.columns()],
-        ),
-    };
-    let nn = lattice.nearest_neighbour_distance();
-    let margin_px = if mask.is_some() {
-        let m = options.regions.edge_margin_nn * nn;
-        [m / geometry.pitch_x(), m / geometry.pitch_y()]
-    } else {
-        [0.0, 0.0]
-    };
-    let mut fits = Vec::new();
-    let mut skipped = Vec::new();
-    let mut first_error = None;
-    for (region, &pixels) in sizes.iter().enumerate() {
-        let label = region as u32;
-        let members: Vec<Vec<usize>> = sets
-            .iter()
-            .zip(corrected)
-            .map(|(set, corrected)| {
-                (0..set.features.len())
-                    .filter(|&i| {
-                        let f: &Feature = &set.features[i];
-                        corrected[i].x_m.is_finite()
-                            && corrected[i].y_m.is_finite()
-                            && inside_region(&labels, label, f.x_px, f.y_px, margin_px)
-                    })
-                    .collect()
-            })
-            .collect();
-        let count = members[0].len();
-        if count < options.regions.min_features {
-            skipped.push(SkippedRegion {
-                region,
-                pixels,
-                features: count,
-                reason: format!(
-                    "{count} features inside (at least {} needed)",
-                    options.regions.min_features
-                ),
-            });
-            continue;
-        }
-        // Retrace sets with too few features are left out of the joint fit.
-        let usable: Vec<usize> = (0..sets.len())
-            .filter(|&k| k == 0 || members[k].len() >= options.regions.min_features)
-            .collect();
-        let points: Vec<Vec<[f64; 2]>> = usable
-            .iter()
-            .map(|&k| {
-                members[k]
-                    .iter()
-                    .map(|&i| [corrected[k][i].x_m, corrected[k][i].y_m])
-                    .collect()
-            })
-            .collect();
-        let refs: Vec<&[[f64; 2]]> = points.iter().map(|p| p.as_slice()).collect();
-        let fit = match fit_lattice(lattice, &refs, &options.lattice_fit) {
-            Ok(fit) => fit,
-            Err(e) => {
-                skipped.push(SkippedRegion {
-                    region,
-                    pixels,
-                    features: count,
-                    reason: e.to_string(),
-                });
-                first_error.get_or_insert(e);
-                continue;
-            }
-        };
-        let members: Vec<Vec<usize>> = usable.iter().map(|&k| members[k].clone()).collect();
-        let passes: Vec<ScanPass> = usable.iter().map(|&k| sets[k].pass).collect();
-        let mut deviations = Vec::new();
-        let mut heights = Vec::new();
-        for (k, set_members) in members.iter().enumerate() {
-            for (point, &i) in fit.points[k].iter().zip(set_members) {
-                deviations.push(point.deviation_m);
-                heights.push(sets[usable[k]].features[i].height);
-            }
-        }
-        let whole_ellipse = ConfidenceEllipse::from_deviations(&deviations, Some(&heights))?;
-        let cells: Vec<Vec<LocalCell>> = (0..points.len())
-            .map(|k| local_cells(lattice, &fit, &points[k], k))
-            .collect();
-        let local: Vec<[f64; 2]> = cells
-            .iter()
-            .flatten()
-            .flat_map(|c| c.deviations_m)
-            .collect();
-        let local_ellipse = ConfidenceEllipse::from_deviations(&local, None).ok();
-        let adf =
-            angular_distribution(lattice, &points[0], options.lattice_fit.nn_window, 180).ok();
-        fits.push(RegionFit {
-            region,
-            pixels,
-            fit,
-            passes,
-            members,
-            whole_ellipse,
-            local_cells: cells,
-            local_ellipse,
-            adf,
-        });
-    }
-    if fits.is_empty() {
-        return Err(match first_error {
-            Some(e) => PipelineError::LatticeFit(e),
-            None => PipelineError::TooFewFeatures {
-                pass: if mask.is_some() {
-                    "largest mask region of the trace".into()
-                } else {
-                    "trace".into()
-                },
-                found: skipped.iter().map(|s| s.features).max().unwrap_or(0),
-                needed: options.regions.min_features,
-            },
-        });
-    }
-    Ok((fits, skipped))
-}
-
-/// Median and robust standard deviation (1.4826 × MAD).
-fn robust_location(values: &[f64]) -> (f64, f64) {
-    use dhct_numerics::robust::{finite_median, mad_sigma_about};
-    match finite_median(values.iter().copied()) {
-        Some(median) => (median, mad_sigma_about(values, median).unwrap_or(f64::NAN)),
-        None => (f64::NAN, f64::NAN),
-    }
-}
-
-/// Whether a cell's corner features pass the selection.
-fn keep_cell(
-    cell: &LocalCell,
-    features: &[Feature],
-    members: &[usize],
-    selection: &CellSelection,
-    height_stats: (f64, f64),
-    width_stats: (f64, f64),
-) -> bool {
-    cell.corners.iter().all(|&corner| {
-        let f = &features[members[corner]];
-        let in_range =
-            |range: Option<[f64; 2]>, v: f64| range.is_none_or(|[lo, hi]| v >= lo && v <= hi);
-        let typical = |stats: (f64, f64), v: f64, k: f64| {
-            stats.1.is_nan() || stats.1 <= 0.0 || (v - stats.0).abs() <= k * stats.1
-        };
-        in_range(selection.height_m, f.height)
-            && in_range(selection.width_px, f.sigma_major_px)
-            && selection.exclude_outliers_sigma.is_none_or(|k| {
-                typical(height_stats, f.height, k) && typical(width_stats, f.sigma_major_px, k)
-            })
-    })
-}
-
-fn unit_cell_analysis(
-    pair: &ScanPair,
-    lattice: &dyn Lattice,
-    options: &PipelineOptions,
-    sets: &[&FeatureSet],
-    regions: &[RegionFit],
-    corrected_images: &[&Array2<f64>],
-) -> Result<UnitCellAnalysis, String> {
-    let geometry = pair.geometry();
-    let selection = &options.unit_cell.selection;
-    let mut available = 0;
-    let mut averages: Vec<AveragedCell> = Vec::new();
-    for (slot, set) in sets.iter().enumerate() {
-        let heights: Vec<f64> = set.features.iter().map(|f| f.height).collect();
-        let widths: Vec<f64> = set.features.iter().map(|f| f.sigma_major_px).collect();
-        let (height_stats, width_stats) = (robust_location(&heights), robust_location(&widths));
-        let mut kept = Vec::new();
-        for region in regions {
-            let Some(k) = region.passes.iter().position(|&p| p == set.pass) else {
-                continue;
-            };
-            available += region.local_cells[k].len();
-            kept.extend(
-                region.local_cells[k]
-                    .iter()
-                    .filter(|cell| {
-                        keep_cell(
-                            cell,
-                            &set.features,
-                            &region.members[k],
-                            selection,
-                            height_stats,
-                            width_stats,
-                        )
-                    })
-                    .cloned(),
-            );
-        }
-        if kept.is_empty() {
-            continue;
-        }
-        match average_unit_cell(
-            corrected_images[slot].view(),
-            (geometry.pitch_x(), geometry.pitch_y()),
-            lattice,
-            &kept,
-            options.unit_cell.resolution,
-        ) {
-            Ok(average) => averages.push(average),
-            Err(e) => return Err(format!("averaging the {} cells failed: {e}", set.pass)),
-        }
-    }
-    if averages.is_empty() {
-        return Err(format!(
-            "no local cell was selected ({available} found): every cell needs its four corner \
-             features indexed{}",
-            if available > 0 {
-                "; loosen the cell selection"
-            } else {
-                ""
-            }
-        ));
-    }
-    // Cell-count weighted mean of the per-image averages.
-    let cells: usize = averages.iter().map(|a| a.cells).sum();
-    let skipped: usize = averages.iter().map(|a| a.skipped).sum();
-    let mut values = Array2::zeros(averages[0].values.dim());
-    for a in &averages {
-        values.scaled_add(a.cells as f64 / cells as f64, &a.values);
-    }
-    let averaged = AveragedCell {
-        values,
-        cells,
-        skipped,
-    };
-    let group = options
-        .unit_cell
-        .plane_group
-        .unwrap_or_else(|| lattice.plane_group());
-    let ops = operations(group, lattice).map_err(|e| e.to_string())?;
-    let symmetrized = symmetrize(&averaged, &ops).map_err(|e| e.to_string())?;
-    let residuals = symmetry_residuals(&averaged, lattice).map_err(|e| e.to_string())?;
-    let asymmetric_unit = asymmetric_unit(group, lattice).map_err(|e| e.to_string())?;
-    Ok(UnitCellAnalysis {
-        group,
-        averaged,
-        symmetrized,
-        residuals,
-        asymmetric_unit,
-        cells_available: available,
-        cells_selected: cells,
-    })
 }
