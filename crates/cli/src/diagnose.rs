@@ -12,9 +12,7 @@ use dhct_diagnose::{
     ValidationOptions, VerdictKind, diagnose, sub_feature_view, validate,
 };
 use dhct_distortion::PassInput;
-use dhct_features::{
-    Feature, FeatureOptions, FeatureSet, find_features_in_pair, unlevelled_fitted_image,
-};
+use dhct_features::{Feature, FeatureOptions, FeatureSet, find_features_in_pair, signed_flattened};
 use dhct_lattice::Lattice;
 use dhct_pipeline::PipelineOptions;
 use dhct_scan::{ScanGeometry, ScanPair};
@@ -82,7 +80,7 @@ pub fn with_sub_feature_view(
         .iter()
         .filter_map(|set| {
             let raw = &pair.image(set.pass)?.z;
-            Some((*set, unlevelled_fitted_image(raw, options, mask).ok()?))
+            Some((*set, signed_flattened(raw, options, mask).ok()?))
         })
         .collect();
     let passes: Vec<PassImage> = images

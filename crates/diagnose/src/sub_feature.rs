@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::spectrum::{local_maxima, periodogram_at};
 
 /// One pass's image as the feature fits saw it but with each line's level kept
-/// ([`dhct_features::unlevelled_fitted_image`]: `rows × columns`, display orientation,
+/// ([`dhct_features::signed_flattened`]: `rows × columns`, display orientation,
 /// features positive) and the features found in it.
 #[derive(Debug, Clone, Copy)]
 pub struct PassImage<'a> {

@@ -4,7 +4,7 @@
 //! find it. The same scan without the vibration must not get one.
 
 use dhct_diagnose::{PassImage, SubFeatureView, sub_feature_view};
-use dhct_features::{FeatureOptions, find_features_in_pair, unlevelled_fitted_image};
+use dhct_features::{FeatureOptions, find_features_in_pair, signed_flattened};
 use dhct_simulate::{Simulation, SimulationConfig};
 
 /// Graphite 512² over 6 nm at 100 nm/s (120 ms per line pair), drift, creep, power-law
@@ -63,7 +63,7 @@ fn view(config: &SimulationConfig) -> SubFeatureView {
         .iter()
         .map(|set| {
             let raw = &output.pair.image(set.pass).unwrap().z;
-            unlevelled_fitted_image(raw, &options, None).unwrap()
+            signed_flattened(raw, &options, None).unwrap()
         })
         .collect();
     let passes: Vec<PassImage> = sets

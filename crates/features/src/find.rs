@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
 use crate::ncc::NccPlan;
-use crate::preprocess::{correct_lines_in_place, remove_background};
+use crate::preprocess::{correct_lines_in_place, signed_flattened};
 use crate::watershed::{Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice, Polarity,
@@ -316,15 +316,11 @@ fn preprocess(
     let (rows, columns) = image.z.dim();
     let mut lined = image.z.clone();
     correct_lines_in_place(&mut lined, geometry.fast_axis(), options.line_correction);
-    let flattened = remove_background(&lined, options.background, mask)?;
+    let signed = signed_flattened(&lined, options, mask)?;
     let sign = match options.polarity {
         Polarity::Bright => 1.0,
         Polarity::Dark => -1.0,
     };
-    let mut signed = flattened;
-    if sign < 0.0 {
-        signed.mapv_inplace(|v| -v);
-    }
     // The correlation needs every pixel: fill missing ones with the median (only if any).
     let filled = if finite == rows * columns {
         None

@@ -60,7 +60,6 @@ pub use kernel::Kernel;
 pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{
-    correct_lines, correct_lines_in_place, remove_background, subtract_polynomial,
-    unlevelled_fitted_image,
+    correct_lines, correct_lines_in_place, remove_background, signed_flattened, subtract_polynomial,
 };
 pub use watershed::{Region, watershed_regions};

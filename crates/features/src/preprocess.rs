@@ -175,12 +175,12 @@ pub fn remove_background(
     }
 }
 
-/// The image the feature fits see, without the line correction: background removed and,
-/// for dark features, negated (so every feature is a positive Gaussian on its local level).
-/// A line's own level stays in: the slices of `dhct-diagnose` read a line's displacement
-/// from it, and levelling each line by its median would mix the features' displacements
-/// into the level.
-pub fn unlevelled_fitted_image(
+/// `z` with the background removed (fitted where `mask` is true) and, for dark features,
+/// negated, so every feature is a positive Gaussian on its local level. The feature finder
+/// applies it after the line correction; the slices of `dhct-diagnose` apply it to the raw
+/// image, keeping each line's level (levelling a line by its median mixes the features'
+/// displacements into the level).
+pub fn signed_flattened(
     z: &Array2<f64>,
     options: &FeatureOptions,
     mask: Option<&Array2<bool>>,
