@@ -76,8 +76,7 @@ pub struct SubFeatureView {
     pub spread_over_noise: [f64; 2],
     /// The strongest periodic displacement, when the periodogram has a peak.
     pub strongest: Option<SliceVibration>,
-    /// Whether [`SubFeatureView::strongest`] is significant (false-alarm probability below
-    /// [`SIGNIFICANT_FALSE_ALARM`]).
+    /// Whether [`SubFeatureView::strongest`] is a vibration ([`SliceVibration::is_found`]).
     pub vibration_found: bool,
 }
 
@@ -410,11 +409,16 @@ fn strongest_vibration(
 }
 
 impl SliceVibration {
-    /// Significant ([`SIGNIFICANT_FALSE_ALARM`]) and, with both passes, seen alike by
-    /// them ([`MIN_PASS_AGREEMENT`]).
+    /// Significant ([`SIGNIFICANT_FALSE_ALARM`]) and seen alike by trace and retrace
+    /// ([`MIN_PASS_AGREEMENT`]). With one pass a periodic pattern cannot be told from one
+    /// tied to the lattice, so nothing is found (see [`SliceVibration::is_significant`]).
     pub fn is_found(&self) -> bool {
+        self.is_significant() && self.pass_agreement.is_some_and(|a| a >= MIN_PASS_AGREEMENT)
+    }
+
+    /// Above the noise: false-alarm probability below [`SIGNIFICANT_FALSE_ALARM`].
+    pub fn is_significant(&self) -> bool {
         self.false_alarm_probability < SIGNIFICANT_FALSE_ALARM
-            && self.pass_agreement.is_none_or(|a| a >= MIN_PASS_AGREEMENT)
     }
 }
 
@@ -502,6 +506,15 @@ impl SubFeatureView {
                 v.frequency_hz,
                 v.amplitude_along_m * 1e12,
                 v.amplitude_across_m * 1e12,
+                v.false_alarm_probability,
+                self.slices
+            ),
+            (Some(v), false) if v.is_significant() && v.pass_agreement.is_none() => format!(
+                "below one feature: a periodic line displacement at {:.2} Hz, {:.1} pm along the \
+                 lines (false-alarm p {:.1e}; {} slices, {spread}), seen in one pass only: it \
+                 cannot be told from a pattern tied to the lattice (a retrace would tell)",
+                v.frequency_hz,
+                v.amplitude_along_m * 1e12,
                 v.false_alarm_probability,
                 self.slices
             ),
