@@ -14,13 +14,26 @@ pub enum CalibrationError {
     #[error(
         "the image is too small for a Fourier analysis ({columns} x {rows} px, at least 16 x 16 needed)"
     )]
-    ImageTooSmall { columns: usize, rows: usize },
+    ImageTooSmall {
+        /// Image columns, pixels.
+        columns: usize,
+        /// Image rows, pixels.
+        rows: usize,
+    },
     /// The pixel size is not a positive finite length.
     #[error("the pixel size {pitch_x:e} x {pitch_y:e} m is not a positive length")]
-    BadPitch { pitch_x: f64, pitch_y: f64 },
+    BadPitch {
+        /// Pixel size along x, metres.
+        pitch_x: f64,
+        /// Pixel size along y, metres.
+        pitch_y: f64,
+    },
     /// No two independent periodicities stand out of the image's power spectrum.
     #[error("no lattice is visible in the image's Fourier transform: {reason}")]
-    NoLattice { reason: String },
+    NoLattice {
+        /// Why not, in words.
+        reason: String,
+    },
     /// The image's lattice has the wrong symmetry for the lattice given.
     #[error("the image shows {shows}; the {lattice} lattice cannot match it: {evidence}")]
     WrongLatticeType {

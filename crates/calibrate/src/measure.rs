@@ -15,10 +15,15 @@ use crate::spectrum::PowerSpectrum;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LatticeShape {
+    /// Equal lengths, 60° apart.
     Hexagonal,
+    /// Equal lengths, 90° apart.
     Square,
+    /// Unequal lengths, 90° apart.
     Rectangular,
+    /// Equal lengths at another angle: the rhombic primitive cell of a centred rectangle.
     CentredRectangular,
+    /// Unequal lengths at another angle.
     Oblique,
 }
 

@@ -49,8 +49,9 @@ pub struct Peak {
 pub struct PowerSpectrum {
     /// `power[[ky_index, kx]]`, `kx` in `0..=columns/2`, `ky_index` in `0..rows`.
     power: Array2<f64>,
-    /// Padded FFT sizes (rows = along y, columns = along x).
+    /// Padded FFT size along y (rows).
     pub rows: usize,
+    /// Padded FFT size along x (columns).
     pub columns: usize,
     /// Median power per integer radius (bins).
     background: Vec<f64>,

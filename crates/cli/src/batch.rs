@@ -34,7 +34,9 @@ pub const SUMMARY_FILE: &str = "summary.csv";
 /// `index + count`, ... (0 ≤ index < count).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
+    /// This part's number, from 0.
     pub index: usize,
+    /// Number of parts.
     pub count: usize,
 }
 
@@ -57,13 +59,17 @@ impl std::str::FromStr for Shard {
 pub struct BatchRequest<'a> {
     /// Folders (searched recursively), glob patterns and files.
     pub inputs: &'a [String],
+    /// The output folder: one folder per corrected file and the summary table.
     pub output: &'a Path,
+    /// The settings every file is corrected with.
     pub config: &'a CorrectConfig,
     /// Files corrected at once (threads in all); default: the number of CPUs.
     pub jobs: Option<usize>,
+    /// Correct only this part of the sorted file list.
     pub shard: Option<Shard>,
     /// Print the rows as JSON instead of text.
     pub json: bool,
+    /// Show progress on stderr (only when it is a terminal).
     pub progress: bool,
 }
 

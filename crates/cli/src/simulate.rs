@@ -18,9 +18,14 @@ pub enum ConfigSource<'a> {
 
 /// What `dhct simulate` was asked to do.
 pub struct SimulateRequest<'a> {
+    /// The simulation config: a file or a preset.
     pub source: ConfigSource<'a>,
+    /// The directory the simulated files and ground truth go to (needed unless only the
+    /// config is printed).
     pub output: Option<&'a Path>,
+    /// Replaces the config's random seed.
     pub seed: Option<u64>,
+    /// Only return the resolved config as TOML; simulate nothing.
     pub print_config: bool,
 }
 

@@ -15,17 +15,21 @@ pub struct Feature {
     pub id: usize,
     /// Image the feature was found in.
     pub pass: ScanPass,
-    /// Fitted centre, pixels (sub-pixel).
+    /// Fitted centre x (column), pixels (sub-pixel).
     pub x_px: f64,
+    /// Fitted centre y (row), pixels (sub-pixel).
     pub y_px: f64,
-    /// Fitted centre, metres.
+    /// Fitted centre x, metres.
     pub x_m: f64,
+    /// Fitted centre y, metres.
     pub y_m: f64,
-    /// 1σ uncertainty of the centre from the fit covariance, pixels.
+    /// 1σ uncertainty of the centre x from the fit covariance, pixels.
     pub x_sigma_px: f64,
+    /// 1σ uncertainty of the centre y from the fit covariance, pixels.
     pub y_sigma_px: f64,
-    /// Gaussian widths along the major and minor axes, pixels (major ≥ minor).
+    /// Gaussian width along the major axis, pixels (major ≥ minor).
     pub sigma_major_px: f64,
+    /// Gaussian width along the minor axis, pixels.
     pub sigma_minor_px: f64,
     /// Angle of the major axis from +x towards +y (display frame), radians.
     pub theta_rad: f64,
@@ -41,6 +45,7 @@ pub struct Feature {
     pub pixel_count: usize,
     /// Peak normalised cross-correlation of the region.
     pub ncc_peak: f64,
+    /// How the Gaussian fit ended.
     pub status: FitStatus,
     /// Levenberg–Marquardt iterations the fit took.
     pub fit_iterations: usize,
@@ -75,21 +80,32 @@ pub enum Rejection {
 /// A candidate region that was not accepted, with where it was and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RejectedCandidate {
+    /// Where the candidate was, x (column), pixels.
     pub x_px: f64,
+    /// Where the candidate was, y (row), pixels.
     pub y_px: f64,
+    /// Why it was rejected.
     pub reason: Rejection,
 }
 
 /// Counts of rejected candidates by reason.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct RejectionCounts {
+    /// [`Rejection::AreaTooSmall`].
     pub area_too_small: usize,
+    /// [`Rejection::AreaTooLarge`].
     pub area_too_large: usize,
+    /// [`Rejection::FitFailed`].
     pub fit_failed: usize,
+    /// [`Rejection::CentreOnBound`].
     pub centre_on_bound: usize,
+    /// [`Rejection::BadShape`].
     pub bad_shape: usize,
+    /// [`Rejection::EdgeCut`].
     pub edge_cut: usize,
+    /// [`Rejection::Duplicate`].
     pub duplicate: usize,
+    /// [`Rejection::TooShallow`].
     #[serde(default)]
     pub too_shallow: usize,
 }
@@ -162,6 +178,7 @@ pub struct StageTimings {
 /// All features of one image, with what was rejected and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeatureSet {
+    /// The image the features were found in: trace or retrace.
     pub pass: ScanPass,
     /// Accepted features, ordered by acquisition time.
     pub features: Vec<Feature>,

@@ -48,8 +48,9 @@ pub enum FitStatus {
 /// Bounds and limits of a fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FitLimits {
-    /// Centre bounds (pixels), inclusive: x in `[x_min, x_max]`, y in `[y_min, y_max]`.
+    /// Centre bounds along x, `(x_min, x_max)`, pixels, inclusive.
     pub x_range: (f64, f64),
+    /// Centre bounds along y, `(y_min, y_max)`, pixels, inclusive.
     pub y_range: (f64, f64),
     /// Allowed Gaussian σ along either principal axis, pixels.
     pub sigma_range: (f64, f64),
@@ -93,8 +94,11 @@ fn restrict_to_circle(jtj: &mut Matrix7, jtr: &mut Vector7) {
 /// Result of one fit, in the caller's z units and pixel coordinates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GaussianFit {
+    /// Amplitude A above the offset, z units.
     pub amplitude: f64,
+    /// Centre x (column), px.
     pub x0: f64,
+    /// Centre y (row), px.
     pub y0: f64,
     /// Width along the major axis, px (σ1 ≥ σ2).
     pub sigma_major: f64,
@@ -102,13 +106,17 @@ pub struct GaussianFit {
     pub sigma_minor: f64,
     /// Angle of the major axis from +x towards +y, radians in (−π/2, π/2].
     pub theta: f64,
+    /// Background level z0, z units.
     pub offset: f64,
     /// Root-mean-square residual, z units.
     pub residual_rms: f64,
-    /// 1σ uncertainty of x0 and y0 from the fit covariance, px.
+    /// 1σ uncertainty of x0 from the fit covariance, px.
     pub x0_sigma: f64,
+    /// 1σ uncertainty of y0 from the fit covariance, px.
     pub y0_sigma: f64,
+    /// Levenberg–Marquardt iterations taken.
     pub iterations: usize,
+    /// How the fit ended.
     pub status: FitStatus,
 }
 

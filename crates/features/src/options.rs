@@ -12,8 +12,10 @@ fn out_of_range(key: &str, value: f64, range: &str) -> crate::FeatureError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Polarity {
+    /// Features are maxima of z (protrusions).
     #[default]
     Bright,
+    /// Features are minima of z (depressions).
     Dark,
 }
 
@@ -40,6 +42,7 @@ pub enum Background {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LineCorrection {
+    /// Leave the lines as they are.
     #[default]
     None,
     /// Subtract each line's median.
@@ -55,13 +58,22 @@ pub enum KernelChoice {
     /// The DHCT kernel sized from the nearest-neighbour distance.
     #[default]
     FromNeighbourDistance,
-    /// An isotropic Gaussian of this σ, pixels.
-    GaussianSigma { sigma_px: f64 },
-    /// An isotropic Gaussian whose σ is this fraction of the nearest-neighbour distance (a
+    /// An isotropic Gaussian of a given σ.
+    GaussianSigma {
+        /// σ, pixels.
+        sigma_px: f64,
+    },
+    /// An isotropic Gaussian whose σ is a fraction of the nearest-neighbour distance (a
     /// small feature in a large cell, e.g. a Si(111)-7×7 corner hole: 0.1).
-    FractionOfNeighbourDistance { fraction: f64 },
+    FractionOfNeighbourDistance {
+        /// σ over the nearest-neighbour distance.
+        fraction: f64,
+    },
     /// A user template.
-    Custom { kernel: Kernel },
+    Custom {
+        /// The template.
+        kernel: Kernel,
+    },
 }
 
 /// Parameters of feature finding. Only `neighbour_distance` has no default.
@@ -71,11 +83,15 @@ pub enum KernelChoice {
 pub struct FeatureOptions {
     /// Expected nearest-neighbour distance, metres (e.g. 2.46e-10 for graphite).
     pub neighbour_distance: f64,
+    /// Whether features are bright (protrusions) or dark (depressions).
     pub polarity: Polarity,
     /// NCC threshold in [−1, 1]; pixels at or below it belong to no feature.
     pub threshold: f64,
+    /// The correlation template.
     pub kernel: KernelChoice,
+    /// Background removed before correlation and fitting.
     pub background: Background,
+    /// Per-line offset removal before correlation and fitting.
     pub line_correction: LineCorrection,
     /// Drop regions whose area is outside `median/√10 .. median·√10` (the DHCT area filter).
     pub area_filter: bool,

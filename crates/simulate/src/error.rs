@@ -13,33 +13,55 @@ pub enum SimulationError {
     /// A configuration value is out of range; `field` is its path in the config file,
     /// e.g. `scan.width_m` or `effects[2].t0_s`.
     #[error("invalid simulation config: {field}: {reason}")]
-    InvalidConfig { field: String, reason: String },
+    InvalidConfig {
+        /// The value's path in the config file.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The config text is not valid TOML/JSON or does not match the schema (unknown effect
     /// kind, misspelt field, wrong type, negative integer size ...).
     #[error("cannot parse simulation config{}: {message}", path_suffix(.path))]
     Parse {
+        /// The config file, when it was read from a path.
         path: Option<PathBuf>,
+        /// The parser's message.
         message: String,
     },
+    /// The config file could not be read.
     #[error("cannot read simulation config {path}")]
     Io {
+        /// The file that could not be read.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// No built-in preset has this name.
     #[error("unknown preset '{name}' (known presets: {known})")]
-    UnknownPreset { name: String, known: String },
+    UnknownPreset {
+        /// The name asked for.
+        name: String,
+        /// The known preset names, comma-separated.
+        known: String,
+    },
+    /// The configured scan geometry is invalid.
     #[error("invalid scan geometry")]
     Geometry(#[from] GeometryError),
+    /// The configured lattice is invalid.
     #[error("invalid lattice")]
     Lattice(#[from] LatticeError),
+    /// Writing the simulated image or its ground truth failed.
     #[error("cannot write simulation output")]
     Write(#[from] WriteError),
     /// [`crate::Effect::with_parameters`] got a parameter vector of the wrong length.
     #[error("effect {effect} takes {expected} parameters, got {got}")]
     ParameterCount {
+        /// The effect's name.
         effect: &'static str,
+        /// Parameters the effect takes.
         expected: usize,
+        /// Parameters given.
         got: usize,
     },
 }

@@ -64,13 +64,20 @@ impl SampleArea {
 pub enum FeatureKind {
     /// Motif site `site` of cell `(n, m)` of domain `domain` (0 = main, 1 = second domain).
     LatticeSite {
+        /// The domain: 0 = main, 1 = second domain.
         domain: usize,
+        /// Cell index along a1.
         n: i64,
+        /// Cell index along a2.
         m: i64,
+        /// Index of the motif site within the cell.
         site: usize,
     },
     /// Adatom number `index` (listed positions first, then random ones).
-    Adatom { index: usize },
+    Adatom {
+        /// The adatom's number.
+        index: usize,
+    },
 }
 
 /// One imaged feature of the sample.

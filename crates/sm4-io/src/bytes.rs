@@ -82,33 +82,43 @@ impl<'a> ByteReader<'a> {
         Ok(out)
     }
 
+    /// The next byte; `what` names it in a truncation error.
     pub fn u8(&mut self, what: &str) -> Result<u8, ReadError> {
         Ok(self.array::<1>(what)?[0])
     }
+    /// The next little-endian `u16`.
     pub fn u16_le(&mut self, what: &str) -> Result<u16, ReadError> {
         Ok(u16::from_le_bytes(self.array(what)?))
     }
+    /// The next little-endian `u32`.
     pub fn u32_le(&mut self, what: &str) -> Result<u32, ReadError> {
         Ok(u32::from_le_bytes(self.array(what)?))
     }
+    /// The next little-endian `i32`.
     pub fn i32_le(&mut self, what: &str) -> Result<i32, ReadError> {
         Ok(i32::from_le_bytes(self.array(what)?))
     }
+    /// The next little-endian `u64`.
     pub fn u64_le(&mut self, what: &str) -> Result<u64, ReadError> {
         Ok(u64::from_le_bytes(self.array(what)?))
     }
+    /// The next little-endian `f32`.
     pub fn f32_le(&mut self, what: &str) -> Result<f32, ReadError> {
         Ok(f32::from_le_bytes(self.array(what)?))
     }
+    /// The next little-endian `f64`.
     pub fn f64_le(&mut self, what: &str) -> Result<f64, ReadError> {
         Ok(f64::from_le_bytes(self.array(what)?))
     }
+    /// The next big-endian `u16`.
     pub fn u16_be(&mut self, what: &str) -> Result<u16, ReadError> {
         Ok(u16::from_be_bytes(self.array(what)?))
     }
+    /// The next big-endian `u32`.
     pub fn u32_be(&mut self, what: &str) -> Result<u32, ReadError> {
         Ok(u32::from_be_bytes(self.array(what)?))
     }
+    /// The next big-endian `f32`.
     pub fn f32_be(&mut self, what: &str) -> Result<f32, ReadError> {
         Ok(f32::from_be_bytes(self.array(what)?))
     }

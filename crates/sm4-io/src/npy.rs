@@ -200,21 +200,25 @@ pub fn write<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteErr
 pub struct Sidecar {
     /// The array layout: `float64`, C order, shape `[rows, columns]`, row 0 the top row.
     pub array: String,
+    /// `[rows, columns]`, pixels.
     pub shape: [usize; 2],
-    /// Channel name and the unit of the values (e.g. `m`).
+    /// Channel name.
     pub channel: String,
+    /// The unit of the values (e.g. `m`).
     pub unit: String,
-    /// Metres per pixel along x (columns) and y (rows), and whether the source file stated
-    /// them or they are placeholders.
+    /// Metres per pixel along x (columns) and y (rows).
     pub pixel_size_m: [f64; 2],
+    /// Whether the source file stated the pixel size or it is a placeholder.
     pub pixel_size_source: dhct_scan::ValueSource,
-    /// Seconds per pixel along the fast axis, and where that came from.
+    /// Seconds per pixel along the fast axis.
     pub pixel_period_s: f64,
+    /// Whether the source file stated the pixel period or it is a placeholder.
     pub timing_source: dhct_scan::ValueSource,
     /// `trace` or `retrace`.
     pub pass: String,
-    /// Fast direction of this pass and slow direction (`right`, `left`, `down`, `up`).
+    /// Fast direction of this pass (`right`, `left`, `down`, `up`).
     pub fast_direction: String,
+    /// Slow direction of this pass (`right`, `left`, `down`, `up`).
     pub slow_direction: String,
     /// What was done to the values (empty for raw data).
     pub corrections: Vec<String>,

@@ -10,6 +10,7 @@ use crate::{LocalCell, UnitCellError};
 /// `values[[i, j]]` is at `u = j / resolution` along a1 and `v = i / resolution` along a2.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AveragedCell {
+    /// The averaged image values on the `resolution × resolution` grid, z units.
     pub values: Array2<f64>,
     /// Cells averaged.
     pub cells: usize,

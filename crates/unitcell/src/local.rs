@@ -9,8 +9,9 @@ use serde::{Deserialize, Serialize};
 /// fit: `p = o + D(s_x, s_y)·R(θ)·(k·a1 + l·a2)` for corners `k, l ∈ {0, 1}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LocalCell {
-    /// Cell indices of the first corner.
+    /// Cell index of the first corner along a1.
     pub n: i64,
+    /// Cell index of the first corner along a2.
     pub m: i64,
     /// Local origin (the first corner's fitted position), metres.
     pub origin_m: [f64; 2],

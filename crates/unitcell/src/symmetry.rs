@@ -24,13 +24,16 @@ use crate::{AveragedCell, UnitCellError};
 /// One plane-group operation in fractional coordinates: `x' = matrix·x + translation`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SymmetryOperation {
+    /// The integer point-group part, rows of a 2 × 2 matrix in the a1, a2 basis.
     pub matrix: [[i64; 2]; 2],
+    /// The translation, fractions of a1 and a2.
     pub translation: [f64; 2],
 }
 
 /// How far an averaged cell is from a plane group's symmetry.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SymmetryResidual {
+    /// The plane group tested.
     pub group: PlaneGroup,
     /// `‖A − S(A)‖ / ‖A − mean(A)‖`: 0 for a perfectly symmetric cell.
     pub residual: f64,

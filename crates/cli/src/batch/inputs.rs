@@ -27,14 +27,18 @@ pub struct Input {
 /// A file that is not corrected, and why.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Skipped {
+    /// The file.
     pub path: PathBuf,
+    /// Why it is not corrected.
     pub note: String,
 }
 
 /// What the inputs hold: scan files (sorted by path, each once) and skipped files.
 #[derive(Debug, Default)]
 pub struct Found {
+    /// Scan files to correct, sorted by path.
     pub scans: Vec<Input>,
+    /// Files that are not corrected.
     pub skipped: Vec<Skipped>,
 }
 

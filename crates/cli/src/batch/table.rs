@@ -13,7 +13,9 @@ use crate::correct::RunSummary;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Status {
+    /// Corrected.
     Ok,
+    /// Could not be corrected (the error says why).
     Failed,
     /// Not a scan file (the note says why).
     Skipped,
@@ -43,27 +45,41 @@ pub struct ParameterCell {
 /// seconds; the first lattice region's fit).
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
+    /// The input file's path.
     pub input: String,
     /// Its output folder, relative to OUTDIR (empty unless corrected).
     pub output: String,
+    /// What became of the file.
     pub status: Status,
     /// The error (failed) or why the file was skipped; empty when ok.
     pub error: String,
+    /// The lattice's name.
     pub lattice: String,
+    /// The lattice's nearest-neighbour distance, metres.
     pub nearest_neighbour_distance_m: Option<f64>,
+    /// Features found, trace and retrace together.
     pub features: Option<usize>,
+    /// Features indexed to a lattice site, trace and retrace together.
     pub indexed: Option<usize>,
+    /// The fitted lattice constant along x (nominal × scale), metres.
     pub lattice_constant_x_m: Option<f64>,
+    /// The fitted lattice constant along y (nominal × scale), metres.
     pub lattice_constant_y_m: Option<f64>,
+    /// The fitted lattice rotation from +x towards +y, degrees.
     pub angle_deg: Option<f64>,
+    /// RMS deviation of the fitted features from their sites, metres.
     pub rms_deviation_m: Option<f64>,
+    /// Semi-axis of the 1σ confidence ellipse along its major axis, metres.
     pub ellipse_major_m: Option<f64>,
+    /// Semi-axis of the 1σ confidence ellipse along its minor axis, metres.
     pub ellipse_minor_m: Option<f64>,
     /// `drift-model` or `affine`.
     pub correction: String,
     /// The warning codes, separated by "; ".
     pub warnings: String,
+    /// Wall time spent on the file, seconds.
     pub seconds: f64,
+    /// The model parameters, each with unit and 1σ.
     pub parameters: Vec<ParameterCell>,
 }
 

@@ -22,15 +22,21 @@ pub struct FeatureRow {
     pub id: usize,
     /// `trace` or `retrace`.
     pub pass: String,
+    /// Fitted centre x (column), px.
     pub x_px: f64,
+    /// Fitted centre y (row), px.
     pub y_px: f64,
+    /// Fitted centre x, metres.
     pub x_m: f64,
+    /// Fitted centre y, metres.
     pub y_m: f64,
-    /// 1σ uncertainty of the centre from the fit covariance, px.
+    /// 1σ uncertainty of the centre x from the fit covariance, px.
     pub x_sigma_px: f64,
+    /// 1σ uncertainty of the centre y from the fit covariance, px.
     pub y_sigma_px: f64,
-    /// Gaussian widths along the major and minor axes, px.
+    /// Gaussian width along the major axis, px.
     pub sigma_major_px: f64,
+    /// Gaussian width along the minor axis, px.
     pub sigma_minor_px: f64,
     /// Major axis from +x towards +y, radians.
     pub theta_rad: f64,
@@ -40,24 +46,33 @@ pub struct FeatureRow {
     pub z0: f64,
     /// RMS residual of the fit.
     pub residual_rms: f64,
+    /// Pixels in the fitted region.
     pub pixel_count: usize,
+    /// Peak normalised cross-correlation of the region.
     pub ncc_peak: f64,
     /// Fit status (`ok` or why not).
     pub status: String,
+    /// Levenberg–Marquardt iterations the fit took.
     pub fit_iterations: usize,
-    /// Acquisition time since frame start and since line start, seconds.
+    /// Acquisition time since frame start, seconds.
     pub time_s: f64,
+    /// Acquisition time since the start of the feature's scan line, seconds.
     pub line_time_s: f64,
-    /// Position after the correction, sample frame, metres.
+    /// Position x after the correction, sample frame, metres.
     pub corrected_x_m: f64,
+    /// Position y after the correction, sample frame, metres.
     pub corrected_y_m: f64,
-    /// Lattice index (empty when the feature was not indexed).
+    /// Region of the lattice fit the feature is indexed in (empty when not indexed).
     pub region: Option<usize>,
+    /// Cell index along a1 (empty when not indexed).
     pub n: Option<i64>,
+    /// Cell index along a2 (empty when not indexed).
     pub m: Option<i64>,
+    /// Motif site within the cell (empty when not indexed).
     pub site: Option<usize>,
-    /// Corrected position minus the fitted lattice site, metres.
+    /// Corrected position x minus the fitted lattice site's, metres.
     pub deviation_x_m: Option<f64>,
+    /// Corrected position y minus the fitted lattice site's, metres.
     pub deviation_y_m: Option<f64>,
 }
 

@@ -27,8 +27,11 @@ use feature_table::write_features_csv;
 
 /// What to run.
 pub struct CorrectRequest<'a> {
+    /// The scan file (trace, or the only image).
     pub input: &'a Path,
+    /// A second file whose image of the same channel is the retrace.
     pub retrace: Option<&'a Path>,
+    /// The output directory.
     pub output: &'a Path,
     /// The config file (if any) overridden by the command-line flags.
     pub config: CorrectConfig,
@@ -63,6 +66,7 @@ pub struct Corrected {
     pub lattice_name: String,
     /// The nearest-neighbour distance given or measured (`--nn auto`), metres.
     pub nn_m: Option<f64>,
+    /// The lattice the run used (with that nearest-neighbour distance).
     pub lattice: Box<dyn Lattice + Send + Sync>,
     /// The pipeline options the run used.
     pub options: PipelineOptions,

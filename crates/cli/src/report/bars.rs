@@ -11,8 +11,11 @@ use crate::units;
 /// What a picture's colours mean: `colormap` maps `low..=high` (in `unit`) to its ends.
 #[derive(Clone)]
 pub struct ColourBar {
+    /// The colour map.
     pub colormap: Colormap,
+    /// The value at the map's low end, `unit`.
     pub low: f64,
+    /// The value at the map's high end, `unit`.
     pub high: f64,
     /// Unit of `low`/`high` as stored (e.g. `m`, or empty for dimensionless values).
     pub unit: String,

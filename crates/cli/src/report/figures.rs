@@ -20,16 +20,25 @@ use super::{model_plots, overlays};
 pub struct Figure {
     /// File stem in the output directory (`stem.png` / `stem.svg`).
     pub stem: String,
+    /// Its title (the bold start of its caption in the report).
     pub title: String,
+    /// What it shows, for the report.
     pub caption: String,
+    /// The picture or plot.
     pub content: FigureContent,
 }
 
+/// What a figure holds.
 pub enum FigureContent {
     /// A picture: the PNG file (full resolution, or reduced for views whose full
     /// resolution is another output) and the SVG shown in the report (a preview of it with
     /// scale and colour bars).
-    Picture { png: Vec<u8>, svg: String },
+    Picture {
+        /// The PNG file's bytes.
+        png: Vec<u8>,
+        /// The annotated SVG document.
+        svg: String,
+    },
     /// A plot, SVG only.
     Plot(String),
 }
@@ -38,6 +47,7 @@ pub enum FigureContent {
 pub struct PictureStyle {
     /// Metres per canvas pixel (x, y), or `None` when the pixel size is not stated.
     pub metres_per_px: Option<[f64; 2]>,
+    /// The colour bar, if the colours stand for values.
     pub colour: Option<ColourBar>,
     /// Longest side of the PNG file, px (`None`: full resolution).
     pub max_side: Option<usize>,
@@ -159,10 +169,15 @@ pub fn channel_colour_bar(
 
 /// What every figure job needs.
 pub struct FigureInputs<'a> {
+    /// The scan pair analysed.
     pub pair: &'a ScanPair,
+    /// The lattice the run used.
     pub lattice: &'a (dyn Lattice + Sync),
+    /// Every result of the run.
     pub analysis: &'a Analysis,
+    /// The analysed area (true = used), raw-image pixels, if a mask was given.
     pub mask: Option<&'a Array2<bool>>,
+    /// The colour map of the image pictures.
     pub colormap: Colormap,
 }
 

@@ -35,6 +35,7 @@ pub struct Html {
 }
 
 impl Html {
+    /// An empty builder.
     pub fn new() -> Html {
         Html::default()
     }
@@ -137,6 +138,7 @@ impl Html {
         self
     }
 
+    /// The HTML built.
     pub fn finish(self) -> String {
         self.out
     }

@@ -7,9 +7,11 @@ use plotters::prelude::*;
 /// How a series is drawn.
 #[derive(Clone, Copy)]
 pub enum Style {
+    /// A solid line through the points.
     Line,
     /// A dashed line (e.g. the raw version of a curve drawn solid when corrected).
     Dashed,
+    /// A marker at each point, no line.
     Points,
     /// Vertical bars from zero (histograms).
     Bars,
@@ -17,13 +19,18 @@ pub enum Style {
 
 /// One data series.
 pub struct Series {
+    /// The legend entry.
     pub label: String,
+    /// (x, y) in the axes' units.
     pub points: Vec<(f64, f64)>,
+    /// How it is drawn.
     pub style: Style,
+    /// Its colour.
     pub colour: RGBColor,
 }
 
 impl Series {
+    /// A series of the finite ones of `points`.
     pub fn new(
         label: impl Into<String>,
         points: Vec<(f64, f64)>,
@@ -44,22 +51,33 @@ impl Series {
 
 /// A plot: axes, series, optional vertical marker lines.
 pub struct Plot {
+    /// The title above the plot.
     pub title: String,
+    /// The x axis label, with its unit.
     pub x_label: String,
+    /// The y axis label, with its unit.
     pub y_label: String,
+    /// The series, drawn in order.
     pub series: Vec<Series>,
+    /// x positions of grey vertical marker lines (e.g. fitted RDF shells), x axis units.
     pub vertical_lines: Vec<f64>,
 }
 
 /// Colours that stay distinguishable for colour-blind readers (Okabe–Ito).
 pub const BLUE: RGBColor = RGBColor(0, 114, 178);
+/// Okabe–Ito orange.
 pub const ORANGE: RGBColor = RGBColor(230, 159, 0);
+/// Okabe–Ito bluish green.
 pub const GREEN: RGBColor = RGBColor(0, 158, 115);
+/// Okabe–Ito vermilion.
 pub const VERMILION: RGBColor = RGBColor(213, 94, 0);
+/// Okabe–Ito sky blue.
 pub const SKY_BLUE: RGBColor = RGBColor(86, 180, 233);
+/// Okabe–Ito reddish purple.
 pub const REDDISH_PURPLE: RGBColor = RGBColor(204, 121, 167);
 /// Fitted curves over measured points.
 pub const INK: RGBColor = RGBColor(0, 0, 0);
+/// Vertical marker lines.
 pub const GREY: RGBColor = RGBColor(120, 120, 120);
 
 /// A tick label: at most four decimals, trailing zeros dropped, a true minus sign.
@@ -110,6 +128,7 @@ fn padded(low: f64, high: f64) -> (f64, f64) {
 }
 
 impl Plot {
+    /// An empty plot with its title and axis labels.
     pub fn new(title: &str, x_label: &str, y_label: &str) -> Plot {
         Plot {
             title: title.into(),
@@ -120,6 +139,7 @@ impl Plot {
         }
     }
 
+    /// The plot with `series` added.
     pub fn with(mut self, series: Series) -> Plot {
         self.series.push(series);
         self

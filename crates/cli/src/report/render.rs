@@ -11,7 +11,9 @@ use ndarray::ArrayView2;
 
 /// An 8-bit RGB picture.
 pub struct Canvas {
+    /// Width, px.
     pub width: usize,
+    /// Height, px.
     pub height: usize,
     rgb: Vec<u8>,
 }

@@ -11,20 +11,31 @@ use super::plots::{nice_ticks, tick_text};
 
 /// A curve drawn over the points (e.g. a confidence ellipse).
 pub struct Curve {
+    /// The legend entry.
     pub label: String,
+    /// (x, y) along the curve, data units.
     pub points: Vec<(f64, f64)>,
+    /// Its colour.
     pub colour: RGBColor,
+    /// Dashed instead of solid.
     pub dashed: bool,
 }
 
 /// A scatter plot at equal aspect.
 pub struct EqualAspectPlot {
+    /// The title above the plot.
     pub title: String,
+    /// The x axis label, with the shared unit.
     pub x_label: String,
+    /// The y axis label, with the shared unit.
     pub y_label: String,
+    /// The legend entry of the points.
     pub points_label: String,
+    /// (x, y) of each point, data units (+y down).
     pub points: Vec<(f64, f64)>,
+    /// The points' colour.
     pub points_colour: RGBColor,
+    /// Curves drawn over the points.
     pub curves: Vec<Curve>,
 }
 

@@ -29,29 +29,45 @@ pub struct Goodness {
 /// Per-image counts.
 #[derive(Debug, Clone, Serialize)]
 pub struct PassCounts {
+    /// Trace or retrace.
     pub pass: ScanPass,
+    /// Features accepted.
     pub features: usize,
+    /// Watershed regions above the correlation threshold.
     pub candidates: usize,
+    /// Candidates rejected.
     pub rejected: usize,
+    /// Features with the lattice's full nearest-neighbour shell, used for the model fit.
     pub selected_for_model: usize,
+    /// Local distortion measurements (one per usable selected feature).
     pub local_distortions: usize,
+    /// Features indexed to a lattice site.
     pub indexed: usize,
+    /// Why the other features were not selected for the model fit.
     pub exclusions: ExclusionCounts,
     /// Whether the neighbours were found again in the frame corrected by a first fit (a
     /// large distortion left too few raw features with their full NN shell).
     pub neighbours_refined: bool,
+    /// The fit of the radial distribution function of the raw (controller-frame) features.
     pub rdf_fit: RdfFit,
 }
 
 /// A confidence ellipse in report units.
 #[derive(Debug, Clone, Serialize)]
 pub struct EllipseSummary {
+    /// Semi-axis of the 1σ ellipse along its major axis, metres.
     pub sigma_major_m: f64,
+    /// Semi-axis of the 1σ ellipse along its minor axis, metres.
     pub sigma_minor_m: f64,
+    /// Semi-axis of the 2σ ellipse along its major axis, metres.
     pub two_sigma_major_m: f64,
+    /// Semi-axis of the 2σ ellipse along its minor axis, metres.
     pub two_sigma_minor_m: f64,
+    /// Direction of the major axis from +x towards +y, degrees.
     pub angle_deg: f64,
+    /// Standard deviation of the feature heights, metres, if heights were given.
     pub sigma_z: Option<f64>,
+    /// Deviations the ellipse is made of.
     pub count: usize,
 }
 
@@ -72,49 +88,81 @@ impl From<&ConfidenceEllipse> for EllipseSummary {
 /// One region's lattice fit.
 #[derive(Debug, Clone, Serialize)]
 pub struct RegionSummary {
+    /// Region number (by size, largest first).
     pub region: usize,
+    /// Pixels in the region.
     pub pixels: usize,
+    /// Features indexed to a lattice site, all passes.
     pub features_indexed: usize,
+    /// Features used in the final lattice fit.
     pub features_used_in_fit: usize,
+    /// Fitted lattice origin, metres (sample frame).
     pub origin_m: [f64; 2],
+    /// Fitted lattice rotation from +x towards +y, degrees.
     pub angle_deg: f64,
+    /// Fitted scales along x and y (1 = the lattice's nominal size).
     pub scale: [f64; 2],
     /// The lattice constant implied along x and y (nominal × scale), metres.
     pub lattice_constant_m: [f64; 2],
+    /// RMS deviation of the fitted features from their sites, metres.
     pub rms_deviation_m: f64,
     /// Retrace offset relative to trace (Δx, Δy), metres, when both were fitted.
     pub set_offsets_m: Vec<[f64; 2]>,
+    /// Deviations from the whole-region fit, all passes pooled.
     pub whole_ellipse: EllipseSummary,
+    /// Corner deviations from the local unit-cell fits, all passes pooled, when there are
+    /// enough.
     pub local_ellipse: Option<EllipseSummary>,
+    /// Local unit cells fitted, all passes.
     pub local_cells: usize,
 }
 
 /// Unit-cell results.
 #[derive(Debug, Clone, Serialize)]
 pub struct UnitCellSummary {
+    /// The plane group of the symmetry average.
     pub group: PlaneGroup,
+    /// Local cells found (all regions and passes).
     pub cells_available: usize,
+    /// Local cells kept by the selection and averaged.
     pub cells_selected: usize,
+    /// How far the averaged cell is from every plane group compatible with the lattice.
     pub residuals: Vec<SymmetryResidual>,
+    /// The group's asymmetric unit: polygon corners, fractional coordinates.
     pub asymmetric_unit: Vec<[f64; 2]>,
 }
 
 /// Everything numeric of a run (`model.json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunSummary {
+    /// The dhct version that made the run.
     pub dhct_version: &'static str,
+    /// The input's name: its path, or a note for arrays.
     pub input: String,
+    /// The retrace file's path, if the retrace came from its own file.
     pub retrace_input: Option<String>,
+    /// The lattice's name.
     pub lattice: String,
+    /// The lattice's nearest-neighbour distance, metres.
     pub nearest_neighbour_distance_m: f64,
+    /// The input's scan geometry.
     pub geometry: ScanGeometry,
+    /// The model the correction used: the drift/creep/hysteresis model, or the affine map
+    /// when that was kept instead.
     pub model: DistortionModel,
+    /// The model's parameters with uncertainty and unit.
     pub parameters: Vec<Parameter>,
+    /// How well the model describes the local distortion measurements.
     pub goodness: Goodness,
+    /// Per-image counts, trace first.
     pub passes: Vec<PassCounts>,
+    /// One lattice fit per mask region (the whole image without a mask), largest first.
     pub regions: Vec<RegionSummary>,
+    /// Regions that were not fitted, and why.
     pub skipped_regions: Vec<SkippedRegion>,
+    /// The averaged unit cell, when enough cells were selected.
     pub unit_cell: Option<UnitCellSummary>,
+    /// Why there is no unit-cell analysis, if there is none.
     pub unit_cell_note: Option<String>,
     /// What not to trust and what to do, each with a stable `code` (see
     /// `dhct_pipeline::WarningCode`).
@@ -135,11 +183,13 @@ pub struct RunSummary {
     /// Each corrected image's lattice measured by FFT against the lattice given (x and y
     /// scale, shear): the check an outside user would make.
     pub corrected_images: Vec<CorrectedImageCheck>,
+    /// Wall time of each analysis stage, seconds.
     pub timings: StageTimings,
     /// Reading the input, seconds.
     pub read_s: f64,
     /// Writing the outputs and the report, seconds (filled after writing).
     pub write_s: f64,
+    /// The files written, names relative to the output directory (filled after writing).
     pub outputs: Vec<String>,
 }
 
@@ -156,6 +206,7 @@ fn rms(values: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+/// How well `analysis`'s model describes its local distortion measurements.
 pub fn goodness(analysis: &Analysis) -> Goodness {
     let model = &analysis.dhct.model;
     let local: Vec<_> = analysis
@@ -222,6 +273,8 @@ fn region_summary(r: &dhct_pipeline::RegionFit, nominal: [f64; 2]) -> RegionSumm
     }
 }
 
+/// The summary of `analysis` of an input named `input` (and `retrace_input`) read in
+/// `read_s` seconds; `outputs` and `write_s` are left empty for the writer to fill.
 pub fn summarise(
     input: String,
     retrace_input: Option<String>,

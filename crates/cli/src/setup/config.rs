@@ -23,7 +23,9 @@ use crate::units;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum Length {
+    /// A number, metres.
     Metres(f64),
+    /// Text: a number with an optional unit (metres without one), or `auto`.
     Text(String),
 }
 
@@ -33,6 +35,7 @@ impl Length {
         matches!(self, Length::Text(t) if t.trim().eq_ignore_ascii_case("auto"))
     }
 
+    /// The length in metres; an error for text that is not a length (e.g. `auto`).
     pub fn metres(&self) -> Result<f64> {
         match self {
             Length::Metres(m) => Ok(*m),

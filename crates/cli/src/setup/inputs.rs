@@ -31,6 +31,8 @@ pub struct Resolved {
     pub nn_m: Option<f64>,
     /// `--nn auto`: the constant still has to be measured from the image.
     pub nn_auto: bool,
+    /// The lattice built from the name and the nearest-neighbour distance (a placeholder
+    /// distance while it is still to be measured).
     pub lattice: Box<dyn Lattice + Send + Sync>,
     /// The config's pipeline options (or the lattice's defaults) with the flags applied.
     pub options: PipelineOptions,

@@ -46,8 +46,13 @@ pub enum Value<'a> {
     String(String),
     /// `o`
     Object(Object<'a>),
-    /// `C`, `I`, `Q` or `D`: element size in bytes and the raw little-endian elements.
-    NumberArray { element_size: usize, raw: &'a [u8] },
+    /// `C`, `I`, `Q` or `D`.
+    NumberArray {
+        /// Bytes per element.
+        element_size: usize,
+        /// The raw little-endian elements.
+        raw: &'a [u8],
+    },
     /// `S`: the strings.
     StringArray(Vec<String>),
     /// `O`

@@ -38,9 +38,13 @@ const MAX_DEPTH: usize = 8;
 /// A typed parameter value.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Value {
+    /// A boolean (`LOOB`).
     Bool(bool),
+    /// A 32-bit integer (`GNOL`).
     Long(i32),
+    /// A 64-bit float (`BUOD`).
     Double(f64),
+    /// A UTF-16 string (`GRTS`).
     Text(String),
 }
 
@@ -59,8 +63,11 @@ impl Value {
 /// A transfer function from stored counts to physical values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transfer {
+    /// The function's type, e.g. `TFF_Linear1D`.
     pub name: String,
+    /// The unit of the physical values.
     pub unit: String,
+    /// Its numeric parameters by name, e.g. `Factor`, `Offset`.
     pub parameters: BTreeMap<String, f64>,
 }
 
