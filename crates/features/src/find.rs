@@ -10,8 +10,8 @@ use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
 use crate::ncc::NccPlan;
-use crate::preprocess::{correct_lines_in_place, signed_flattened};
-use crate::watershed::{Region, watershed_regions};
+use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
+use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice, Polarity,
     RejectedCandidate, Rejection, RejectionCounts, StageTimings,
@@ -32,8 +32,8 @@ pub fn find_features(
     find_features_and_correlation(image, geometry, pass, options, mask).map(|(set, _)| set)
 }
 
-/// Finds features in every image of a pair, trace and retrace in parallel (sharing the
-/// kernel and the correlation plan).
+/// Finds features in every image of a pair, trace and retrace in parallel up to 4096² px
+/// and one after the other above (sharing the kernel and the correlation plan).
 pub fn find_features_in_pair(
     pair: &ScanPair,
     options: &FeatureOptions,
@@ -55,9 +55,18 @@ pub fn find_features_in_pair_and_correlation(
         pair.image(pass)
             .map(|image| find_prepared(image, geometry, pass, options, mask, &prepared))
     };
-    let (trace, retrace) = rayon::join(|| run(ScanPass::Trace), || run(ScanPass::Retrace));
+    let (trace, retrace) = if geometry.rows() * geometry.columns() <= PARALLEL_PASSES_MAX_PIXELS {
+        rayon::join(|| run(ScanPass::Trace), || run(ScanPass::Retrace))
+    } else {
+        // Each stage runs in parallel within an image; one image at a time halves the
+        // working memory of a huge scan.
+        (run(ScanPass::Trace), run(ScanPass::Retrace))
+    };
     trace.into_iter().chain(retrace).collect()
 }
+
+/// Largest image (pixels) whose trace and retrace are searched at the same time (4096²).
+const PARALLEL_PASSES_MAX_PIXELS: usize = 1 << 24;
 
 /// Like [`find_features`], also returning the normalised cross-correlation map.
 pub fn find_features_and_correlation(
@@ -133,7 +142,7 @@ impl Prepared {
                 kernel: kh.max(kw),
             });
         }
-        let plan = NccPlan::new(rows, columns, &kernel);
+        let plan = NccPlan::with_strip_rows(rows, columns, &kernel, options.correlation_strip_rows);
         Ok(Prepared {
             kernel,
             kernel_sigma_px,
@@ -274,6 +283,12 @@ fn check_sizes(
             geometry.rows()
         )));
     }
+    if rows * columns >= MAX_WATERSHED_PIXELS {
+        return Err(FeatureError::BadParameter(format!(
+            "image is {columns} x {rows} px; feature finding takes fewer than \
+             {MAX_WATERSHED_PIXELS} px"
+        )));
+    }
     if mask.is_some_and(|m| m.dim() != image.z.dim()) {
         return Err(FeatureError::BadParameter(
             "mask size differs from the image size".into(),
@@ -314,9 +329,9 @@ fn preprocess(
     finite: usize,
 ) -> Result<Preprocessed, FeatureError> {
     let (rows, columns) = image.z.dim();
-    let mut lined = image.z.clone();
-    correct_lines_in_place(&mut lined, geometry.fast_axis(), options.line_correction);
-    let signed = signed_flattened(&lined, options, mask)?;
+    let mut signed = image.z.clone();
+    correct_lines_in_place(&mut signed, geometry.fast_axis(), options.line_correction);
+    sign_flattened_in_place(&mut signed, options, mask)?;
     let sign = match options.polarity {
         Polarity::Bright => 1.0,
         Polarity::Dark => -1.0,
@@ -659,7 +674,7 @@ fn area_filter(
 ) -> Vec<Region> {
     let mut areas: Vec<usize> = regions
         .iter()
-        .map(|r| r.pixels.len())
+        .map(|r| r.area)
         .filter(|&a| a > MIN_AREA_FOR_MEDIAN)
         .collect();
     if !enabled || areas.is_empty() {
@@ -671,7 +686,7 @@ fn area_filter(
     let (low, high) = (median / factor, median * factor);
     let mut kept = Vec::with_capacity(regions.len());
     for region in regions {
-        let area = region.pixels.len() as f64;
+        let area = region.area as f64;
         let reason = if area <= low {
             Some(Rejection::AreaTooSmall)
         } else if area >= high {

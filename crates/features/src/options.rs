@@ -110,6 +110,11 @@ pub struct FeatureOptions {
     /// deepest or brightest of several kinds (the Si(111)-7×7 corner holes among shallower
     /// minima) keeps only that kind. NCC alone cannot tell them apart: it ignores depth.
     pub min_relative_height: f64,
+    /// Rows of the correlation map computed at once (0 = automatic: eight kernel heights,
+    /// at least 256 rows, and images up to twice that in one piece). The correlation's
+    /// transforms need memory for one strip, not the image; the map agrees with the
+    /// one-piece map to single-precision rounding (~1e-6) whatever the value.
+    pub correlation_strip_rows: usize,
 }
 
 impl Default for FeatureOptions {
@@ -126,6 +131,7 @@ impl Default for FeatureOptions {
             fit_radius_fraction: 0.4,
             min_median_ncc: 0.3,
             min_relative_height: 0.0,
+            correlation_strip_rows: 0,
         }
     }
 }

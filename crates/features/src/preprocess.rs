@@ -16,6 +16,17 @@ pub fn subtract_polynomial(
     order: u8,
     mask: Option<&Array2<bool>>,
 ) -> Result<Array2<f64>, FeatureError> {
+    let mut out = z.clone();
+    subtract_polynomial_in_place(&mut out, order, mask)?;
+    Ok(out)
+}
+
+/// [`subtract_polynomial`] without a copy: `z` is replaced by its residual.
+pub fn subtract_polynomial_in_place(
+    z: &mut Array2<f64>,
+    order: u8,
+    mask: Option<&Array2<bool>>,
+) -> Result<(), FeatureError> {
     if order > 6 {
         return Err(FeatureError::BadParameter(format!(
             "background polynomial order must be at most 6, got {order}"
@@ -79,9 +90,8 @@ pub fn subtract_polynomial(
         FeatureError::BadParameter("background fit is singular (mask too small?)".into())
     })?;
     // Per row the surface is a polynomial in x: c_i(y) = Σ_j coef[i, j]·y^j.
-    let mut out = z.clone();
     let mut row_coefficients = vec![0.0; order + 1];
-    for (r, mut row) in out.rows_mut().into_iter().enumerate() {
+    for (r, mut row) in z.rows_mut().into_iter().enumerate() {
         let y = scale(r, h);
         row_coefficients.iter_mut().for_each(|v| *v = 0.0);
         for (k, &(i, j)) in exponents.iter().enumerate() {
@@ -97,7 +107,7 @@ pub fn subtract_polynomial(
             *value -= surface;
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Removes per-line offsets along the fast axis (each line's median, or its straight-line
@@ -185,11 +195,26 @@ pub fn signed_flattened(
     options: &FeatureOptions,
     mask: Option<&Array2<bool>>,
 ) -> Result<Array2<f64>, FeatureError> {
-    let mut signed = remove_background(z, options.background, mask)?;
-    if options.polarity == Polarity::Dark {
-        signed.mapv_inplace(|v| -v);
-    }
+    let mut signed = z.clone();
+    sign_flattened_in_place(&mut signed, options, mask)?;
     Ok(signed)
+}
+
+/// [`signed_flattened`] without a copy: `z` is replaced by the result.
+pub fn sign_flattened_in_place(
+    z: &mut Array2<f64>,
+    options: &FeatureOptions,
+    mask: Option<&Array2<bool>>,
+) -> Result<(), FeatureError> {
+    match options.background {
+        Background::None => {}
+        Background::Plane => subtract_polynomial_in_place(z, 1, mask)?,
+        Background::Polynomial(order) => subtract_polynomial_in_place(z, order, mask)?,
+    }
+    if options.polarity == Polarity::Dark {
+        z.mapv_inplace(|v| -v);
+    }
+    Ok(())
 }
 
 #[cfg(test)]
