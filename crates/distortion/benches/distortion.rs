@@ -7,7 +7,9 @@
 
 use std::time::Instant;
 
-use dhct_distortion::{DhctOptions, PassInput, analyse, correct_features, correct_image};
+use dhct_distortion::{
+    DhctOptions, PassInput, analyse, correct_features, correct_image, pixel_sample_positions,
+};
 use dhct_features::{FeatureOptions, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
 use dhct_simulate::{Simulation, presets};
@@ -66,10 +68,20 @@ fn main() {
     );
     let correction_s = start.elapsed().as_secs_f64();
 
+    // Of which computing every pixel's sample-frame position (the resampling computes each
+    // twice: once for the rows' extent, once where a band uses it).
+    let start = Instant::now();
+    rayon::join(
+        || pixel_sample_positions(&result.model, geometry, ScanPass::Trace),
+        || pixel_sample_positions(&result.model, geometry, ScanPass::Retrace),
+    );
+    let positions_s = start.elapsed().as_secs_f64();
+
     let count: usize = sets.iter().map(|s| s.features.len()).sum();
     println!("features:          {features_s:.3} s ({count} in trace + retrace)");
     println!("NN + local + fit:  {model_s:.3} s");
     println!("correction (2 images): {correction_s:.3} s");
+    println!("  pixel positions once (2 images): {positions_s:.3} s");
     println!(
         "total:             {:.3} s on {} threads",
         features_s + model_s + correction_s,

@@ -71,16 +71,7 @@ pub fn pixel_sample_positions(
     pass: ScanPass,
 ) -> (Array2<f64>, Array2<f64>) {
     let (rows, columns) = (geometry.rows(), geometry.columns());
-    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
-    // Pixels share the hysteresis lag of their fast index: tabulate it once (the table is
-    // used only where a pixel's line time is bit-identical to the tabulated one).
-    let pixel_period = geometry.pixel_period();
-    let lags: Vec<(f64, f64)> = (0..geometry.fast_len())
-        .map(|k| {
-            let tau = (k as f64 + 0.5) * pixel_period;
-            (tau, model.hysteresis_lag(geometry, pass, tau))
-        })
-        .collect();
+    let positions = RowPositions::new(model, geometry, pass);
     let mut x = Array2::<f64>::zeros((rows, columns));
     let mut y = Array2::<f64>::zeros((rows, columns));
     let contiguous = "a new array is contiguous";
@@ -93,28 +84,71 @@ pub fn pixel_sample_positions(
                 .par_chunks_mut(columns.max(1)),
         )
         .enumerate()
-        .for_each(|(r, (x_row, y_row))| {
-            for (c, (x, y)) in x_row.iter_mut().zip(y_row.iter_mut()).enumerate() {
-                let (xc, yc) = (c as f64, r as f64);
-                let time = geometry.acquisition_time(pass, xc, yc);
-                let tau = time.since_line_start;
-                let k = (tau / pixel_period - 0.5).round();
-                let lag = match lags.get(k as usize) {
-                    Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
-                    _ => model.hysteresis_lag(geometry, pass, tau),
-                };
-                let d = model.displacement_with_lag(geometry, time.since_frame_start, lag);
-                *x = (xc * px + d[0]) / px;
-                *y = (yc * py + d[1]) / py;
-            }
-        });
+        .for_each(|(r, (x_row, y_row))| positions.fill(r, x_row, y_row));
     (x, y)
+}
+
+/// Writes the sample-frame positions (output pixels) of input row `r` to `(xs, ys)`.
+type RowPositionsFn<'a> = dyn Fn(usize, &mut [f64], &mut [f64]) + Sync + 'a;
+
+/// Computes the sample-frame positions (output pixels) of one input row at a time.
+struct RowPositions<'a> {
+    model: &'a DistortionModel,
+    geometry: &'a ScanGeometry,
+    pass: ScanPass,
+    /// `(time since line start, hysteresis lag)` of each fast index: pixels share the lag
+    /// of their fast index, so it is tabulated once (and used only where a pixel's line
+    /// time is bit-identical to the tabulated one).
+    lags: Vec<(f64, f64)>,
+}
+
+impl<'a> RowPositions<'a> {
+    fn new(model: &'a DistortionModel, geometry: &'a ScanGeometry, pass: ScanPass) -> Self {
+        let pixel_period = geometry.pixel_period();
+        let lags = (0..geometry.fast_len())
+            .map(|k| {
+                let tau = (k as f64 + 0.5) * pixel_period;
+                (tau, model.hysteresis_lag(geometry, pass, tau))
+            })
+            .collect();
+        RowPositions {
+            model,
+            geometry,
+            pass,
+            lags,
+        }
+    }
+
+    /// Writes the positions of the pixels of row `r` (display orientation) to `xs`, `ys`.
+    fn fill(&self, r: usize, xs: &mut [f64], ys: &mut [f64]) {
+        let geometry = self.geometry;
+        let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+        let pixel_period = geometry.pixel_period();
+        for (c, (x, y)) in xs.iter_mut().zip(ys.iter_mut()).enumerate() {
+            let (xc, yc) = (c as f64, r as f64);
+            let time = geometry.acquisition_time(self.pass, xc, yc);
+            let tau = time.since_line_start;
+            let k = (tau / pixel_period - 0.5).round();
+            let lag = match self.lags.get(k as usize) {
+                Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
+                _ => self.model.hysteresis_lag(geometry, self.pass, tau),
+            };
+            let d = self
+                .model
+                .displacement_with_lag(geometry, time.since_frame_start, lag);
+            *x = (xc * px + d[0]) / px;
+            *y = (yc * py + d[1]) / py;
+        }
+    }
 }
 
 /// The corrected image of `pass`: `z` (rows × columns, display orientation, controller
 /// frame) resampled onto the sample-frame grid with the same pitch, size and origin
 /// (output pixel `(c, r)` is the sample point `(c·pitch_x, r·pitch_y)`). Pixels no input
 /// triangle covers are NaN; z values are not changed.
+///
+/// Memory beyond the output is a few rows per thread: the pixel positions are computed
+/// row by row where they are used, not stored for the whole image.
 pub fn correct_image(
     model: &DistortionModel,
     geometry: &ScanGeometry,
@@ -131,54 +165,36 @@ pub fn correct_image(
             geometry_rows: geometry.rows(),
         });
     }
-    let (xs, ys) = pixel_sample_positions(model, geometry, pass);
-    Ok(resample_mesh(&xs, &ys, z, rows, columns))
+    let positions = RowPositions::new(model, geometry, pass);
+    Ok(resample_mesh(
+        &|r, xs, ys| positions.fill(r, xs, ys),
+        z,
+        (rows, columns),
+    ))
 }
 
-/// Rasterises the quad mesh with vertices `(xs, ys)` (output pixels) and values `z` onto an
-/// `out_rows × out_columns` grid by barycentric interpolation; uncovered pixels NaN.
-/// Runs in parallel over horizontal bands of the output; where the mesh folds over itself
+/// Rasterises the quad mesh whose row `r` of vertices `row_positions(r, xs, ys)` writes
+/// (output pixels) and whose values are `z` onto an `out_rows × out_columns` grid by
+/// barycentric interpolation; uncovered pixels NaN. Runs in parallel over horizontal bands
+/// of the output, each computing the vertex rows it needs; where the mesh folds over itself
 /// the quad acquired last (in row-major input order) wins.
-pub fn resample_mesh(
-    xs: &Array2<f64>,
-    ys: &Array2<f64>,
+fn resample_mesh(
+    row_positions: &RowPositionsFn<'_>,
     z: &Array2<f64>,
-    out_rows: usize,
-    out_columns: usize,
+    (out_rows, out_columns): (usize, usize),
 ) -> Array2<f64> {
     let mut out = Array2::from_elem((out_rows, out_columns), f64::NAN);
     let (rows, columns) = z.dim();
     if rows < 2 || columns < 2 || out_rows == 0 || out_columns == 0 {
         return out;
     }
-    let (xs, ys, z) = (
-        xs.as_standard_layout(),
-        ys.as_standard_layout(),
-        z.as_standard_layout(),
-    );
-    let contiguous = "standard-layout arrays are contiguous";
-    let (xs, ys, z) = (
-        xs.as_slice().expect(contiguous),
-        ys.as_slice().expect(contiguous),
-        z.as_slice().expect(contiguous),
-    );
-    // The y range covered by each row of quads.
-    let quad_rows: Vec<(f64, f64)> = (0..rows - 1)
-        .map(|r| {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for &y in &ys[r * columns..(r + 2) * columns] {
-                if y.is_finite() {
-                    lo = lo.min(y);
-                    hi = hi.max(y);
-                }
-            }
-            (lo, hi)
-        })
-        .collect();
+    let z = z.as_standard_layout();
+    let z = z.as_slice().expect("standard-layout arrays are contiguous");
+    let quad_rows = quad_row_ranges(row_positions, rows, columns);
     let band = out_rows
         .div_ceil(4 * rayon::current_num_threads().max(1))
         .max(8);
-    let out_slice = out.as_slice_mut().expect(contiguous);
+    let out_slice = out.as_slice_mut().expect("a new array is contiguous");
     out_slice
         .par_chunks_mut(band * out_columns)
         .enumerate()
@@ -190,27 +206,96 @@ pub fn resample_mesh(
                 rows,
                 columns: out_columns,
             };
+            let mut vertices = VertexRows::new(columns);
             let last = target.first + target.rows - 1;
             for (r, (lo, hi)) in quad_rows.iter().enumerate() {
                 if *hi < target.first as f64 - 1.0 || *lo > last as f64 + 1.0 {
                     continue;
                 }
-                let vertex = |rr: usize, c: usize| {
-                    let i = rr * columns + c;
-                    (xs[i], ys[i], z[i])
-                };
+                vertices.load(r, row_positions);
+                let (top, bottom) = (&z[r * columns..], &z[(r + 1) * columns..]);
                 for c in 0..columns - 1 {
-                    let (a, b, cc, d) = (
-                        vertex(r, c),
-                        vertex(r, c + 1),
-                        vertex(r + 1, c + 1),
-                        vertex(r + 1, c),
-                    );
-                    target.rasterise_quad([a, b, cc, d]);
+                    target.rasterise_quad([
+                        vertices.top(c, top[c]),
+                        vertices.top(c + 1, top[c + 1]),
+                        vertices.bottom(c + 1, bottom[c + 1]),
+                        vertices.bottom(c, bottom[c]),
+                    ]);
                 }
             }
         });
     out
+}
+
+/// The y range (output pixels) covered by each row of quads (vertex rows `r`, `r + 1`).
+fn quad_row_ranges(
+    row_positions: &RowPositionsFn<'_>,
+    rows: usize,
+    columns: usize,
+) -> Vec<(f64, f64)> {
+    let vertex_rows: Vec<(f64, f64)> = (0..rows)
+        .into_par_iter()
+        .map_init(
+            || (vec![0.0; columns], vec![0.0; columns]),
+            |(xs, ys), r| {
+                row_positions(r, xs, ys);
+                ys.iter()
+                    .filter(|y| y.is_finite())
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &y| {
+                        (lo.min(y), hi.max(y))
+                    })
+            },
+        )
+        .collect();
+    vertex_rows
+        .windows(2)
+        .map(|w| (w[0].0.min(w[1].0), w[0].1.max(w[1].1)))
+        .collect()
+}
+
+/// Two consecutive rows of mesh vertices (`r` on top, `r + 1` below), reused when the next
+/// quad row is `r + 1`.
+struct VertexRows {
+    /// The top row's index, once loaded.
+    row: Option<usize>,
+    top: (Vec<f64>, Vec<f64>),
+    bottom: (Vec<f64>, Vec<f64>),
+}
+
+impl VertexRows {
+    fn new(columns: usize) -> Self {
+        VertexRows {
+            row: None,
+            top: (vec![0.0; columns], vec![0.0; columns]),
+            bottom: (vec![0.0; columns], vec![0.0; columns]),
+        }
+    }
+
+    /// Makes vertex rows `r` and `r + 1` the current pair.
+    fn load(&mut self, r: usize, row_positions: &RowPositionsFn<'_>) {
+        if self.row == Some(r) {
+            return;
+        }
+        if self.row.is_some_and(|previous| previous + 1 == r) {
+            std::mem::swap(&mut self.top, &mut self.bottom);
+        } else {
+            row_positions(r, &mut self.top.0, &mut self.top.1);
+        }
+        row_positions(r + 1, &mut self.bottom.0, &mut self.bottom.1);
+        self.row = Some(r);
+    }
+
+    /// Vertex `c` of the top row with value `z`.
+    #[inline]
+    fn top(&self, c: usize, z: f64) -> (f64, f64, f64) {
+        (self.top.0[c], self.top.1[c], z)
+    }
+
+    /// Vertex `c` of the bottom row with value `z`.
+    #[inline]
+    fn bottom(&self, c: usize, z: f64) -> (f64, f64, f64) {
+        (self.bottom.0[c], self.bottom.1[c], z)
+    }
 }
 
 /// `floor` without a libm call (the baseline x86-64 target has no rounding instruction).
