@@ -64,9 +64,10 @@ pub struct PassOutput {
     pub pass: ScanPass,
     /// Features in the controller frame.
     pub features: FeatureSet,
-    /// The normalised cross-correlation map (rows × columns), when kept.
+    /// The normalised cross-correlation map (rows × columns), when kept (single precision:
+    /// it is kept for plots).
     #[serde(skip)]
-    pub correlation: Option<Array2<f64>>,
+    pub correlation: Option<Array2<f32>>,
     /// Every feature moved to the sample frame (same order as `features.features`).
     pub corrected: Vec<CorrectedFeature>,
     /// The image resampled onto the sample-frame grid (z unchanged; NaN = no data).

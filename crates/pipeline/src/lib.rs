@@ -201,6 +201,9 @@ pub fn run(
     Ok(analysis)
 }
 
+/// One image's features and, when kept, its correlation map (single precision).
+type FoundPass = (FeatureSet, Option<Array2<f32>>);
+
 /// Runs `stage`, adding its wall time (seconds) to `slot`.
 fn timed<T>(slot: &mut f64, stage: impl FnOnce() -> T) -> T {
     let t = Instant::now();
@@ -228,11 +231,11 @@ fn check_mask(mask: Option<&Array2<bool>>, geometry: &ScanGeometry) -> Result<()
     Ok(())
 }
 
-/// Step 1: the features of every image with its correlation map, the kernel sized from
+/// Step 1: the features of every image with its correlation map (when kept), the kernel sized from
 /// the lattice's nearest-neighbour distance (metres) as the image shows it (scaled by the
 /// calibration's mean scale when the lattice was measured). An error when an image has
 /// fewer than [`MIN_FEATURES`].
-fn find_all_features(inputs: &Inputs) -> Result<Vec<(FeatureSet, Array2<f64>)>, PipelineError> {
+fn find_all_features(inputs: &Inputs) -> Result<Vec<FoundPass>, PipelineError> {
     let mut feature_options = inputs.options.features.clone();
     if !feature_options.neighbour_distance.is_finite() {
         feature_options.neighbour_distance = inputs.lattice.nearest_neighbour_distance();
@@ -241,6 +244,13 @@ fn find_all_features(inputs: &Inputs) -> Result<Vec<(FeatureSet, Array2<f64>)>, 
         feature_options.neighbour_distance *= found.calibration.mean_scale;
     }
     let found = find_features_in_pair_and_correlation(inputs.pair, &feature_options, inputs.mask)?;
+    // A correlation map is kept (for plots) in single precision, and one not asked for is
+    // let go now, not at the end of the run.
+    let keep = inputs.options.keep_correlation;
+    let found: Vec<_> = found
+        .into_iter()
+        .map(|(set, correlation)| (set, keep.then(|| correlation.mapv(|v| v as f32))))
+        .collect();
     for (set, _) in &found {
         if set.features.len() < MIN_FEATURES {
             return Err(PipelineError::TooFewFeatures {
@@ -258,7 +268,7 @@ fn find_all_features(inputs: &Inputs) -> Result<Vec<(FeatureSet, Array2<f64>)>, 
 /// with the reason the model failed.
 fn fit_distortion_model(
     inputs: &Inputs,
-    found: &[(FeatureSet, Array2<f64>)],
+    found: &[FoundPass],
 ) -> Result<(DhctResult, Option<String>), PipelineError> {
     let (geometry, lattice, calibration) =
         (inputs.pair.geometry(), inputs.lattice, inputs.calibration);
@@ -443,7 +453,7 @@ fn unit_cells(
 fn pass_outputs(
     inputs: &Inputs,
     dhct: &DhctResult,
-    found: Vec<(FeatureSet, Array2<f64>)>,
+    found: Vec<FoundPass>,
     corrected_features: Vec<Vec<CorrectedFeature>>,
     images: Vec<Array2<f64>>,
     indices: Vec<Vec<Option<FeatureIndex>>>,
@@ -472,7 +482,7 @@ fn pass_outputs(
             PassOutput {
                 pass: set.pass,
                 features: set,
-                correlation: inputs.options.keep_correlation.then_some(correlation),
+                correlation,
                 corrected,
                 corrected_image: image,
                 indices,
@@ -527,7 +537,7 @@ fn correct_sets(
 /// the lattice's neighbour pattern.
 fn model_error(
     error: DistortionError,
-    found: &[(FeatureSet, Array2<f64>)],
+    found: &[FoundPass],
     lattice: &dyn Lattice,
 ) -> PipelineError {
     let DistortionError::TooFewFeatures {
@@ -564,7 +574,7 @@ fn model_error(
     }
 }
 
-fn found_sets_first(found: &[(FeatureSet, Array2<f64>)]) -> &FeatureSet {
+fn found_sets_first(found: &[FoundPass]) -> &FeatureSet {
     &found[0].0
 }
 
