@@ -161,6 +161,7 @@ pub fn base_config(seed: u64) -> SimulationConfig {
         turnaround_s: 0.0,
         trace_fast: ScanDirection::Right,
         slow: ScanDirection::Down,
+        memory_limit_gib: None,
     };
     config.surface.angle_rad = uniform(&mut rng, 0.0, std::f64::consts::FRAC_PI_3);
     config.surface.origin_m = [uniform(&mut rng, 0.0, 2e-10), uniform(&mut rng, 0.0, 2e-10)];

@@ -119,6 +119,11 @@ pub struct ScanConfig {
     /// Slow direction.
     #[serde(default = "down")]
     pub slow: ScanDirection,
+    /// Memory the simulation may take, GiB (default [`MAX_MEMORY_BYTES`], 2 GiB, which
+    /// caps images at [`MAX_PIXELS`]); raise it for larger images on a machine that has the
+    /// memory ([`BYTES_PER_PIXEL`] bytes per pixel; at most 256 GiB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub memory_limit_gib: Option<f64>,
 }
 
 fn right() -> ScanDirection {
@@ -547,8 +552,10 @@ impl ScanConfig {
         if self.rows == 0 {
             return Err(invalid("scan.rows", "must be at least 1"));
         }
+        let memory_limit = self.memory_limit_bytes()?;
+        let max_pixels = (memory_limit / BYTES_PER_PIXEL) as usize;
         match self.columns.checked_mul(self.rows) {
-            Some(pixels) if pixels <= MAX_PIXELS => {}
+            Some(pixels) if pixels <= max_pixels => {}
             pixels => {
                 let gigabytes =
                     pixels.map_or(f64::INFINITY, |p| p as f64) * BYTES_PER_PIXEL as f64 / 1e9;
@@ -556,10 +563,10 @@ impl ScanConfig {
                     "scan.columns × scan.rows",
                     format!(
                         "{} x {} px would need about {gigabytes:.1} GB; the limit is \
-                         {MAX_PIXELS} pixels ({:.1} GB, e.g. 5120 x 5120)",
+                         {max_pixels} pixels ({:.1} GB; scan.memory_limit_gib raises it)",
                         self.columns,
                         self.rows,
-                        MAX_MEMORY_BYTES as f64 / 1e9
+                        memory_limit as f64 / 1e9
                     ),
                 ));
             }
@@ -578,6 +585,20 @@ impl ScanConfig {
             ));
         }
         Ok(())
+    }
+
+    /// The memory the simulation may take, bytes: `memory_limit_gib` or 2 GiB.
+    fn memory_limit_bytes(&self) -> Result<u64, SimulationError> {
+        match self.memory_limit_gib {
+            None => Ok(MAX_MEMORY_BYTES),
+            Some(gib) if gib.is_finite() && gib > 0.0 && gib <= 256.0 => {
+                Ok((gib * (1u64 << 30) as f64) as u64)
+            }
+            Some(gib) => Err(invalid(
+                "scan.memory_limit_gib",
+                format!("must lie in (0, 256] GiB, got {gib}"),
+            )),
+        }
     }
 
     /// The scan geometry: pitch = size / pixels, pixel period = fast pitch / fast speed.

@@ -98,6 +98,7 @@ fn fig3(name: &str, description: &str, velocity_m_per_s: Option<[f64; 2]>) -> Si
             turnaround_s: 0.0,
             trace_fast: ScanDirection::Right,
             slow: ScanDirection::Down,
+            memory_limit_gib: None,
         },
         surface: SurfaceConfig {
             lattice: LatticeConfig::Hexagonal { a_m: 1e-9 },
@@ -221,6 +222,7 @@ pub fn headline_2048() -> SimulationConfig {
             turnaround_s: 0.0,
             trace_fast: ScanDirection::Right,
             slow: ScanDirection::Down,
+            memory_limit_gib: None,
         },
         vec![
             EffectConfig::ThermalDrift(ThermalDrift {
@@ -263,6 +265,7 @@ pub fn ci_small() -> SimulationConfig {
             turnaround_s: 0.0,
             trace_fast: ScanDirection::Right,
             slow: ScanDirection::Down,
+            memory_limit_gib: None,
         },
         vec![
             EffectConfig::ThermalDrift(ThermalDrift {

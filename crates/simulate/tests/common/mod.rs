@@ -33,6 +33,7 @@ pub fn base_config() -> SimulationConfig {
             turnaround_s: 0.0,
             trace_fast: ScanDirection::Right,
             slow: ScanDirection::Down,
+            memory_limit_gib: None,
         },
         surface: SurfaceConfig {
             lattice: LatticeConfig::Square { a_m: A },
