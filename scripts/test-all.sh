@@ -31,6 +31,6 @@ MATURIN_PEP517_ARGS="--profile dev" "$py" -m pip install --quiet --disable-pip-v
     --force-reinstall --no-deps ./crates/python
 
 # The tests compare with the command line built above.
-export DHCT_BIN="$PWD/target/debug/dhct"
+export DHCT_BIN="${CARGO_TARGET_DIR:-$PWD/target}/debug/dhct"
 export PYTHONDONTWRITEBYTECODE=1
 "$py" -m pytest -p no:cacheprovider crates/python/tests "$@"

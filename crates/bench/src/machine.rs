@@ -11,6 +11,50 @@ pub fn peak_memory_mib() -> Option<f64> {
     Some(kib / 1024.0)
 }
 
+/// Resets this process's peak resident set size (`VmHWM`) to its current size (writing 5
+/// to `/proc/self/clear_refs`, Linux ≥ 4.0), so the next [`peak_memory_mib`] is the peak
+/// since now. False where that is not possible.
+pub fn reset_peak_memory() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// Peak resident memory of each stage of a run, from `VmHWM` reset as each stage starts.
+#[derive(Debug, Default)]
+pub struct StagePeaks {
+    state: std::sync::Mutex<StagePeaksState>,
+}
+
+#[derive(Debug, Default)]
+struct StagePeaksState {
+    /// `(stage, peak MiB)` in order, once the stage has ended.
+    ended: Vec<(String, f64)>,
+    /// The stage running now.
+    current: Option<String>,
+}
+
+impl StagePeaks {
+    /// Ends the current stage (recording its peak) and starts `stage` (named with the
+    /// resident memory it starts from, MiB).
+    pub fn start(&self, stage: &str) {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        if let (Some(previous), Some(peak)) = (state.current.take(), peak_memory_mib()) {
+            state.ended.push((previous, peak));
+        }
+        if reset_peak_memory() {
+            let resident = current_memory_mib().unwrap_or(f64::NAN);
+            state.current = Some(format!("{stage} (from {resident:.0})"));
+        }
+    }
+
+    /// Ends the current stage; every stage's peak, MiB.
+    pub fn finish(&self) -> Vec<(String, f64)> {
+        self.start("");
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.current = None;
+        std::mem::take(&mut state.ended)
+    }
+}
+
 /// Current resident set size of this process (`VmRSS`), MiB.
 pub fn current_memory_mib() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;

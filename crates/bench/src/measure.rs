@@ -58,6 +58,10 @@ pub struct Measurement {
     pub times: StageTimes,
     /// Peak resident memory of the process that ran it (VmHWM), MiB.
     pub peak_memory_mib: Option<f64>,
+    /// Peak resident memory of each stage (read, then the pipeline's stages), MiB; empty
+    /// where the peak cannot be reset.
+    #[serde(default)]
+    pub stage_peaks_mib: Vec<(String, f64)>,
     /// Rayon worker threads.
     pub threads: usize,
     /// Load average (1, 5, 15 min) when the run ended.
@@ -74,15 +78,20 @@ pub fn measure_file(
     options: &PipelineOptions,
 ) -> Result<(Measurement, Analysis), String> {
     let probe = machine::ContentionProbe::start();
+    let peaks = machine::StagePeaks::default();
+    peaks.start("read");
     let start = Instant::now();
     let file = dhct_sm4_io::read_path(path).map_err(|e| format!("reading {path:?}: {e}"))?;
     let pair = file
         .topography()
         .ok_or_else(|| format!("{path:?} has no topography channel"))?;
     let read_s = start.elapsed().as_secs_f64();
-    let analysis = dhct_pipeline::run(pair, lattice, None, options, &|_| {})
-        .map_err(|e| format!("pipeline: {e}"))?;
+    let analysis = dhct_pipeline::run(pair, lattice, None, options, &|stage| {
+        peaks.start(&format!("{stage:?}"))
+    })
+    .map_err(|e| format!("pipeline: {e}"))?;
     let end_to_end_s = start.elapsed().as_secs_f64();
+    let stage_peaks_mib = peaks.finish();
     let other_cpus = probe.other_cpus();
     let (neighbours_local_s, model_fit_s) =
         model_breakdown(&analysis, pair.geometry(), lattice, options)?;
@@ -108,7 +117,12 @@ pub fn measure_file(
             pipeline_s: t.total_s,
             end_to_end_s,
         },
-        peak_memory_mib: machine::peak_memory_mib(),
+        peak_memory_mib: stage_peaks_mib
+            .iter()
+            .map(|(_, peak)| *peak)
+            .reduce(f64::max)
+            .or_else(machine::peak_memory_mib),
+        stage_peaks_mib,
         threads: rayon::current_num_threads(),
         load: machine::load_string(),
         other_cpus,

@@ -22,7 +22,7 @@ use dhct_bench::accuracy::{Accuracy, accuracy, match_features};
 use dhct_bench::machine::{cpus, load_string, peak_memory_mib};
 use dhct_bench::measure::{Measurement, StageTimes, measure_file};
 use dhct_bench::robustness::{self, SweepSize};
-use dhct_bench::scenario::{HEADLINE_PIXELS, headline_at, pipeline_options};
+use dhct_bench::scenario::{HEADLINE_PIXELS, SpeedScaling, headline_at, pipeline_options};
 use dhct_bench::table::Table;
 use dhct_scan::ScanPass;
 use dhct_simulate::{LatticeConfig, Simulation, SimulationOutput};
@@ -160,7 +160,7 @@ fn measure_in_child(path: &Path, lattice: &LatticeConfig) -> Result<Measurement,
 
 /// Simulates `pixels`², writes the SM4 into `dir`; returns the output and the file.
 fn simulate_to_sm4(pixels: usize, dir: &Path) -> Result<(SimulationOutput, PathBuf, f64), String> {
-    let config = headline_at(pixels);
+    let config = headline_at(pixels, SpeedScaling::SameLineTime);
     let start = Instant::now();
     let output = Simulation::from_config(&config)
         .and_then(|s| s.run())
@@ -170,6 +170,43 @@ fn simulate_to_sm4(pixels: usize, dir: &Path) -> Result<(SimulationOutput, PathB
     dhct_sm4_io::write_atomically(&path, |w| dhct_sm4_io::sm4::write(&output.scan_file(), w))
         .map_err(|e| format!("writing {path:?}: {e}"))?;
     Ok((output, path, simulate_s))
+}
+
+/// `"2048²: peak per stage (MiB): read 98, Calibration 120, …"`.
+fn stage_peaks_line(m: &Measurement) -> String {
+    let stages: Vec<String> = m
+        .stage_peaks_mib
+        .iter()
+        .map(|(stage, peak)| format!("{stage} {peak:.0}"))
+        .collect();
+    format!(
+        "{}²: peak per stage (MiB): {}",
+        m.pixels[0],
+        stages.join(", ")
+    )
+}
+
+/// Issue 18's time and memory targets for the sizes that have one (2048², 4096², 8192²;
+/// read + pipeline on 2 cores; GB = 10⁹ bytes), met or missed.
+fn scale_target(m: &Measurement) -> Option<String> {
+    let (seconds, gigabytes) = match m.pixels {
+        [2048, 2048] => (1.5, None),
+        [4096, 4096] => (6.0, Some(1.5)),
+        [8192, 8192] => (30.0, Some(4.0)),
+        _ => return None,
+    };
+    let time = m.times.end_to_end_s;
+    let verdict = |ok: bool| if ok { "met" } else { "MISSED" };
+    let mut text = format!(
+        "target {}²: ≤ {seconds} s: {time:.2} s {}",
+        m.pixels[0],
+        verdict(time <= seconds)
+    );
+    if let Some(gb) = gigabytes {
+        let peak_gb = m.peak_memory_mib.unwrap_or(f64::NAN) * 1048576.0 / 1e9;
+        text += &format!("; ≤ {gb} GB: {peak_gb:.2} GB {}", verdict(peak_gb <= gb));
+    }
+    Some(text)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -308,6 +345,7 @@ fn headline(args: &Args, dir: &Path, lattice_config: &LatticeConfig) -> Result<V
             m.load,
             m.other_cpus.unwrap_or(f64::NAN)
         );
+        println!("  {}", stage_peaks_line(&m));
         runs.push(m);
     }
     let (min, med) = summarise(&runs);
@@ -408,7 +446,13 @@ fn run(args: &Args) -> Result<(), String> {
         scaling.push(m);
     }
     if !scaling.is_empty() {
-        println!("\n## Scaling (same pitch and speed; one run each)\n{table}");
+        println!("\n## Scaling (same pitch and line time; one run each)\n{table}");
+        for m in &scaling {
+            println!("{}", stage_peaks_line(m));
+            if let Some(verdict) = scale_target(m) {
+                println!("  {verdict}");
+            }
+        }
     }
     report.insert("scaling".into(), json!(scaling));
 
@@ -460,7 +504,7 @@ fn run(args: &Args) -> Result<(), String> {
 /// stage times and residuals vs truth).
 fn write_peer_files(dir: &Path, pixels: usize) -> Result<Value, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{dir:?}: {e}"))?;
-    let config = headline_at(pixels);
+    let config = headline_at(pixels, SpeedScaling::SameSpeed);
     let output = Simulation::from_config(&config)
         .and_then(|s| s.run())
         .map_err(|e| format!("simulation: {e}"))?;
