@@ -388,6 +388,42 @@ mod tests {
     }
 
     #[test]
+    fn a_faint_modulation_of_a_large_image_is_no_larger_cell() {
+        // Hexagonal, a = 20 px, one set of rows exactly along the fast axis (its reflection
+        // is in the scan-line band and is left out), modulated along y by 3e-4 in
+        // amplitude (sidebands ~1e-8 of the strongest peak's power: far above a noise-free
+        // background, far below any real superstructure).
+        let (n, a_px, pitch) = (1024, 20.0, 1e-11);
+        let k = 4.0 * std::f64::consts::PI / (3f64.sqrt() * a_px);
+        let waves: Vec<[f64; 2]> = [90.0f64, 30.0, -30.0]
+            .iter()
+            .map(|d| [k * d.to_radians().cos(), k * d.to_radians().sin()])
+            .collect();
+        let z = Array2::from_shape_fn((n, n), |(r, c)| {
+            let (x, y) = (c as f64, r as f64);
+            let atoms: f64 = waves.iter().map(|w| (w[0] * x + w[1] * y).cos()).sum();
+            let modulation = 1.0 + 3e-4 * (2.0 * std::f64::consts::PI * y / 164.0).cos();
+            1e-11 * atoms * modulation
+        });
+        let geometry = ScanGeometry::new(
+            n,
+            n,
+            pitch,
+            pitch,
+            1e-4,
+            dhct_scan::ScanDirection::Right,
+            dhct_scan::ScanDirection::Down,
+        )
+        .unwrap();
+        let measured = measure_lattice(z.view(), &geometry, None).unwrap().lattice;
+        let a_m = a_px * pitch;
+        assert_eq!(measured.shape, LatticeShape::Hexagonal, "{measured:?}");
+        for length in measured.lengths_m {
+            assert!((length / a_m - 1.0).abs() < 0.002, "{measured:?}");
+        }
+    }
+
+    #[test]
     fn a_stretched_hexagonal_lattice_is_named_as_one() {
         let stretched = lattice([5.09e-10, 5.18e-10], 64.2);
         assert_eq!(stretched.shape, LatticeShape::CentredRectangular);

@@ -33,6 +33,14 @@ pub const LINE_BAND_SNR: f64 = 50.0;
 /// At most this many peaks (the strongest) are kept.
 pub const MAX_PEAKS: usize = 48;
 
+/// A peak weaker than this fraction of the strongest is ignored, however far it stands out
+/// of the background: in a large image (many pixels, so a low background) the window's
+/// leakage from a reflection along the scan lines and faint modulations of the corrected
+/// image (10⁻⁷ of the strongest peak in an 8192² image) would otherwise be taken for the
+/// reflections of a larger cell. A real superstructure a tenth as strong in amplitude
+/// has 10⁻² of the power.
+pub const MIN_RELATIVE_POWER: f64 = 1e-5;
+
 /// A local maximum of the power spectrum.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Peak {
@@ -208,6 +216,8 @@ impl PowerSpectrum {
             }
         }
         peaks.sort_by(|a, b| b.power.total_cmp(&a.power));
+        let strongest = peaks.first().map_or(0.0, |p| p.power);
+        peaks.retain(|p| p.power >= MIN_RELATIVE_POWER * strongest);
         peaks.truncate(MAX_PEAKS);
         peaks
     }
