@@ -4,6 +4,7 @@
 pub mod feature_table;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -335,13 +336,14 @@ enum DataFormat {
 fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result<Vec<String>> {
     let geometry = pair.geometry();
     let pitch = [geometry.pitch_x(), geometry.pitch_y()];
-    let mut jobs: Vec<(String, ImageChannel, DataFormat)> = Vec::new();
+    // One copy of each image, shared by its files (a huge scan's images are gigabytes).
+    let mut jobs: Vec<(String, Arc<ImageChannel>, DataFormat)> = Vec::new();
     for pass in &analysis.passes {
-        let channel = channel_like(pair, pass.pass, &pass.corrected_image);
+        let channel = Arc::new(channel_like(pair, pass.pass, &pass.corrected_image));
         let name = format!("corrected_{}", pass.pass);
         jobs.push((
             format!("{name}.tiff"),
-            channel.clone(),
+            Arc::clone(&channel),
             DataFormat::Tiff(Some(pitch)),
         ));
         jobs.push((format!("{name}.gsf"), channel, DataFormat::Gsf(pass.pass)));
@@ -351,7 +353,7 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             ("unit_cell_averaged.tiff", &cell.averaged.values),
             ("unit_cell_symmetrized.tiff", &cell.symmetrized.values),
         ] {
-            let channel = ImageChannel::new(name, "m", values.clone());
+            let channel = Arc::new(ImageChannel::new(name, "m", values.clone()));
             jobs.push((name.into(), channel, DataFormat::Tiff(None)));
         }
     }

@@ -285,7 +285,7 @@ fn image_figures(inputs: &FigureInputs, pass: &PassOutput) -> Vec<Figure> {
 
 /// The normalised cross-correlation map of one pass.
 fn ncc_figure(inputs: &FigureInputs, pass: &PassOutput) -> Option<Figure> {
-    let ncc = pass.correlation.as_ref()?.mapv(f64::from);
+    let ncc = pass.correlation.as_ref()?;
     let geometry = inputs.pair.geometry();
     let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
     Some(Figure::picture(

@@ -20,14 +20,26 @@ pub struct Canvas {
 
 /// Robust display range of an image: the 0.5 and 99.5 percentiles of its finite values
 /// (so a few spikes do not wash out the picture).
-pub fn display_range(values: ArrayView2<f64>) -> Option<(f64, f64)> {
-    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+pub fn display_range<T: Copy + Into<f64>>(values: ArrayView2<T>) -> Option<(f64, f64)> {
+    // About 200,000 evenly spaced pixels (a huge image is not copied whole).
+    let step = (values.len() / 200_000).max(1);
+    let mut finite: Vec<f64> = values
+        .iter()
+        .step_by(step)
+        .map(|&v| v.into())
+        .filter(|v: &f64| v.is_finite())
+        .collect();
     if finite.is_empty() {
-        return None;
-    }
-    let step = (finite.len() / 200_000).max(1);
-    if step > 1 {
-        finite = finite.into_iter().step_by(step).collect();
+        // A sample of NaN only: look at every pixel before giving up.
+        finite = values
+            .iter()
+            .map(|&v| v.into())
+            .filter(|v: &f64| v.is_finite())
+            .take(200_000)
+            .collect();
+        if finite.is_empty() {
+            return None;
+        }
     }
     finite.sort_by(f64::total_cmp);
     let at = |q: f64| finite[((finite.len() - 1) as f64 * q).round() as usize];
@@ -42,8 +54,8 @@ pub fn display_range(values: ArrayView2<f64>) -> Option<(f64, f64)> {
 impl Canvas {
     /// `image` through `colormap` over `range` (default: [`display_range`]), each pixel
     /// drawn as `scale × scale` picture pixels. NaN is drawn in [`NAN_COLOUR`].
-    pub fn from_image(
-        image: ArrayView2<f64>,
+    pub fn from_image<T: Copy + Into<f64>>(
+        image: ArrayView2<T>,
         colormap: Colormap,
         range: Option<(f64, f64)>,
         scale: usize,
@@ -57,7 +69,7 @@ impl Canvas {
         let mut rgb = vec![0u8; width * height * 3];
         for r in 0..rows {
             for c in 0..columns {
-                let v = image[[r, c]];
+                let v: f64 = image[[r, c]].into();
                 let colour = if v.is_finite() {
                     table.rgb((v - low) / span)
                 } else {
