@@ -47,6 +47,7 @@ pub mod matrix;
 pub mod nanoscope;
 pub mod nid;
 pub mod npy;
+mod npy_sidecar;
 mod overrides;
 mod placeholders;
 pub mod png_file;
@@ -82,6 +83,10 @@ pub fn read_path_limited(path: &Path, limits: &ReadLimits) -> Result<ScanFile, R
     if matrix::is_data_file(&bytes) {
         // A MATRIX data file is read with its parameter file from beside it.
         return matrix::read_files(path, &bytes, limits);
+    }
+    if detect_format(&bytes) == Some(FileFormat::Npy) {
+        // With the JSON sidecar dhct writes beside it, and the other pass, when there.
+        return npy_sidecar::read_with_sidecar(path, &bytes, limits);
     }
     read_bytes_limited(&bytes, limits)
 }

@@ -23,7 +23,10 @@
 //! [`ValueSource::Assumed`]: pixel pitch [`ASSUMED_PITCH`] along x and y, pixel period
 //! [`ASSUMED_PIXEL_PERIOD`], fast direction right, slow direction down. Supply the real values
 //! with [`crate::GeometryOverrides`]. The channel is called [`CHANNEL_NAME`] with an empty
-//! (unknown) unit.
+//! (unknown) unit. Read by path ([`crate::read_path`]), a file with the JSON [`Sidecar`]
+//! dhct writes beside it (`NAME.json`) gets its geometry, channel name and unit from the
+//! sidecar, and is paired with its other pass (`…trace…` ↔ `…retrace…`) when that has a
+//! sidecar of the same scan.
 //!
 //! # Hostile input
 //!

@@ -20,9 +20,12 @@
 //! names the z unit `z_unit` (ImageJ reads `unit` as the length unit). ImageJ/Fiji convert a
 //! centimetre resolution only for `unit=um`, so they show µm.
 //!
-//! A TIFF carries no scan geometry dhct trusts, so the reader returns the placeholder
-//! geometry of [`crate::npy`]: pitch [`crate::ASSUMED_PITCH`], pixel period [`crate::ASSUMED_PIXEL_PERIOD`],
-//! fast right, slow down, scale and timing [`ValueSource::Assumed`](dhct_scan::ValueSource).
+//! A TIFF carries no scan timing, so the reader returns the placeholder geometry of
+//! [`crate::npy`]: pixel period [`crate::ASSUMED_PIXEL_PERIOD`], fast right, slow down, timing
+//! [`ValueSource::Assumed`](dhct_scan::ValueSource). The pixel size is read from the
+//! resolution tags where the description says they are physical (a dhct TIFF, or an ImageJ
+//! header with a length unit), and is otherwise the placeholder [`crate::ASSUMED_PITCH`],
+//! marked assumed.
 //! Only the first image of a multi-page file is read. Row 0 is the top row (TIFF's default
 //! orientation; the `Orientation` tag is not interpreted).
 //!
@@ -40,7 +43,7 @@ use ::tiff::decoder::{Decoder, DecodingResult, Limits};
 use ::tiff::encoder::{Rational, TiffEncoder, colortype};
 use ::tiff::tags::ResolutionUnit;
 use ::tiff::tags::Tag;
-use dhct_scan::{FileFormat, ImageChannel, ScanPair};
+use dhct_scan::{FileFormat, ImageChannel, ScanPair, ValueSource};
 
 use crate::limits::{Budget, ReadLimits};
 use crate::placeholders::{ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY};
@@ -273,6 +276,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
         .get_tag_ascii_string(Tag::ImageDescription)
         .ok()
         .unwrap_or_default();
+    let pitch = stated_pitch(&mut decoder, &description);
     let more_pages = decoder.more_images();
     let image = decoder.read_image().map_err(|e| read_error(e, bytes))?;
     let values = samples_as_f64(image)?;
@@ -302,17 +306,88 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     let channel =
         ImageChannel::from_row_major(name, info.unit.unwrap_or_default(), rows, columns, values)
             .map_err(|source| ReadError::geometry(FORMAT, source))?;
-    let geometry = crate::npy::assumed_geometry(columns, rows)
+    let mut geometry = crate::npy::assumed_geometry(columns, rows)
         .map_err(|source| ReadError::geometry(FORMAT, source))?;
+    if let Some([x, y]) = pitch {
+        geometry = geometry
+            .with_pitch(x, y)
+            .map_err(|source| ReadError::geometry(FORMAT, source))?
+            .with_scale_source(ValueSource::Stated);
+    }
     let pair = ScanPair::new(geometry, channel, None)
         .map_err(|source| ReadError::geometry(FORMAT, source))?;
 
-    let metadata = tiff_metadata(bits, more_pages, &description, scale);
+    let mut metadata = tiff_metadata(bits, more_pages, &description, scale);
+    if let Some([x, y]) = pitch {
+        metadata.remove(ASSUMED_SCALE_KEY);
+        metadata.insert(
+            "tiff pixel size".to_string(),
+            format!("{x:e} m × {y:e} m (resolution tags)"),
+        );
+    }
     Ok(ScanFile {
         format: FORMAT,
         pairs: vec![pair],
         metadata,
     })
+}
+
+/// The pixel size (metres, x and y) the resolution tags state, trusted only where the
+/// description says they are physical: a TIFF written by dhct (its block in
+/// `ImageDescription`) or an ImageJ header with a length `unit` (`nm`, `um`/`micron`/`µm`,
+/// `mm`, `cm`, `m`, `A`/`Å`). A bare resolution (often 72 dpi of a screen) is no scale.
+fn stated_pitch(decoder: &mut Decoder<Cursor<&[u8]>>, description: &str) -> Option<[f64; 2]> {
+    let mut resolution = |tag| match decoder.find_tag(tag).ok().flatten()? {
+        ::tiff::decoder::ifd::Value::Rational(n, d) if n > 0 && d > 0 => {
+            Some(f64::from(n) / f64::from(d))
+        }
+        _ => None,
+    };
+    let (x, y) = (resolution(Tag::XResolution)?, resolution(Tag::YResolution)?);
+    let unit = decoder
+        .find_tag(Tag::ResolutionUnit)
+        .ok()
+        .flatten()
+        .and_then(|v| v.into_u16().ok())
+        .unwrap_or(2);
+    // ImageJ's header comes first; dhct's block after it names the z unit `unit` or `z_unit`.
+    let imagej_header = description
+        .starts_with("ImageJ=")
+        .then(|| {
+            description
+                .lines()
+                .take_while(|l| l.trim() != DESCRIPTION_MAGIC)
+        })
+        .into_iter()
+        .flatten();
+    let imagej_unit_m = imagej_header.into_iter().find_map(|line| {
+        let value = line.trim().strip_prefix("unit=")?.trim();
+        match value {
+            "nm" => Some(1e-9),
+            "um" | "µm" | "micron" | "microns" => Some(1e-6),
+            "mm" => Some(1e-3),
+            "cm" => Some(1e-2),
+            "m" => Some(1.0),
+            "A" | "Å" | "angstrom" => Some(1e-10),
+            _ => None,
+        }
+    });
+    let ours = description
+        .lines()
+        .any(|line| line.trim() == DESCRIPTION_MAGIC);
+    // Metres per resolution unit: centimetre and inch by the TIFF standard (trusted for our
+    // own files and ImageJ's), none (1) in ImageJ's length unit.
+    let unit_m = match unit {
+        3 if ours || imagej_unit_m.is_some() => 1e-2,
+        2 if ours || imagej_unit_m.is_some() => 2.54e-2,
+        1 => imagej_unit_m?,
+        _ => return None,
+    };
+    let pitch = [unit_m / x, unit_m / y];
+    pitch
+        .iter()
+        .all(|p| p.is_finite() && (1e-15..=1.0).contains(p))
+        .then_some(pitch)
 }
 
 /// The bits per sample of a single-channel grey image (8, 16, 32 or 64).

@@ -2,7 +2,7 @@
 
 use std::io::Cursor;
 
-use dhct_scan::ImageChannel;
+use dhct_scan::{ImageChannel, ValueSource};
 use dhct_sm4_io::{WriteError, tiff_file};
 use ndarray::Array2;
 use tiff::decoder::Decoder;
@@ -49,6 +49,43 @@ fn the_pixel_size_is_stored_in_centimetres_and_for_imagej() {
     assert_eq!(image.name, "Topography (corrected)");
     assert_eq!(image.unit, "m");
     assert_eq!(image.z[[5, 8]], (53.0f64 * 1e-11) as f32 as f64);
+    // ... and the pixel size, as stated.
+    let geometry = file.pairs[0].geometry();
+    assert_eq!(geometry.scale_source(), ValueSource::Stated);
+    for (read, written) in [
+        (geometry.pitch_x(), pitch[0]),
+        (geometry.pitch_y(), pitch[1]),
+    ] {
+        assert!(
+            (read / written - 1.0).abs() < 1e-9,
+            "{read:e} vs {written:e}"
+        );
+    }
+    assert!(!file.metadata.contains_key("assumed scale"));
+}
+
+#[test]
+fn a_screen_resolution_without_a_length_unit_is_no_pixel_size() {
+    // A plain grey TIFF with 72 dpi (what many programs write): the pitch stays assumed.
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = tiff::encoder::TiffEncoder::new(Cursor::new(&mut bytes)).unwrap();
+        let mut image = encoder
+            .new_image::<tiff::encoder::colortype::Gray32Float>(9, 6)
+            .unwrap();
+        image.resolution(
+            tiff::tags::ResolutionUnit::Inch,
+            tiff::encoder::Rational { n: 72, d: 1 },
+        );
+        let data: Vec<f32> = (0..54).map(|v| v as f32).collect();
+        image.write_data(&data).unwrap();
+    }
+    let file = tiff_file::read(&bytes).unwrap();
+    assert_eq!(
+        file.pairs[0].geometry().scale_source(),
+        ValueSource::Assumed
+    );
+    assert!(file.metadata.contains_key("assumed scale"));
 }
 
 #[test]
