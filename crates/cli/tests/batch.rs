@@ -171,3 +171,48 @@ fn globs_shards_and_summarize() {
     let not_table = dhct(d, &["summarize", "in/notes.sm4", "-o", "y.csv"]);
     assert_eq!(not_table.status.code(), Some(1));
 }
+
+#[test]
+fn an_npy_pair_with_sidecars_is_one_scan() {
+    // trace.npy + retrace.npy with the sidecars dhct writes: corrected once, as a pair.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = dhct_sm4_io::read_path(&example()).unwrap();
+    let pair = file.topography().unwrap();
+    std::fs::create_dir_all(d.join("in")).unwrap();
+    for (pass, image) in pair.images() {
+        let mut bytes = Vec::new();
+        dhct_sm4_io::npy::write(image, &mut bytes).unwrap();
+        std::fs::write(d.join(format!("in/{pass}.npy")), bytes).unwrap();
+        let sidecar = dhct_sm4_io::npy::Sidecar::new(image, pair.geometry(), pass, Vec::new());
+        std::fs::write(
+            d.join(format!("in/{pass}.json")),
+            serde_json::to_string(&sidecar).unwrap(),
+        )
+        .unwrap();
+    }
+    let out = dhct(d, &["batch", "in", "-o", "out", "--quiet"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    let rows = table(&d.join("out/summary.csv"));
+    assert_eq!(by_status(&rows, "ok"), ["in/trace.npy"]);
+    assert_eq!(
+        by_status(&rows, "skipped"),
+        ["in/retrace.json", "in/retrace.npy", "in/trace.json"]
+    );
+    assert!(stderr.contains("the retrace of in/trace.npy"), "{stderr}");
+    assert!(
+        stderr.contains("the JSON sidecar of in/trace.npy"),
+        "{stderr}"
+    );
+    // The same result as the SM4 the arrays came from: both passes, the same geometry.
+    std::fs::create_dir_all(d.join("sm4")).unwrap();
+    std::fs::copy(example(), d.join("sm4/example.sm4")).unwrap();
+    let sm4 = dhct(d, &["batch", "sm4", "-o", "out-sm4", "--quiet"]);
+    assert_eq!(sm4.status.code(), Some(0));
+    let sm4_rows = table(&d.join("out-sm4/summary.csv"));
+    let ok = rows.iter().find(|r| r["status"] == "ok").unwrap();
+    for column in ["features", "indexed", "v_x [m/s]", "lattice_constant_x_m"] {
+        assert_eq!(ok[column], sm4_rows[0][column], "{column}");
+    }
+}

@@ -117,6 +117,25 @@ pub(crate) fn read_with_sidecar(
     Ok(file)
 }
 
+/// For an NPY retrace written by dhct (`path`, with its sidecar), the trace file it is read
+/// with: the `…trace…` file beside it whose sidecar describes the same scan. `None` for
+/// anything else (a trace, a retrace alone, a file that is no NPY or has no sidecar).
+pub fn paired_trace(path: &Path) -> Option<PathBuf> {
+    let mut magic = [0u8; 6];
+    std::io::Read::read_exact(&mut std::fs::File::open(path).ok()?, &mut magic).ok()?;
+    if magic != *b"\x93NUMPY" {
+        return None;
+    }
+    let fields = read_sidecar(&path.with_extension("json")).ok()??;
+    let trace = counterpart(path)?;
+    let trace_fields = read_sidecar(&trace.with_extension("json")).ok()??;
+    (fields.pass == "retrace"
+        && trace_fields.pass == "trace"
+        && fields.pairs_with(&trace_fields)
+        && trace.is_file())
+    .then_some(trace)
+}
+
 /// The sidecar at `path`: `None` when there is no file or it is not dhct's (no
 /// `pixel_size_m` key); an error when it is dhct's but cannot be read.
 fn read_sidecar(path: &Path) -> Result<Option<SidecarFields>, ReadError> {

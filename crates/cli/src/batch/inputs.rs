@@ -71,7 +71,14 @@ fn not_a_scan(path: &Path) -> Option<String> {
     if let Err(e) = file.take(SNIFF_BYTES).read_to_end(&mut head) {
         return Some(format!("cannot read: {e}"));
     }
+    let npy_beside = path.with_extension("npy");
     match detect_format(&head) {
+        None if path.extension().is_some_and(|e| e == "json") && npy_beside.is_file() => {
+            Some(format!(
+                "the JSON sidecar of {} (read with it)",
+                npy_beside.display()
+            ))
+        }
         None => Some("not a scan file (its content is no format dhct reads)".into()),
         Some(FileFormat::Png) => {
             Some("a PNG picture (a mask?), not a scan: name it to dhct correct to use it".into())
@@ -93,6 +100,28 @@ fn skip_folder(dir: &Path) -> bool {
 }
 
 impl Found {
+    /// Leaves out an NPY retrace whose trace (paired through their sidecars) is among the
+    /// scans: it is corrected with that trace, not on its own a second time.
+    fn leave_out_paired_retraces(&mut self) {
+        let canonical = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+        let scans: std::collections::BTreeSet<PathBuf> =
+            self.scans.iter().map(|s| canonical(&s.path)).collect();
+        let mut kept = Vec::with_capacity(self.scans.len());
+        for scan in std::mem::take(&mut self.scans) {
+            match dhct_sm4_io::npy::paired_trace(&scan.path) {
+                Some(trace) if scans.contains(&canonical(&trace)) => self.skipped.push(Skipped {
+                    note: format!(
+                        "the retrace of {} (their sidecars pair them): corrected with it",
+                        trace.display()
+                    ),
+                    path: scan.path,
+                }),
+                _ => kept.push(scan),
+            }
+        }
+        self.scans = kept;
+    }
+
     fn add_file(&mut self, path: PathBuf, relative_dir: PathBuf) {
         match not_a_scan(&path) {
             None => self.scans.push(Input { path, relative_dir }),
@@ -193,6 +222,7 @@ pub fn find(inputs: &[String], output: &Path) -> Result<Found> {
     }
     found.scans = unique.into_values().collect();
     found.scans.sort_by(|a, b| a.path.cmp(&b.path));
+    found.leave_out_paired_retraces();
     found.skipped.sort_by(|a, b| a.path.cmp(&b.path));
     found.skipped.dedup();
     Ok(found)
