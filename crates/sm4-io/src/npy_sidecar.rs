@@ -121,6 +121,10 @@ pub(crate) fn read_with_sidecar(
 /// with: the `…trace…` file beside it whose sidecar describes the same scan. `None` for
 /// anything else (a trace, a retrace alone, a file that is no NPY or has no sidecar).
 pub fn paired_trace(path: &Path) -> Option<PathBuf> {
+    // Only a regular file is opened (a FIFO would block).
+    if !path.is_file() {
+        return None;
+    }
     let mut magic = [0u8; 6];
     std::io::Read::read_exact(&mut std::fs::File::open(path).ok()?, &mut magic).ok()?;
     if magic != *b"\x93NUMPY" {
@@ -136,13 +140,16 @@ pub fn paired_trace(path: &Path) -> Option<PathBuf> {
     .then_some(trace)
 }
 
-/// The sidecar at `path`: `None` when there is no file or it is not dhct's (no
-/// `pixel_size_m` key); an error when it is dhct's but cannot be read.
+/// The sidecar at `path`: `None` when there is no regular file, or it is not dhct's (larger
+/// than [`MAX_SIDECAR_BYTES`], not JSON text, or without a `pixel_size_m` key); an error
+/// when it is dhct's but its values cannot be read.
 fn read_sidecar(path: &Path) -> Result<Option<SidecarFields>, ReadError> {
     if !path.is_file() {
         return Ok(None);
     }
-    let text = read_regular_text(path, MAX_SIDECAR_BYTES)?;
+    let Ok(text) = read_regular_text(path, MAX_SIDECAR_BYTES) else {
+        return Ok(None);
+    };
     let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) else {
         return Ok(None);
     };

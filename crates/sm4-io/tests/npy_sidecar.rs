@@ -106,4 +106,11 @@ fn a_json_file_that_is_no_sidecar_leaves_the_geometry_assumed() {
     let g = file.topography().unwrap().geometry();
     assert_eq!(g.scale_source(), ValueSource::Assumed);
     assert!(file.metadata.contains_key("assumed scale"));
+    // Nor does a large or binary file of that name stop the array from being read.
+    for content in [vec![b' '; 1 << 20], vec![0xff, 0xfe, 0x00, 0x93]] {
+        std::fs::write(dir.path().join("image.json"), content).unwrap();
+        let file = read_path(&dir.path().join("image.npy")).unwrap();
+        let g = file.topography().unwrap().geometry();
+        assert_eq!(g.scale_source(), ValueSource::Assumed);
+    }
 }
