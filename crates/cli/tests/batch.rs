@@ -215,4 +215,11 @@ fn an_npy_pair_with_sidecars_is_one_scan() {
     for column in ["features", "indexed", "v_x [m/s]", "lattice_constant_x_m"] {
         assert_eq!(ok[column], sm4_rows[0][column], "{column}");
     }
+    // `correct` names the file the retrace came from.
+    let single = dhct(d, &["correct", "in/trace.npy", "-o", "single", "--quiet"]);
+    assert_eq!(single.status.code(), Some(0));
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("single/model.json")).unwrap())
+            .unwrap();
+    assert_eq!(model["retrace_input"], "in/retrace.npy");
 }

@@ -121,6 +121,16 @@ pub(crate) fn read_with_sidecar(
 /// with: the `…trace…` file beside it whose sidecar describes the same scan. `None` for
 /// anything else (a trace, a retrace alone, a file that is no NPY or has no sidecar).
 pub fn paired_trace(path: &Path) -> Option<PathBuf> {
+    match other_pass_file(path)? {
+        (trace, ScanPass::Trace) => Some(trace),
+        _ => None,
+    }
+}
+
+/// For an NPY written by dhct (`path`, with its sidecar), the file its other pass is read
+/// from (`…trace…` ↔ `…retrace…` beside it, with a sidecar of the same scan) and that
+/// pass; `None` when there is none (or `path` is no NPY or has no sidecar).
+pub fn other_pass_file(path: &Path) -> Option<(PathBuf, ScanPass)> {
     // Only a regular file is opened (a FIFO would block).
     if !path.is_file() {
         return None;
@@ -131,13 +141,10 @@ pub fn paired_trace(path: &Path) -> Option<PathBuf> {
         return None;
     }
     let fields = read_sidecar(&path.with_extension("json")).ok()??;
-    let trace = counterpart(path)?;
-    let trace_fields = read_sidecar(&trace.with_extension("json")).ok()??;
-    (fields.pass == "retrace"
-        && trace_fields.pass == "trace"
-        && fields.pairs_with(&trace_fields)
-        && trace.is_file())
-    .then_some(trace)
+    let other = counterpart(path)?;
+    let other_fields = read_sidecar(&other.with_extension("json")).ok()??;
+    let pass = other_fields.pass(&other).ok()?;
+    (fields.pairs_with(&other_fields) && other.is_file()).then_some((other, pass))
 }
 
 /// The sidecar at `path`: `None` when there is no regular file, or it is not dhct's (larger

@@ -189,7 +189,7 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
             config: request.config,
             mask: None,
             input: request.input.display().to_string(),
-            retrace: request.retrace.map(|p| p.display().to_string()),
+            retrace: retrace_name(request.input, request.retrace),
             read_s,
         },
         &|stage: Stage| bar.set_message(stage.describe()),
@@ -369,6 +369,19 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             Ok(name.clone())
         })
         .collect()
+}
+
+/// The name of the file the retrace came from: the one given, or the NPY retrace paired
+/// with an NPY trace through their sidecars.
+fn retrace_name(input: &Path, retrace: Option<&Path>) -> Option<String> {
+    let paired = || match dhct_sm4_io::npy::other_pass_file(input) {
+        Some((path, ScanPass::Retrace)) => Some(path),
+        _ => None,
+    };
+    retrace
+        .map(Path::to_path_buf)
+        .or_else(paired)
+        .map(|p| p.display().to_string())
 }
 
 /// A one-screen text summary.
