@@ -60,7 +60,7 @@ pub use kernel::Kernel;
 pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{
-    correct_lines, correct_lines_in_place, remove_background, sign_flattened_in_place,
-    signed_flattened, subtract_polynomial, subtract_polynomial_in_place,
+    correct_lines, correct_lines_in_place, remove_background, remove_background_in_place,
+    sign_flattened_in_place, signed_flattened, subtract_polynomial, subtract_polynomial_in_place,
 };
 pub use watershed::{MAX_WATERSHED_PIXELS, NO_BASIN, Region, basin_labels, watershed_regions};

@@ -178,10 +178,21 @@ pub fn remove_background(
     background: Background,
     mask: Option<&Array2<bool>>,
 ) -> Result<Array2<f64>, FeatureError> {
+    let mut out = z.clone();
+    remove_background_in_place(&mut out, background, mask)?;
+    Ok(out)
+}
+
+/// [`remove_background`] without a copy: `z` is replaced by its residual.
+pub fn remove_background_in_place(
+    z: &mut Array2<f64>,
+    background: Background,
+    mask: Option<&Array2<bool>>,
+) -> Result<(), FeatureError> {
     match background {
-        Background::None => Ok(z.clone()),
-        Background::Plane => subtract_polynomial(z, 1, mask),
-        Background::Polynomial(order) => subtract_polynomial(z, order, mask),
+        Background::None => Ok(()),
+        Background::Plane => subtract_polynomial_in_place(z, 1, mask),
+        Background::Polynomial(order) => subtract_polynomial_in_place(z, order, mask),
     }
 }
 
@@ -206,11 +217,7 @@ pub fn sign_flattened_in_place(
     options: &FeatureOptions,
     mask: Option<&Array2<bool>>,
 ) -> Result<(), FeatureError> {
-    match options.background {
-        Background::None => {}
-        Background::Plane => subtract_polynomial_in_place(z, 1, mask)?,
-        Background::Polynomial(order) => subtract_polynomial_in_place(z, order, mask)?,
-    }
+    remove_background_in_place(z, options.background, mask)?;
     if options.polarity == Polarity::Dark {
         z.mapv_inplace(|v| -v);
     }
