@@ -95,10 +95,10 @@ pub(crate) fn read_with_sidecar(
     limits: &ReadLimits,
 ) -> Result<ScanFile, ReadError> {
     let mut file = npy::read_limited(bytes, limits)?;
-    let Some(fields) = read_sidecar(&path.with_extension("json"))? else {
+    let sidecar_path = path.with_extension("json");
+    let Some(fields) = read_sidecar(&sidecar_path)? else {
         return Ok(file);
     };
-    let sidecar_path = path.with_extension("json");
     let pass = fields.pass(&sidecar_path)?;
     let geometry = fields.geometry(&sidecar_path)?;
     let (_, image, _) = file.pairs.remove(0).into_parts();
@@ -141,10 +141,17 @@ pub fn other_pass_file(path: &Path) -> Option<(PathBuf, ScanPass)> {
         return None;
     }
     let fields = read_sidecar(&path.with_extension("json")).ok()??;
-    let other = counterpart(path)?;
-    let other_fields = read_sidecar(&other.with_extension("json")).ok()??;
+    let (other, other_fields) = partner(path)?;
     let pass = other_fields.pass(&other).ok()?;
     (fields.pairs_with(&other_fields) && other.is_file()).then_some((other, pass))
+}
+
+/// The file named like `path` with `trace` ↔ `retrace` and its sidecar, when it has one
+/// (whether it describes the same scan is for [`SidecarFields::pairs_with`] to say).
+fn partner(path: &Path) -> Option<(PathBuf, SidecarFields)> {
+    let other = counterpart(path)?;
+    let fields = read_sidecar(&other.with_extension("json")).ok()??;
+    Some((other, fields))
 }
 
 /// The sidecar at `path`: `None` when there is no regular file, or it is not dhct's (larger
@@ -193,10 +200,7 @@ fn other_pass(
     limits: &ReadLimits,
     file: &mut ScanFile,
 ) -> Result<Option<ImageChannel>, ReadError> {
-    let Some(other_path) = counterpart(path) else {
-        return Ok(None);
-    };
-    let Ok(Some(other)) = read_sidecar(&other_path.with_extension("json")) else {
+    let Some((other_path, other)) = partner(path) else {
         return Ok(None);
     };
     let name = other_path.display().to_string();
