@@ -115,14 +115,21 @@ pub fn fit_model(
             needed: MIN_FEATURES,
         });
     }
-    let (drift, mut parameters, diagnostics) = fit_drift(
-        local,
-        frame_duration_s,
-        line_scan_time_s,
-        options.robust_rounds,
-        options.secant,
-    )?;
-    let (hysteresis, more) = fit_hysteresis(local, line_scan_time_s, options)?;
+    // The two fits share no parameter: they run side by side.
+    let (drift, hysteresis) = rayon::join(
+        || {
+            fit_drift(
+                local,
+                frame_duration_s,
+                line_scan_time_s,
+                options.robust_rounds,
+                options.secant,
+            )
+        },
+        || fit_hysteresis(local, line_scan_time_s, options),
+    );
+    let (drift, mut parameters, diagnostics) = drift?;
+    let (hysteresis, more) = hysteresis?;
     parameters.extend(more);
     Ok(DistortionModel {
         drift,
@@ -535,15 +542,19 @@ impl<'a> HysteresisData<'a> {
     /// Writes `law`'s predicted scale (its secant over the neighbours where there are
     /// offsets) minus the measured scale into `r`.
     fn residuals(&self, law: &HysteresisLaw, r: &mut [f64]) {
-        let (tau, s, offsets) = (&self.tau, &self.s, &self.offsets);
-        for i in 0..tau.len() {
-            let predicted = if offsets[i].is_empty() {
-                law.scale(tau[i])
-            } else {
-                1.0 + secant(|x| law.excess_integral(x), tau[i], offsets[i])
-            };
-            r[i] = predicted - s[i];
-        }
+        // In parallel over fixed chunks: each residual depends on its own entry only.
+        const CHUNK: usize = 1024;
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
+            for (k, out) in chunk.iter_mut().enumerate() {
+                let i = c * CHUNK + k;
+                let predicted = if self.offsets[i].is_empty() {
+                    law.scale(self.tau[i])
+                } else {
+                    1.0 + secant(|x| law.excess_integral(x), self.tau[i], self.offsets[i])
+                };
+                *out = predicted - self.s[i];
+            }
+        });
     }
 }
 
