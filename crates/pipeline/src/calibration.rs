@@ -9,6 +9,7 @@ use dhct_calibrate::{
 use dhct_lattice::Lattice;
 use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use ndarray::Array2;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::PipelineError;
@@ -136,7 +137,7 @@ pub(crate) fn check_corrected(
 ) -> Vec<CorrectedImageCheck> {
     let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
     images
-        .iter()
+        .par_iter()
         .filter_map(|&(pass, z)| {
             let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
             let calibration = match_lattice(&measured, lattice).calibration;
