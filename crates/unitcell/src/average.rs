@@ -48,13 +48,15 @@ impl<'a> Sampler<'a> {
     /// The bilinear value at `(x, y)`, which must satisfy [`Sampler::contains`].
     #[inline]
     fn at(&self, x: f64, y: f64) -> f64 {
-        let c0 = (x as usize).min(self.cols - 2);
+        let cols = self.cols;
+        let c0 = (x as usize).min(cols - 2);
         let r0 = (y as usize).min(self.rows - 2);
         let (fx, fy) = (x - c0 as f64, y - r0 as f64);
-        let top = &self.data[r0 * self.cols + c0..r0 * self.cols + c0 + 2];
-        let bottom = &self.data[(r0 + 1) * self.cols + c0..(r0 + 1) * self.cols + c0 + 2];
-        let upper = top[0] + fx * (top[1] - top[0]);
-        let lower = bottom[0] + fx * (bottom[1] - bottom[0]);
+        // The four neighbours in one slice: one bounds check.
+        let start = r0 * cols + c0;
+        let d = &self.data[start..start + cols + 2];
+        let upper = d[0] + fx * (d[1] - d[0]);
+        let lower = d[cols] + fx * (d[cols + 1] - d[cols]);
         upper + fy * (lower - upper)
     }
 }
