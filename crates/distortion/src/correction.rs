@@ -91,6 +91,9 @@ pub fn pixel_sample_positions(
 /// Writes the sample-frame positions (output pixels) of input row `r` to `(xs, ys)`.
 type RowPositionsFn<'a> = dyn Fn(usize, &mut [f64], &mut [f64]) + Sync + 'a;
 
+/// A range (output rows) holding the y positions of every pixel of input row `r`.
+type RowYRangeFn<'a> = dyn Fn(usize) -> (f64, f64) + Sync + 'a;
+
 /// Computes the sample-frame positions (output pixels) of one input row at a time.
 struct RowPositions<'a> {
     model: &'a DistortionModel,
@@ -121,26 +124,61 @@ impl<'a> RowPositions<'a> {
 
     /// Writes the positions of the pixels of row `r` (display orientation) to `xs`, `ys`.
     fn fill(&self, r: usize, xs: &mut [f64], ys: &mut [f64]) {
-        let geometry = self.geometry;
-        let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
-        let pixel_period = geometry.pixel_period();
         for (c, (x, y)) in xs.iter_mut().zip(ys.iter_mut()).enumerate() {
-            let (xc, yc) = (c as f64, r as f64);
-            let time = geometry.acquisition_time(self.pass, xc, yc);
-            let tau = time.since_line_start;
-            let k = (tau / pixel_period - 0.5).round();
-            let lag = match self.lags.get(k as usize) {
-                Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
-                _ => self.model.hysteresis_lag(geometry, self.pass, tau),
-            };
-            let d = self
-                .model
-                .displacement_with_lag(geometry, time.since_frame_start, lag);
-            *x = (xc * px + d[0]) / px;
-            *y = (yc * py + d[1]) / py;
+            (*x, *y) = self.position(c, r);
         }
     }
+
+    /// The position (output pixels) of pixel `(c, r)` (display orientation).
+    #[inline]
+    fn position(&self, c: usize, r: usize) -> (f64, f64) {
+        let geometry = self.geometry;
+        let (xc, yc) = (c as f64, r as f64);
+        let time = geometry.acquisition_time(self.pass, xc, yc);
+        let tau = time.since_line_start;
+        let k = (tau / geometry.pixel_period() - 0.5).round();
+        let lag = match self.lags.get(k as usize) {
+            Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
+            _ => self.model.hysteresis_lag(geometry, self.pass, tau),
+        };
+        let d = self
+            .model
+            .displacement_with_lag(geometry, time.since_frame_start, lag);
+        let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+        ((xc * px + d[0]) / px, (yc * py + d[1]) / py)
+    }
+
+    /// A range (output rows) holding the y position of every pixel of row `r`, from every
+    /// [`Y_RANGE_STEP`]-th pixel and the last, widened by twice the largest change between
+    /// neighbouring samples plus one row. Along a row the displacement is smooth (drift and
+    /// creep) plus a lag monotone in the line time, so between two samples it leaves their
+    /// range by less than one sample step. Only used to skip rows that cannot touch a band:
+    /// a wider range costs time, never pixels. `(∞, −∞)` when no sample is finite.
+    fn y_range(&self, r: usize, columns: usize) -> (f64, f64) {
+        let samples = (0..columns)
+            .step_by(Y_RANGE_STEP)
+            .chain(
+                (columns > 0 && !(columns - 1).is_multiple_of(Y_RANGE_STEP)).then_some(columns - 1),
+            )
+            .map(|c| self.position(c, r).1)
+            .filter(|y| y.is_finite());
+        let (mut lo, mut hi, mut step) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+        let mut previous: Option<f64> = None;
+        for y in samples {
+            lo = lo.min(y);
+            hi = hi.max(y);
+            if let Some(p) = previous {
+                step = step.max((y - p).abs());
+            }
+            previous = Some(y);
+        }
+        let margin = 2.0 * step + 1.0;
+        (lo - margin, hi + margin)
+    }
 }
+
+/// Pixels between the samples of [`RowPositions::y_range`].
+const Y_RANGE_STEP: usize = 16;
 
 /// The corrected image of `pass`: `z` (rows × columns, display orientation, controller
 /// frame) resampled onto the sample-frame grid with the same pitch, size and origin
@@ -168,6 +206,7 @@ pub fn correct_image(
     let positions = RowPositions::new(model, geometry, pass);
     Ok(resample_mesh(
         &|r, xs, ys| positions.fill(r, xs, ys),
+        &|r| positions.y_range(r, columns),
         z,
         (rows, columns),
     ))
@@ -180,6 +219,7 @@ pub fn correct_image(
 /// the quad acquired last (in row-major input order) wins.
 fn resample_mesh(
     row_positions: &RowPositionsFn<'_>,
+    row_y_range: &RowYRangeFn<'_>,
     z: &Array2<f64>,
     (out_rows, out_columns): (usize, usize),
 ) -> Array2<f64> {
@@ -190,7 +230,7 @@ fn resample_mesh(
     }
     let z = z.as_standard_layout();
     let z = z.as_slice().expect("standard-layout arrays are contiguous");
-    let quad_rows = quad_row_ranges(row_positions, rows, columns);
+    let quad_rows = quad_row_ranges(row_y_range, rows);
     let band = out_rows
         .div_ceil(4 * rayon::current_num_threads().max(1))
         .max(8);
@@ -228,25 +268,8 @@ fn resample_mesh(
 }
 
 /// The y range (output pixels) covered by each row of quads (vertex rows `r`, `r + 1`).
-fn quad_row_ranges(
-    row_positions: &RowPositionsFn<'_>,
-    rows: usize,
-    columns: usize,
-) -> Vec<(f64, f64)> {
-    let vertex_rows: Vec<(f64, f64)> = (0..rows)
-        .into_par_iter()
-        .map_init(
-            || (vec![0.0; columns], vec![0.0; columns]),
-            |(xs, ys), r| {
-                row_positions(r, xs, ys);
-                ys.iter()
-                    .filter(|y| y.is_finite())
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &y| {
-                        (lo.min(y), hi.max(y))
-                    })
-            },
-        )
-        .collect();
+fn quad_row_ranges(row_y_range: &RowYRangeFn<'_>, rows: usize) -> Vec<(f64, f64)> {
+    let vertex_rows: Vec<(f64, f64)> = (0..rows).into_par_iter().map(row_y_range).collect();
     vertex_rows
         .windows(2)
         .map(|w| (w[0].0.min(w[1].0), w[0].1.max(w[1].1)))
@@ -404,5 +427,58 @@ impl Triangle {
         let l0 = 1.0 - l1 - l2;
         (l0 >= -SLACK && l1 >= -SLACK && l2 >= -SLACK)
             .then(|| l0 * self.z[0] + l1 * self.z[1] + l2 * self.z[2])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::DriftCreep;
+    use dhct_scan::{HysteresisLaw, ScanDirection};
+
+    /// Every pixel's y lies in its row's sampled range, for a fast axis along y (the
+    /// hysteresis lag moves pixels along y, steepest at the line start), early creep,
+    /// a drift that turns back within the frame, both passes and several directions.
+    #[test]
+    fn sampled_row_ranges_hold_every_pixel() {
+        let model = DistortionModel::new(
+            DriftCreep {
+                // The y velocity changes sign within the frame: y peaks between samples.
+                velocity_m_per_s: [3e-11, 4e-11],
+                acceleration_m_per_s2: [2e-13, -2e-11],
+                creep_m: [2e-10, 1e-11],
+                t0_s: 0.5,
+            },
+            HysteresisLaw::Power { k: 0.6, n: -0.6 },
+        );
+        for (fast, slow) in [
+            (ScanDirection::Down, ScanDirection::Right),
+            (ScanDirection::Up, ScanDirection::Left),
+            (ScanDirection::Right, ScanDirection::Up),
+        ] {
+            let geometry =
+                ScanGeometry::new(203, 77, 2e-11, 2e-11, 2e-4, fast, slow).expect("valid");
+            for pass in [ScanPass::Trace, ScanPass::Retrace] {
+                let positions = RowPositions::new(&model, &geometry, pass);
+                let (rows, columns) = (geometry.rows(), geometry.columns());
+                let (mut xs, mut ys) = (vec![0.0; columns], vec![0.0; columns]);
+                for r in 0..rows {
+                    positions.fill(r, &mut xs, &mut ys);
+                    let (lo, hi) = positions.y_range(r, columns);
+                    let outside: Vec<f64> =
+                        ys.iter().copied().filter(|&y| y < lo || y > hi).collect();
+                    assert!(
+                        outside.is_empty(),
+                        "{fast:?}/{slow:?} {pass:?} row {r}: {outside:?} outside {lo}..{hi}"
+                    );
+                    let span = ys.iter().fold(f64::NEG_INFINITY, |a, &y| a.max(y))
+                        - ys.iter().fold(f64::INFINITY, |a, &y| a.min(y));
+                    assert!(
+                        hi - lo <= 3.0 * span + 2.0,
+                        "{lo}..{hi} for a span of {span}"
+                    );
+                }
+            }
+        }
     }
 }
