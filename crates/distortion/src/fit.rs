@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::hysteresis_problem::{HysteresisData, HysteresisProblem, hysteresis_law};
 use crate::model::{
     Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
 };
@@ -85,7 +86,7 @@ impl Default for FitOptions {
 
 /// `Σ Δ·(g(x+Δ) − g(x)) / Σ Δ²`: the least-squares slope of `g` through the point `x` over
 /// the offsets `Δ`; the derivative (central difference) when there are no offsets.
-fn secant<G: Fn(f64) -> f64>(g: G, x: f64, offsets: &[f64]) -> f64 {
+pub(crate) fn secant<G: Fn(f64) -> f64>(g: G, x: f64, offsets: &[f64]) -> f64 {
     let denominator: f64 = offsets.iter().map(|d| d * d).sum();
     if offsets.is_empty() || denominator <= 0.0 {
         let h = 1e-6 * x.abs().max(1e-6);
@@ -213,13 +214,12 @@ impl<'a> DriftData<'a> {
         }
     }
 
-    /// The creep column `secant(ln(1 + t/t0))` for the time constant `t0` (s).
-    fn creep_column(&self, t0: f64) -> Vec<f64> {
-        self.t
-            .iter()
-            .zip(&self.offsets)
-            .map(|(&t, offsets)| secant(|x| (x / t0).ln_1p(), t, offsets))
-            .collect()
+    /// The start grid's creep column for the time constant `t0` (s): the derivative
+    /// `1/(t0 + t)` of `ln(1 + t/t0)` at each feature rather than its secant over the
+    /// neighbours, which costs a logarithm per neighbour at each of the grid's 49 points;
+    /// the fit from the start uses the secant.
+    fn start_creep_column(&self, t0: f64) -> Vec<f64> {
+        self.t.iter().map(|&t| 1.0 / (t0 + t)).collect()
     }
 }
 
@@ -268,7 +268,7 @@ fn drift_start(data: &DriftData, span: f64) -> Result<([f64; 6], f64), Distortio
         .into_par_iter()
         .map(|k| {
             let t0 = span * 10f64.powf(-3.0 + 5.0 * k as f64 / 48.0);
-            let log = data.creep_column(t0);
+            let log = data.start_creep_column(t0);
             let design = DMatrix::from_fn(m, 3, |i, j| match j {
                 0 => 1.0,
                 1 => data.quadratic[i],
@@ -513,68 +513,6 @@ impl Residuals for DriftProblem<'_> {
     }
 }
 
-/// The hysteresis fit's data, one entry per local distortion: line times `tau` (s), the
-/// measured fast-axis scales `s` and the secant offsets to the neighbours (s; empty
-/// without secants).
-struct HysteresisData<'a> {
-    tau: Vec<f64>,
-    s: Vec<f64>,
-    offsets: Vec<&'a [f64]>,
-}
-
-impl<'a> HysteresisData<'a> {
-    fn new(local: &'a [LocalDistortion], secant_mode: bool) -> HysteresisData<'a> {
-        let tau: Vec<f64> = local.iter().map(|l| l.line_time_s).collect();
-        let s: Vec<f64> = local.iter().map(|l| l.scale).collect();
-        let offsets: Vec<&[f64]> = local
-            .iter()
-            .map(|l| {
-                if secant_mode {
-                    l.neighbour_dtau_s.as_slice()
-                } else {
-                    &[]
-                }
-            })
-            .collect();
-        HysteresisData { tau, s, offsets }
-    }
-
-    /// Writes `law`'s predicted scale (its secant over the neighbours where there are
-    /// offsets) minus the measured scale into `r`.
-    fn residuals(&self, law: &HysteresisLaw, r: &mut [f64]) {
-        // In parallel over fixed chunks: each residual depends on its own entry only.
-        const CHUNK: usize = 1024;
-        r.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
-            for (k, out) in chunk.iter_mut().enumerate() {
-                let i = c * CHUNK + k;
-                let predicted = if self.offsets[i].is_empty() {
-                    law.scale(self.tau[i])
-                } else {
-                    1.0 + secant(|x| law.excess_integral(x), self.tau[i], self.offsets[i])
-                };
-                *out = predicted - self.s[i];
-            }
-        });
-    }
-}
-
-/// The hysteresis law of `choice` with the fitted parameters `p` (a quartic's time scale
-/// defaults to `line_scan_time_s`; the exponential's `p[1]` is `ln τ_h`).
-fn hysteresis_law(choice: HysteresisChoice, line_scan_time_s: f64, p: &[f64]) -> HysteresisLaw {
-    match choice {
-        HysteresisChoice::None => HysteresisLaw::none(),
-        HysteresisChoice::Quartic { time_scale_s } => HysteresisLaw::Quartic {
-            coefficients: [p[0], p[1], p[2], p[3], p[4]],
-            time_scale_s: time_scale_s.unwrap_or(line_scan_time_s),
-        },
-        HysteresisChoice::Power => HysteresisLaw::Power { k: p[0], n: p[1] },
-        HysteresisChoice::Exponential => HysteresisLaw::Exponential {
-            amplitude: p[0],
-            time_constant_s: p[1].exp(),
-        },
-    }
-}
-
 fn fit_hysteresis(
     local: &[LocalDistortion],
     line_scan_time_s: f64,
@@ -594,8 +532,12 @@ fn fit_hysteresis(
             needed: n + 3,
         });
     }
-    let residuals = |p: &[f64], r: &mut [f64]| data.residuals(&law_of(p), r);
-    let (fit, weights) = hysteresis_irls(&residuals, m, p0, options.robust_rounds)?;
+    let problem = HysteresisProblem {
+        data: &data,
+        choice: options.hysteresis,
+        line_scan_time_s,
+    };
+    let (fit, weights) = hysteresis_irls(&problem, m, p0, options.robust_rounds)?;
     let sg = scaled_sigmas(&fit, &weights, n);
     let p = &fit.params;
     let law = law_of(p);

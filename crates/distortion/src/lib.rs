@@ -55,6 +55,7 @@
 pub mod correction;
 mod error;
 pub mod fit;
+mod hysteresis_problem;
 pub mod local;
 pub mod mask;
 pub mod model;
