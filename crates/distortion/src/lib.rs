@@ -77,6 +77,7 @@ use dhct_features::Feature;
 use dhct_lattice::{Lattice, LocalDistortionMethod};
 use dhct_scan::{ScanGeometry, ScanPass};
 use ndarray::Array2;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Options of [`analyse`]; [`DhctOptions::validate`] checks their ranges.
@@ -203,18 +204,20 @@ pub fn analyse_seeded(
         .unwrap_or_else(|| lattice.local_distortion_method());
     // Passes without features are skipped; `inputs[k]` belongs to `passes[k]` from here.
     let inputs: Vec<&PassInput> = inputs.iter().filter(|i| !i.features.is_empty()).collect();
-    let mut passes = Vec::new();
-    for input in &inputs {
-        let Some(pass) = input.features.first().map(|f| f.pass) else {
-            continue;
-        };
-        let points_px: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
-        let selection =
-            select_features(&points_px, search, input.mask, lattice, &options.neighbours)?;
-        passes.push(measure_pass(
-            input, pass, selection, None, geometry, lattice, method,
-        ));
-    }
+    // The passes are independent until the pooled fit: measured side by side.
+    let mut passes: Vec<PassAnalysis> = inputs
+        .par_iter()
+        .map(|input| {
+            let pass = input.features[0].pass;
+            let points_px: Vec<[f64; 2]> =
+                input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+            let selection =
+                select_features(&points_px, search, input.mask, lattice, &options.neighbours)?;
+            Ok(measure_pass(
+                input, pass, selection, None, geometry, lattice, method,
+            ))
+        })
+        .collect::<Result<_, DistortionError>>()?;
     let windowed: usize = passes.iter().map(|p| p.selection.selected.len()).sum();
     if windowed < fit::MIN_FEATURES {
         // Too distorted for the window: a first model from the k nearest neighbours.
@@ -244,26 +247,23 @@ pub fn analyse_seeded(
     }
     let mut model = fit_pooled(&passes, geometry, options)?;
     for _ in 0..2 {
-        let mut refined = Vec::with_capacity(passes.len());
-        let mut gained = false;
-        for (input, previous) in inputs.iter().zip(&passes) {
-            let selection = select_in_sample_frame(input, &model, geometry, lattice, options)?;
+        let refined: Vec<NeighbourSelection> = inputs
+            .par_iter()
+            .map(|input| select_in_sample_frame(input, &model, geometry, lattice, options))
+            .collect::<Result<_, DistortionError>>()?;
+        let gained = refined.iter().zip(&passes).any(|(selection, previous)| {
             let before = previous.used_selection().selected.len();
             // The k-nearest bootstrap is always replaced by the windowed selection.
             let bootstrap = previous.neighbour_source == NeighbourSource::RawNearest;
-            if (bootstrap && !selection.selected.is_empty())
+            (bootstrap && !selection.selected.is_empty())
                 || selection.selected.len() as f64 > REFINE_GAIN * before as f64
-            {
-                gained = true;
-            }
-            refined.push(selection);
-        }
+        });
         if !gained {
             break;
         }
         passes = passes
-            .into_iter()
-            .zip(&inputs)
+            .into_par_iter()
+            .zip(inputs.par_iter())
             .zip(refined)
             .map(|((previous, input), selection)| {
                 measure_pass(
