@@ -15,7 +15,8 @@
 //! edges).
 
 use dhct_features::Feature;
-use dhct_scan::{ScanGeometry, ScanPass};
+use dhct_numerics::series::ln_1p_small;
+use dhct_scan::{AcquisitionTime, ScanGeometry, ScanPass};
 use ndarray::Array2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -123,27 +124,49 @@ impl<'a> RowPositions<'a> {
     }
 
     /// Writes the positions of the pixels of row `r` (display orientation) to `xs`, `ys`.
+    ///
+    /// The creep's `ln(1 + t/t0)` is taken from the row's first pixel:
+    /// `ln(1 + t_a/t0) + ln(1 + (t − t_a)/(t0 + t_a))`, the second term by its series where
+    /// small ([`ln_1p_small`]: a row spans a tiny part of `t0 + t` unless `t0` is short).
     fn fill(&self, r: usize, xs: &mut [f64], ys: &mut [f64]) {
+        let t0 = self.model.drift.t0_s;
+        let mut anchor: Option<(f64, f64)> = None;
         for (c, (x, y)) in xs.iter_mut().zip(ys.iter_mut()).enumerate() {
-            (*x, *y) = self.position(c, r);
+            let t = self.time(c, r).since_frame_start;
+            let (t_a, log_a) = *anchor.get_or_insert_with(|| (t, (t / t0).ln_1p()));
+            let log = log_a + ln_1p_small((t - t_a) / (t0 + t_a));
+            (*x, *y) = self.position_with_log(c, r, log);
         }
     }
 
-    /// The position (output pixels) of pixel `(c, r)` (display orientation).
+    /// The acquisition time of pixel `(c, r)` (display orientation).
     #[inline]
+    fn time(&self, c: usize, r: usize) -> AcquisitionTime {
+        self.geometry
+            .acquisition_time(self.pass, c as f64, r as f64)
+    }
+
+    /// The position (output pixels) of pixel `(c, r)` (display orientation).
     fn position(&self, c: usize, r: usize) -> (f64, f64) {
+        let t = self.time(c, r).since_frame_start;
+        self.position_with_log(c, r, (t / self.model.drift.t0_s).ln_1p())
+    }
+
+    /// [`RowPositions::position`] with the creep's `ln(1 + t/t0)` given.
+    #[inline]
+    fn position_with_log(&self, c: usize, r: usize, log: f64) -> (f64, f64) {
         let geometry = self.geometry;
         let (xc, yc) = (c as f64, r as f64);
-        let time = geometry.acquisition_time(self.pass, xc, yc);
+        let time = self.time(c, r);
         let tau = time.since_line_start;
         let k = (tau / geometry.pixel_period() - 0.5).round();
         let lag = match self.lags.get(k as usize) {
             Some(&(tabulated, lag)) if k >= 0.0 && tabulated == tau => lag,
             _ => self.model.hysteresis_lag(geometry, self.pass, tau),
         };
-        let d = self
-            .model
-            .displacement_with_lag(geometry, time.since_frame_start, lag);
+        let d =
+            self.model
+                .displacement_with_lag_and_log(geometry, time.since_frame_start, lag, log);
         let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
         ((xc * px + d[0]) / px, (yc * py + d[1]) / py)
     }

@@ -54,7 +54,12 @@ impl DriftCreep {
 
     /// `∫0^t D`, metres, `[x, y]`: `v·t + a·t²/2 + C·ln(1 + t/t0)`.
     pub fn displacement(&self, t: f64) -> [f64; 2] {
-        let log = (t / self.t0_s).ln_1p();
+        self.displacement_with_log(t, (t / self.t0_s).ln_1p())
+    }
+
+    /// [`DriftCreep::displacement`] with `log = ln(1 + t/t0)` computed by the caller (the
+    /// correction of a row of pixels takes it from the row's first pixel).
+    pub fn displacement_with_log(&self, t: f64, log: f64) -> [f64; 2] {
         std::array::from_fn(|k| {
             self.velocity_m_per_s[k] * t
                 + 0.5 * self.acceleration_m_per_s2[k] * t * t
@@ -219,7 +224,19 @@ impl DistortionModel {
     /// Displacement (metres, display frame) at acquisition time `t` (s since frame start)
     /// with hysteresis lag `lag` from [`DistortionModel::hysteresis_lag`].
     pub fn displacement_with_lag(&self, geometry: &ScanGeometry, t: f64, lag: f64) -> [f64; 2] {
-        let drift = self.drift.displacement(t);
+        let log = (t / self.drift.t0_s).ln_1p();
+        self.displacement_with_lag_and_log(geometry, t, lag, log)
+    }
+
+    /// [`DistortionModel::displacement_with_lag`] with the creep's `ln(1 + t/t0)` given.
+    pub(crate) fn displacement_with_lag_and_log(
+        &self,
+        geometry: &ScanGeometry,
+        t: f64,
+        lag: f64,
+        log: f64,
+    ) -> [f64; 2] {
+        let drift = self.drift.displacement_with_log(t, log);
         let trace = direction_vector(geometry.trace_fast());
         let h = -geometry.fast_speed() * lag;
         [drift[0] + h * trace[0], drift[1] + h * trace[1]]

@@ -7,6 +7,7 @@
 //! - [`linalg`]: covariance from normal equations when some parameters are not determined.
 //! - [`crlb`]: the Cramér–Rao bound on a 2-D Gaussian's centre.
 //! - [`moments`]: plain moments of point sets.
+//! - [`series`]: `ln(1 + u)` for small `u` in hot loops (the correction of every pixel).
 //!
 //! Why our own LM and not `argmin` or `levenberg-marquardt`: the feature fit needs bound
 //! projection after every step and forms `JᵀJ`, `Jᵀr` and the cost in one pass over the
@@ -33,3 +34,4 @@ pub mod linalg;
 pub mod lm;
 pub mod moments;
 pub mod robust;
+pub mod series;
