@@ -65,8 +65,10 @@ pub fn find_features_in_pair_and_correlation(
     trace.into_iter().chain(retrace).collect()
 }
 
-/// Largest image (pixels) whose trace and retrace are searched at the same time (4096²).
-const PARALLEL_PASSES_MAX_PIXELS: usize = 1 << 24;
+/// Largest image (pixels) whose trace and retrace are processed at the same time (4096²):
+/// above it, one image at a time (each stage still parallel within the image) bounds the
+/// working memory of a huge scan.
+pub const PARALLEL_PASSES_MAX_PIXELS: usize = 1 << 24;
 
 /// Like [`find_features`], also returning the normalised cross-correlation map.
 pub fn find_features_and_correlation(

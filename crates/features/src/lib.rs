@@ -52,8 +52,8 @@ pub use feature::{
     CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
 };
 pub use find::{
-    find_features, find_features_and_correlation, find_features_in_pair,
-    find_features_in_pair_and_correlation,
+    PARALLEL_PASSES_MAX_PIXELS, find_features, find_features_and_correlation,
+    find_features_in_pair, find_features_in_pair_and_correlation,
 };
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;

@@ -6,6 +6,7 @@ use dhct_calibrate::{
     Calibration, CalibrationError, CheckOptions, PairCalibration, binning_factor, calibrate_pair,
     match_lattice, measure_lattice_binned,
 };
+use dhct_features::PARALLEL_PASSES_MAX_PIXELS;
 use dhct_lattice::Lattice;
 use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
 use ndarray::Array2;
@@ -136,16 +137,19 @@ pub(crate) fn check_corrected(
     lattice: &dyn Lattice,
 ) -> Vec<CorrectedImageCheck> {
     let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
-    images
-        .par_iter()
-        .filter_map(|&(pass, z)| {
-            let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
-            let calibration = match_lattice(&measured, lattice).calibration;
-            Some(CorrectedImageCheck {
-                pass,
-                calibration,
-                angle_error_deg: angle_error_deg(lattice, &calibration),
-            })
+    let check = |&(pass, z): &(ScanPass, &Array2<f64>)| {
+        let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
+        let calibration = match_lattice(&measured, lattice).calibration;
+        Some(CorrectedImageCheck {
+            pass,
+            calibration,
+            angle_error_deg: angle_error_deg(lattice, &calibration),
         })
-        .collect()
+    };
+    // Side by side, except for huge images (one working set at a time).
+    if geometry.rows() * geometry.columns() <= PARALLEL_PASSES_MAX_PIXELS {
+        images.par_iter().filter_map(check).collect()
+    } else {
+        images.iter().filter_map(check).collect()
+    }
 }
