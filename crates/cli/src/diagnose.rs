@@ -9,16 +9,15 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use dhct_diagnose::{
     Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, GapLocation, PassImage,
-    ValidationOptions, VerdictKind, diagnose, sub_feature_view, validate,
+    ValidationOptions, VerdictKind, diagnose_with_model, sub_feature_view, validate,
 };
 use dhct_distortion::PassInput;
-use dhct_features::{Feature, FeatureOptions, FeatureSet, find_features_in_pair, signed_flattened};
-use dhct_lattice::Lattice;
-use dhct_pipeline::PipelineOptions;
+use dhct_features::{FeatureOptions, FeatureSet, signed_flattened};
 use dhct_scan::{ScanGeometry, ScanPair};
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
+use crate::correct::{AnalyseRequest, CorrectError, analyse};
 use crate::output_dir::StagedOutput;
 use crate::report::bars::ColourBar;
 use crate::report::figures::{Figure, PictureStyle, metres_per_picture_px};
@@ -41,21 +40,28 @@ pub fn write_stdout(text: &str) -> Result<()> {
     }
 }
 
-/// The diagnosis of a `dhct correct` run: on its features, options and mask, with the
-/// image view below one feature (what `correct --diagnose` writes as diagnosis.json).
+/// The diagnosis of a `dhct correct` run: on its features, options and mask, starting from
+/// the correction the run made (its drift model, or the affine map it chose) without
+/// refitting it, with the image view below one feature (what `correct --diagnose` and
+/// `dhct diagnose` write as diagnosis.json).
 pub fn diagnosis_of(corrected: &crate::correct::Corrected) -> Result<DiagnosisReport> {
     let passes = &corrected.analysis.passes;
-    let sets: Vec<&[Feature]> = passes
+    let inputs: Vec<PassInput> = passes
         .iter()
-        .map(|p| p.features.features.as_slice())
+        .map(|p| PassInput {
+            features: p.features.features.as_slice(),
+            mask: corrected.mask.as_ref(),
+        })
         .collect();
-    let report = diagnose_features(
-        &sets,
+    let report = diagnose_with_model(
+        &inputs,
         corrected.pair.geometry(),
         corrected.lattice.as_ref(),
-        corrected.mask.as_ref(),
-        &corrected.options,
-    )?;
+        &corrected.analysis.dhct.model,
+        &corrected.options.lattice_fit,
+        &DiagnoseOptions::default(),
+    )
+    .context("diagnosis")?;
     let feature_sets: Vec<&FeatureSet> = passes.iter().map(|p| &p.features).collect();
     Ok(with_sub_feature_view(
         report,
@@ -95,26 +101,6 @@ pub fn with_sub_feature_view(
         Some(view) => report.with_sub_feature_view(view),
         None => report,
     }
-}
-
-/// Runs the diagnosis on already found features (trace first); `mask` (raw-image pixels,
-/// true = use) restricts it as it restricts the correction.
-pub fn diagnose_features(
-    sets: &[&[Feature]],
-    geometry: &ScanGeometry,
-    lattice: &dyn Lattice,
-    mask: Option<&Array2<bool>>,
-    pipeline: &PipelineOptions,
-) -> Result<DiagnosisReport> {
-    let inputs: Vec<PassInput> = sets
-        .iter()
-        .map(|features| PassInput { features, mask })
-        .collect();
-    let options = DiagnoseOptions {
-        dhct: pipeline.dhct,
-        ..DiagnoseOptions::default()
-    };
-    diagnose(&inputs, geometry, lattice, &options).context("diagnosis")
 }
 
 fn bin_plot(title: &str, x_label: &str, bins: &[Bin], noise: [f64; 2]) -> Plot {
@@ -511,17 +497,31 @@ pub fn run_file(
     let target = output;
     let staged = StagedOutput::prepare(target, config.overwrite)?;
     let output = staged.path();
+    let start = std::time::Instant::now();
     let pair = setup::read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
     let geometry = pair.geometry().clone();
-    let mask = setup::load_mask(&config, &geometry)?;
-    let setup::Resolved {
-        lattice, options, ..
-    } = setup::with_measured_nn(setup::resolve(&config)?, &pair, mask.as_ref())?;
-    let sets = find_features_in_pair(&pair, &options.features).context("feature finding")?;
-    let refs: Vec<&[Feature]> = sets.iter().map(|s| s.features.as_slice()).collect();
-    let report = diagnose_features(&refs, &geometry, lattice.as_ref(), mask.as_ref(), &options)?;
-    let set_refs: Vec<&FeatureSet> = sets.iter().collect();
-    let report = with_sub_feature_view(report, &pair, &set_refs, &options.features, mask.as_ref());
+    // The same pipeline as `dhct correct` (options, calibration, mask, regions, the
+    // correction it keeps), diagnosed from that correction.
+    let corrected = analyse(
+        AnalyseRequest {
+            pair,
+            config,
+            mask: None,
+            input: input.display().to_string(),
+            retrace: retrace.map(|r| r.display().to_string()),
+            read_s: start.elapsed().as_secs_f64(),
+        },
+        &|_| {},
+    )
+    .map_err(|e| match e {
+        CorrectError::Options(e) => e,
+        CorrectError::InputMismatch(message) => anyhow::anyhow!(message),
+        CorrectError::Analysis(message) => {
+            anyhow::anyhow!(message).context(format!("analysing {}", input.display()))
+        }
+    })?;
+    let lattice = &corrected.lattice;
+    let report = diagnosis_of(&corrected)?;
     write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
     let (section, figures) = diagnosis_section(&report, &geometry);
     write_figure_files(output, &figures)?;

@@ -1,8 +1,8 @@
 //! Observations: the features of a trace/retrace pair with their times, their lattice
 //! indices and the base DHCT "sim" prediction.
 //!
-//! The base stage runs [`dhct_distortion::analyse`] (the local-distortion DHCT fit), moves
-//! every feature to the sample frame, fits the lattice to the corrected features
+//! The base stage runs [`dhct_distortion::analyse`] (the local-distortion DHCT fit), or
+//! takes a correction already made (the pipeline's), moves every feature to the sample frame, fits the lattice to the corrected features
 //! ([`dhct_lattice::fit_lattice`]) so that each feature gets its ideal site, and pushes the
 //! ideal site back through the fitted distortion: the predicted controller position solves
 //! `p + d(t(p), pass) = site` (Newton in pixels). The gap of that "sim" is
@@ -164,7 +164,7 @@ pub(crate) fn prepare(
     inputs: &[PassInput],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
-    dhct: &DhctOptions,
+    source: &BaseSource,
     max_deviation_fraction: f64,
 ) -> Result<Prepared, DiagnoseError> {
     let raw: Vec<&[Feature]> = inputs.iter().map(|i| i.features).collect();
@@ -180,7 +180,7 @@ pub(crate) fn prepare(
             needed: MIN_FEATURES,
         });
     }
-    let (model, fit) = fit_dhct(&sets, geometry, lattice, dhct)?;
+    let (model, fit) = base_fits(&sets, geometry, lattice, source)?;
     let base = BaseStage::new(&model, &fit, geometry, lattice, &sets);
     let (observations, dhct_gap, unindexed) =
         base.observe(&sets, &masked.original, max_deviation_fraction);
@@ -201,23 +201,41 @@ pub(crate) fn prepare(
     })
 }
 
-/// The DHCT fit of `sets` ([`analyse`]) and the lattice fitted to the features it
-/// corrected (sample frame).
-fn fit_dhct(
+/// Where the base stage's correction comes from.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum BaseSource<'a> {
+    /// Fitted here ([`analyse`] with these options); the lattice with default options.
+    Fit(&'a DhctOptions),
+    /// A correction already made (e.g. the pipeline's, drift model or affine) and the
+    /// lattice-fit options it was judged with: nothing is refitted.
+    Given {
+        model: &'a DistortionModel,
+        lattice_fit: &'a LatticeFitOptions,
+    },
+}
+
+/// The base correction of `sets` (fitted or given, see [`BaseSource`]) and the lattice
+/// fitted to the features it corrected (sample frame).
+fn base_fits(
     sets: &[&[Feature]],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
-    dhct: &DhctOptions,
+    source: &BaseSource,
 ) -> Result<(DistortionModel, LatticeFit), DiagnoseError> {
-    let inputs: Vec<PassInput> = sets
-        .iter()
-        .map(|s| PassInput {
-            features: s,
-            mask: None,
-        })
-        .collect();
-    let result = analyse(&inputs, geometry, lattice, dhct)?;
-    let model = result.model;
+    let (model, lattice_options) = match *source {
+        BaseSource::Fit(dhct) => {
+            let inputs: Vec<PassInput> = sets
+                .iter()
+                .map(|s| PassInput {
+                    features: s,
+                    mask: None,
+                })
+                .collect();
+            let model = analyse(&inputs, geometry, lattice, dhct)?.model;
+            (model, LatticeFitOptions::default())
+        }
+        BaseSource::Given { model, lattice_fit } => (model.clone(), *lattice_fit),
+    };
     let corrected: Vec<Vec<[f64; 2]>> = sets
         .iter()
         .map(|s| {
@@ -228,7 +246,7 @@ fn fit_dhct(
         })
         .collect();
     let refs: Vec<&[[f64; 2]]> = corrected.iter().map(|c| c.as_slice()).collect();
-    let fit = fit_lattice(lattice, &refs, &LatticeFitOptions::default())?;
+    let fit = fit_lattice(lattice, &refs, &lattice_options)?;
     Ok((model, fit))
 }
 

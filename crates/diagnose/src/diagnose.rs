@@ -1,8 +1,8 @@
 //! The whole diagnosis: base stage, position-level base fit, noise floor, location of the
 //! gap, greedy selection of effects, shrink.
 
-use dhct_distortion::{DhctOptions, PassInput};
-use dhct_lattice::Lattice;
+use dhct_distortion::{DhctOptions, DistortionModel, PassInput};
+use dhct_lattice::{Lattice, LatticeFitOptions};
 use dhct_scan::ScanGeometry;
 use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::DiagnoseError;
 use crate::base::{BaseChoice, choose_hysteresis};
 use crate::candidates::{Candidate, creep_t0_bounds};
-use crate::data::{MIN_FEATURES, Observation, Prepared, prepare};
+use crate::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
 use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::location::locate;
 use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
@@ -150,13 +150,48 @@ pub fn diagnose(
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisReport, DiagnoseError> {
     options.validate()?;
+    let source = BaseSource::Fit(&options.dhct);
     let prepared = prepare(
         inputs,
         geometry,
         lattice,
-        &options.dhct,
+        &source,
         options.max_deviation_fraction,
     )?;
+    diagnose_prepared(prepared, geometry, lattice, options)
+}
+
+/// [`diagnose`] of a correction already made: `model` is the correction the features were
+/// corrected with (e.g. the pipeline's drift model, or the affine map it chose instead) and
+/// `lattice_fit` the options its lattice was fitted with. Nothing is refitted before the
+/// position-level base fit starts from `model`; `options.dhct` is not used.
+pub fn diagnose_with_model(
+    inputs: &[PassInput],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    model: &DistortionModel,
+    lattice_fit: &LatticeFitOptions,
+    options: &DiagnoseOptions,
+) -> Result<DiagnosisReport, DiagnoseError> {
+    options.validate()?;
+    let source = BaseSource::Given { model, lattice_fit };
+    let prepared = prepare(
+        inputs,
+        geometry,
+        lattice,
+        &source,
+        options.max_deviation_fraction,
+    )?;
+    diagnose_prepared(prepared, geometry, lattice, options)
+}
+
+/// The diagnosis from the base stage on.
+fn diagnose_prepared(
+    prepared: Prepared,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DiagnoseOptions,
+) -> Result<DiagnosisReport, DiagnoseError> {
     let fitted = fit_base(&prepared, geometry, options)?;
     let (observations, base, sigma) = (&fitted.observations, &fitted.base, fitted.noise.sigma_m);
     let base_summary = summary(base, sigma);

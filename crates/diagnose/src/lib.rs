@@ -4,8 +4,9 @@
 //!
 //! # What [`diagnose`] does
 //!
-//! 1. **Sim**: the base DHCT fit ([`dhct_distortion::analyse`]), the lattice fitted to the
-//!    corrected features (every feature gets its ideal site), and each ideal site pushed
+//! 1. **Sim**: the base DHCT fit ([`dhct_distortion::analyse`]; [`diagnose_with_model`]
+//!    takes a correction already made instead, e.g. the pipeline's), the lattice fitted to
+//!    the corrected features (every feature gets its ideal site), and each ideal site pushed
 //!    back through the fitted distortion to a predicted controller position. The **gap** is
 //!    `measured − predicted` ([`DiagnosisReport::dhct`]).
 //! 2. **Position-level base fit**: drift, acceleration, creep `C`, `t0`, the hysteresis
@@ -79,7 +80,7 @@ mod verdict;
 pub use base::{BaseChoice, LawScore};
 pub use candidates::Candidate;
 pub use data::{MIN_FEATURES, Observation};
-pub use diagnose::{DiagnoseOptions, diagnose};
+pub use diagnose::{DiagnoseOptions, diagnose, diagnose_with_model};
 pub use error::DiagnoseError;
 pub use fit::FittedParameter;
 pub use location::{Bin, ChangePoint, GapLocation};
