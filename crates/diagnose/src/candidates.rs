@@ -76,6 +76,17 @@ impl Candidate {
         )
     }
 
+    /// Whether a scan can hold several of it, each with its own parameters: tip jumps,
+    /// vibrations at different frequencies (e.g. harmonics), creep events. The greedy
+    /// selection keeps such a candidate after adding it, so a second one can be added when
+    /// it passes on its own; the others act on the whole frame once.
+    pub fn is_repeatable(self) -> bool {
+        matches!(
+            self,
+            Candidate::TipChange | Candidate::Vibration | Candidate::SecondCreep
+        )
+    }
+
     /// Kebab-case name.
     pub fn name(self) -> &'static str {
         match self {

@@ -404,7 +404,8 @@ fn refit(
 
 /// The greedy selection: each round scores the remaining candidates on top of the current
 /// model (`context.fitted` at first) and adds the best that passes, refitted in full,
-/// until none passes, none is left or `max_effects` were added. Returns the final model.
+/// until none passes, none is left or `max_effects` were added (a repeatable candidate,
+/// [`Candidate::is_repeatable`], stays in the running). Returns the final model.
 fn select_effects(
     context: &Current,
     options: &DiagnoseOptions,
@@ -452,7 +453,9 @@ fn select_effects(
                 options.selection.max_iterations,
                 context.t0_bounds,
             )?;
-            remaining.retain(|c| *c != w.score.candidate);
+            if !w.score.candidate.is_repeatable() {
+                remaining.retain(|c| *c != w.score.candidate);
+            }
         }
         greedy.rounds.push(GreedyRound {
             scores: scored.into_iter().map(|s| s.score).collect(),
@@ -469,18 +472,24 @@ fn select_effects(
 /// it at the noise floor `sigma`).
 fn added_effect(w: &Scored, f: &Fitted, current: &Fitted, sigma: [f64; 2]) -> AddedEffect {
     let from = current.model.terms.len();
-    // A replaced term (asymmetric hysteresis) sits at its old index.
-    let index = f
+    // A new term is appended; a replaced term (asymmetric hysteresis) sits at its old index.
+    // (A repeated candidate's earlier terms carry the same label: never look them up.)
+    let index = if f.model.terms.len() > from {
+        from
+    } else {
+        f.model
+            .terms
+            .iter()
+            .position(|t| t.label == w.score.candidate.name())
+            .unwrap_or(from)
+    };
+    let count = f
         .model
         .terms
-        .iter()
-        .position(|t| t.label == w.score.candidate.name())
-        .unwrap_or(from);
-    let parameters = f
-        .parameters(0)
-        .into_iter()
-        .filter(|p| f.model.terms[index].effect.name() == p.effect)
-        .collect();
+        .get(index)
+        .map_or(0, |t| t.effect.parameter_names().len());
+    // `parameters(index)` lists the terms from `index` on: the first `count` are its own.
+    let parameters = f.parameters(index).into_iter().take(count).collect();
     AddedEffect {
         candidate: w.score.candidate,
         shape: w.score.shape.clone(),
