@@ -118,11 +118,11 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
-    /// Diagnose the sim-to-real gap: where the fitted DHCT model and the image disagree (in
-    /// time, fast-line phase, space, trace vs retrace), which unmodelled effect explains it
-    /// and how far the gap shrinks once it is added; writes diagnosis.json and
-    /// diagnosis.html into OUTDIR. With --validate, runs the withheld-effect validation on
-    /// simulated scans instead.
+    /// Diagnose the sim-to-real gap of the correction `correct` makes (the same pipeline,
+    /// options and mask): where it and the image disagree (in time, fast-line phase, space,
+    /// trace vs retrace), which unmodelled effect explains it and how far the gap shrinks
+    /// once it is added; writes diagnosis.json and diagnosis.html into OUTDIR. With
+    /// --validate, runs the withheld-effect validation on simulated scans instead.
     Diagnose {
         /// The image file (not with --validate).
         #[arg(required_unless_present = "validate")]
