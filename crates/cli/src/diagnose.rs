@@ -17,7 +17,7 @@ use dhct_scan::{ScanGeometry, ScanPair};
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
-use crate::correct::{AnalyseRequest, CorrectError, analyse};
+use crate::correct::analyse_file;
 use crate::output_dir::StagedOutput;
 use crate::report::bars::ColourBar;
 use crate::report::figures::{Figure, PictureStyle, metres_per_picture_px};
@@ -26,7 +26,7 @@ use crate::report::page::{Html, document};
 use crate::report::plots::{BLUE, ORANGE, Plot, Series, Style, thin};
 use crate::report::render::{Canvas, heat_colour, upscale_for};
 use crate::report::{write_bytes, write_figure_files};
-use crate::setup::{self, CorrectConfig};
+use crate::setup::CorrectConfig;
 
 /// Writes `text` to a locked stdout and flushes it. A closed pipe (`dhct … --json | head -1`)
 /// is success, not a panic: the reader has all it wanted.
@@ -497,33 +497,14 @@ pub fn run_file(
     let target = output;
     let staged = StagedOutput::prepare(target, config.overwrite)?;
     let output = staged.path();
-    let start = std::time::Instant::now();
-    let pair = setup::read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
-    let geometry = pair.geometry().clone();
     // The same pipeline as `dhct correct` (options, calibration, mask, regions, the
     // correction it keeps), diagnosed from that correction.
-    let corrected = analyse(
-        AnalyseRequest {
-            pair,
-            config,
-            mask: None,
-            input: input.display().to_string(),
-            retrace: retrace.map(|r| r.display().to_string()),
-            read_s: start.elapsed().as_secs_f64(),
-        },
-        &|_| {},
-    )
-    .map_err(|e| match e {
-        CorrectError::Options(e) => e,
-        CorrectError::InputMismatch(message) => anyhow::anyhow!(message),
-        CorrectError::Analysis(message) => {
-            anyhow::anyhow!(message).context(format!("analysing {}", input.display()))
-        }
-    })?;
+    let corrected = analyse_file(input, retrace, config, &|_| {})?;
+    let geometry = corrected.pair.geometry();
     let lattice = &corrected.lattice;
     let report = diagnosis_of(&corrected)?;
     write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
-    let (section, figures) = diagnosis_section(&report, &geometry);
+    let (section, figures) = diagnosis_section(&report, geometry);
     write_figure_files(output, &figures)?;
     let mut body = Html::new();
     body.element("h1", "DHCT sim-to-real gap")

@@ -149,16 +149,13 @@ pub fn diagnose(
     lattice: &dyn Lattice,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisReport, DiagnoseError> {
-    options.validate()?;
-    let source = BaseSource::Fit(&options.dhct);
-    let prepared = prepare(
+    diagnose_from(
         inputs,
         geometry,
         lattice,
-        &source,
-        options.max_deviation_fraction,
-    )?;
-    diagnose_prepared(prepared, geometry, lattice, options)
+        &BaseSource::Fit(&options.dhct),
+        options,
+    )
 }
 
 /// [`diagnose`] of a correction already made: `model` is the correction the features were
@@ -173,25 +170,31 @@ pub fn diagnose_with_model(
     lattice_fit: &LatticeFitOptions,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisReport, DiagnoseError> {
+    diagnose_from(
+        inputs,
+        geometry,
+        lattice,
+        &BaseSource::Given { model, lattice_fit },
+        options,
+    )
+}
+
+/// The diagnosis with the base correction from `source`.
+fn diagnose_from(
+    inputs: &[PassInput],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    source: &BaseSource,
+    options: &DiagnoseOptions,
+) -> Result<DiagnosisReport, DiagnoseError> {
     options.validate()?;
-    let source = BaseSource::Given { model, lattice_fit };
     let prepared = prepare(
         inputs,
         geometry,
         lattice,
-        &source,
+        source,
         options.max_deviation_fraction,
     )?;
-    diagnose_prepared(prepared, geometry, lattice, options)
-}
-
-/// The diagnosis from the base stage on.
-fn diagnose_prepared(
-    prepared: Prepared,
-    geometry: &ScanGeometry,
-    lattice: &dyn Lattice,
-    options: &DiagnoseOptions,
-) -> Result<DiagnosisReport, DiagnoseError> {
     let fitted = fit_base(&prepared, geometry, options)?;
     let (observations, base, sigma) = (&fitted.observations, &fitted.base, fitted.noise.sigma_m);
     let base_summary = summary(base, sigma);

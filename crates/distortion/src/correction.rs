@@ -132,10 +132,11 @@ impl<'a> RowPositions<'a> {
         let t0 = self.model.drift.t0_s;
         let mut anchor: Option<(f64, f64)> = None;
         for (c, (x, y)) in xs.iter_mut().zip(ys.iter_mut()).enumerate() {
-            let t = self.time(c, r).since_frame_start;
+            let time = self.time(c, r);
+            let t = time.since_frame_start;
             let (t_a, log_a) = *anchor.get_or_insert_with(|| (t, (t / t0).ln_1p()));
             let log = log_a + ln_1p_small((t - t_a) / (t0 + t_a));
-            (*x, *y) = self.position_with_log(c, r, log);
+            (*x, *y) = self.position_at(c, r, time, log);
         }
     }
 
@@ -148,16 +149,17 @@ impl<'a> RowPositions<'a> {
 
     /// The position (output pixels) of pixel `(c, r)` (display orientation).
     fn position(&self, c: usize, r: usize) -> (f64, f64) {
-        let t = self.time(c, r).since_frame_start;
-        self.position_with_log(c, r, (t / self.model.drift.t0_s).ln_1p())
+        let time = self.time(c, r);
+        let log = (time.since_frame_start / self.model.drift.t0_s).ln_1p();
+        self.position_at(c, r, time, log)
     }
 
-    /// [`RowPositions::position`] with the creep's `ln(1 + t/t0)` given.
+    /// [`RowPositions::position`] with the pixel's acquisition `time` and the creep's
+    /// `ln(1 + t/t0)` given.
     #[inline]
-    fn position_with_log(&self, c: usize, r: usize, log: f64) -> (f64, f64) {
+    fn position_at(&self, c: usize, r: usize, time: AcquisitionTime, log: f64) -> (f64, f64) {
         let geometry = self.geometry;
         let (xc, yc) = (c as f64, r as f64);
-        let time = self.time(c, r);
         let tau = time.since_line_start;
         let k = (tau / geometry.pixel_period() - 0.5).round();
         let lag = match self.lags.get(k as usize) {

@@ -174,37 +174,49 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     let bar = progress_bar(request.progress);
-    let start = Instant::now();
     bar.set_message("reading");
-    let pair = read_pair(
+    let corrected = analyse_file(
         request.input,
         request.retrace,
-        &request.config.geometry,
-        request.config.channel.as_deref(),
+        request.config,
+        &|stage: Stage| bar.set_message(stage.describe()),
     )?;
+    let summary = write_into(staged.path(), &corrected, request.diagnose, &bar)?;
+    staged.commit()?;
+    bar.finish_and_clear();
+    Ok(summary)
+}
+
+/// Reads `input` (and `retrace`, if given) with the config's geometry and channel and runs
+/// [`analyse`] on it, as `dhct correct` and `dhct diagnose` do; errors in the command
+/// line's words.
+pub fn analyse_file(
+    input: &Path,
+    retrace: Option<&Path>,
+    config: CorrectConfig,
+    on_stage: &(dyn Fn(Stage) + Sync),
+) -> Result<Corrected> {
+    let start = Instant::now();
+    let pair = read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
     let read_s = start.elapsed().as_secs_f64();
-    let corrected = analyse(
+    analyse(
         AnalyseRequest {
             pair,
-            config: request.config,
+            config,
             mask: None,
-            input: request.input.display().to_string(),
-            retrace: retrace_name(request.input, request.retrace),
+            input: input.display().to_string(),
+            retrace: retrace_name(input, retrace),
             read_s,
         },
-        &|stage: Stage| bar.set_message(stage.describe()),
+        on_stage,
     )
     .map_err(|e| match e {
         CorrectError::Options(e) => e,
         CorrectError::InputMismatch(message) => anyhow::anyhow!(message),
         CorrectError::Analysis(message) => {
-            anyhow::anyhow!(message).context(format!("analysing {}", request.input.display()))
+            anyhow::anyhow!(message).context(format!("analysing {}", input.display()))
         }
-    })?;
-    let summary = write_into(staged.path(), &corrected, request.diagnose, &bar)?;
-    staged.commit()?;
-    bar.finish_and_clear();
-    Ok(summary)
+    })
 }
 
 /// Writes every output of `corrected` into `output` (through a staging folder, replacing
