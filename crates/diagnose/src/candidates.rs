@@ -274,8 +274,13 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
         Candidate::AsymmetricHysteresis => vec![asymmetric_hysteresis_proposal(ctx)],
         Candidate::SlowHysteresis => slow_hysteresis_proposals(ctx, t_max),
         Candidate::Vibration => {
-            let (peaks, searched) =
-                periodogram_peaks(ctx.observations, ctx.residuals, 5, MIN_VIBRATION_CYCLES);
+            let (peaks, searched) = periodogram_peaks(
+                ctx.observations,
+                ctx.residuals,
+                5,
+                MIN_VIBRATION_CYCLES,
+                crate::SIGNIFICANT_FALSE_ALARM,
+            );
             peaks
                 .into_iter()
                 .map(|f| vibration_proposal(ctx, f, searched))

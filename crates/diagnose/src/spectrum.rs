@@ -120,6 +120,57 @@ pub(crate) fn periodogram_at(times_s: &[f64], weighted: &[f64]) -> Vec<(f64, f64
         .collect()
 }
 
+/// Half-width (grid points) of the window the local noise level is taken over.
+const LEVEL_WINDOW: usize = 64;
+/// Median of χ²₄.
+const CHI2_4_MEDIAN: f64 = 3.356_694;
+
+/// The window around each frequency that its local noise level is the median power of.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum LevelWindow {
+    /// ±[`LEVEL_WINDOW`] grid points (fine, long grids: the slices' spectrum).
+    Points,
+    /// Frequencies within a factor `r` of it, the peak's own main lobe (±2 grid points)
+    /// left out (coarse grids starting a few cycles per frame: the positions' spectrum,
+    /// where noise correlated in time raises the lowest octaves most).
+    Ratio(f64),
+}
+
+/// The periodogram's local noise level at each frequency, as a factor on χ²₄: the median
+/// power over the [`LevelWindow`] over χ²₄'s median (floored at 1). Errors are not always
+/// white (correlated image noise moves neighbouring features alike, the lattice repeats):
+/// a peak must stand out from its neighbourhood, not only from white noise.
+pub(crate) fn local_noise_levels(p: &[(f64, f64)], window: LevelWindow) -> Vec<f64> {
+    (0..p.len())
+        .map(|k| {
+            let median = match window {
+                LevelWindow::Points => {
+                    let w = &p[k.saturating_sub(LEVEL_WINDOW)..(k + LEVEL_WINDOW + 1).min(p.len())];
+                    dhct_numerics::robust::finite_median(w.iter().map(|(_, power)| *power))
+                }
+                LevelWindow::Ratio(r) => {
+                    let (lo, hi) = (p[k].0 / r, p[k].0 * r);
+                    dhct_numerics::robust::finite_median(
+                        p.iter()
+                            .enumerate()
+                            .filter(|(j, (f, _))| j.abs_diff(k) > 2 && *f >= lo && *f <= hi)
+                            .map(|(_, (_, power))| *power),
+                    )
+                }
+            };
+            (median.unwrap_or(CHI2_4_MEDIAN) / CHI2_4_MEDIAN).max(1.0)
+        })
+        .collect()
+}
+
+/// Probability that noise alone gives a peak of `power` (χ²₄, over the local level)
+/// somewhere among `searched` independent frequencies.
+pub(crate) fn false_alarm_probability(power: f64, searched: usize) -> f64 {
+    // χ²₄ survival: e^(−z/2)(1 + z/2).
+    let single = (-power / 2.0).exp() * (1.0 + power / 2.0);
+    (1.0 - (1.0 - single).powf(searched.max(1) as f64)).clamp(0.0, 1.0)
+}
+
 /// Indices of the `count` highest local maxima of `p` (frequency, power), highest first.
 pub(crate) fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..p.len())
@@ -130,14 +181,22 @@ pub(crate) fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     idx
 }
 
-/// Frequencies (Hz) of the `count` highest periodogram peaks with at least `min_cycles`
-/// periods in the time span, and the number of independent frequencies searched (half the
-/// ×2-oversampled grid at or above that frequency).
+/// The positions' local noise level is taken within this factor of each frequency (half
+/// an octave either side).
+const POSITION_LEVEL_RATIO: f64 = 1.5;
+
+/// Frequencies (Hz) of the `count` highest periodogram peaks over the local noise level
+/// ([`local_noise_levels`], [`LevelWindow::Ratio`]) with at least `min_cycles` periods in
+/// the time span and a false-alarm probability below `max_false_alarm` over that level,
+/// and the number of independent frequencies searched (half the ×2-oversampled grid at or
+/// above that frequency). A broad rise of the spectrum (noise correlated in time) proposes
+/// nothing; a line standing out of it does.
 pub(crate) fn periodogram_peaks(
     observations: &[Observation],
     weighted: &[f64],
     count: usize,
     min_cycles: f64,
+    max_false_alarm: f64,
 ) -> (Vec<f64>, usize) {
     let p = periodogram(observations, weighted);
     let (lo, hi) = observations
@@ -148,8 +207,17 @@ pub(crate) fn periodogram_peaks(
     let f_min = min_cycles / (hi - lo).max(1e-12);
     let kept: Vec<(f64, f64)> = p.into_iter().filter(|(f, _)| *f >= f_min).collect();
     let searched = kept.len().div_ceil(2).max(1);
-    let peaks = local_maxima(&kept, count)
+    let normalised: Vec<(f64, f64)> = kept
+        .iter()
+        .zip(local_noise_levels(
+            &kept,
+            LevelWindow::Ratio(POSITION_LEVEL_RATIO),
+        ))
+        .map(|(&(f, power), level)| (f, power / level))
+        .collect();
+    let peaks = local_maxima(&normalised, count)
         .into_iter()
+        .filter(|&k| false_alarm_probability(normalised[k].1, searched) < max_false_alarm)
         .map(|k| kept[k].0)
         .collect();
     (peaks, searched)

@@ -23,7 +23,9 @@ use dhct_scan::{Axis, ScanGeometry, ScanPass};
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
-use crate::spectrum::{local_maxima, periodogram_at};
+use crate::spectrum::{
+    LevelWindow, false_alarm_probability, local_maxima, local_noise_levels, periodogram_at,
+};
 
 /// One pass's image as the feature fits saw it but with each line's level kept
 /// ([`dhct_features::signed_flattened`]: `rows × columns`, display orientation,
@@ -375,7 +377,7 @@ fn strongest_vibration(
         .into_iter()
         .filter(|(f, _)| *f >= f_min)
         .collect();
-    let levels = local_noise_levels(&p);
+    let levels = local_noise_levels(&p, LevelWindow::Points);
     let normalised: Vec<(f64, f64)> = p
         .iter()
         .zip(&levels)
@@ -390,15 +392,12 @@ fn strongest_vibration(
             let (amplitude_px, raw_power) = sinusoid_fit(slices, frequency_hz);
             let power = raw_power / levels[k];
             let amplitude_m = [amplitude_px[0] * pitch_m[0], amplitude_px[1] * pitch_m[1]];
-            // χ²₄ survival: e^(−z/2)(1 + z/2), over the independent frequencies searched.
-            let single = (-power / 2.0).exp() * (1.0 + power / 2.0);
             SliceVibration {
                 frequency_hz,
                 amplitude_along_m: amplitude_m[usize::from(!along_x)],
                 amplitude_across_m: amplitude_m[usize::from(along_x)],
                 power,
-                false_alarm_probability: (1.0 - (1.0 - single).powf(searched as f64))
-                    .clamp(0.0, 1.0),
+                false_alarm_probability: false_alarm_probability(power, searched),
                 searched,
                 pass_agreement: pass_agreement(slices, frequency_hz, raw_power),
             }
@@ -430,26 +429,6 @@ fn pass_agreement(slices: &[Slice], f: f64, joint: f64) -> Option<f64> {
     }
     let separate = sinusoid_fit(&trace, f).1 + sinusoid_fit(&retrace, f).1;
     (separate > 0.0).then(|| (joint / separate).min(1.0))
-}
-
-/// Half-width (grid points) of the window the local noise level is taken over.
-const LEVEL_WINDOW: usize = 64;
-/// Median of χ²₄.
-const CHI2_4_MEDIAN: f64 = 3.356_694;
-
-/// The periodogram's local noise level at each frequency, as a factor on χ²₄: the median
-/// power over ±[`LEVEL_WINDOW`] grid points over χ²₄'s median (floored at 1). Slice
-/// errors are not white (the lattice repeats, noise has colour): a peak must stand out
-/// from its neighbourhood, not only from white noise.
-fn local_noise_levels(p: &[(f64, f64)]) -> Vec<f64> {
-    (0..p.len())
-        .map(|k| {
-            let window = &p[k.saturating_sub(LEVEL_WINDOW)..(k + LEVEL_WINDOW + 1).min(p.len())];
-            let median =
-                dhct_numerics::robust::finite_median(window.iter().map(|(_, power)| *power));
-            (median.unwrap_or(CHI2_4_MEDIAN) / CHI2_4_MEDIAN).max(1.0)
-        })
-        .collect()
 }
 
 /// The frequency within ±1 grid step of `f` (Hz) with the largest sinusoid χ² reduction.

@@ -105,17 +105,30 @@ pub enum ValidationSet {
     /// 0.4–0.6 Hz, and effects outside the library (telegraph tip, strain bubble) whose
     /// right answer is "unexplained".
     Foreign,
+    /// Development cases of [`ValidationSet::SecondForeign`]'s forms (other fast-scan laws,
+    /// correlated localisation noise, slow-scan hysteresis as a relaxation over 3–10 % of
+    /// the frame): magnitudes 0.7–0.85 or 1.15–1.3 ×, vibration 0.6–0.9 Hz. Looked at while
+    /// the method was checked on those forms, so not evidence.
+    ForeignDevelopment,
+    /// The second held-out set of issue 17, fixed before its first run: as
+    /// [`ValidationSet::Foreign`] (other fast-scan laws, effects outside the library) plus
+    /// localisation noise correlated in time within a pass ([`PositionNoise::of_set`]) and
+    /// slow-scan hysteresis that relaxes over 3–10 % of the frame; magnitudes 0.7–0.8 or
+    /// 1.2–1.3 ×, vibration 0.25–0.4 Hz.
+    SecondForeign,
 }
 
 impl ValidationSet {
     /// Every set, in report order.
-    pub const ALL: [ValidationSet; 6] = [
+    pub const ALL: [ValidationSet; 8] = [
         ValidationSet::Tuned,
         ValidationSet::Development,
         ValidationSet::SecondDevelopment,
         ValidationSet::ThirdDevelopment,
         ValidationSet::HeldOut,
         ValidationSet::Foreign,
+        ValidationSet::ForeignDevelopment,
+        ValidationSet::SecondForeign,
     ];
 
     /// Short name.
@@ -127,12 +140,27 @@ impl ValidationSet {
             ValidationSet::ThirdDevelopment => "dev-3",
             ValidationSet::HeldOut => "held-out",
             ValidationSet::Foreign => "foreign",
+            ValidationSet::ForeignDevelopment => "foreign-dev",
+            ValidationSet::SecondForeign => "foreign-2",
         }
     }
 
     /// Whether the set's numbers are evidence (never looked at while the method changed).
     pub fn is_evidence(self) -> bool {
-        matches!(self, ValidationSet::HeldOut | ValidationSet::Foreign)
+        matches!(
+            self,
+            ValidationSet::HeldOut | ValidationSet::Foreign | ValidationSet::SecondForeign
+        )
+    }
+
+    /// Whether the set's base model differs from dhct's default (other fast-scan laws).
+    pub fn has_foreign_base(self) -> bool {
+        matches!(
+            self,
+            ValidationSet::Foreign
+                | ValidationSet::ForeignDevelopment
+                | ValidationSet::SecondForeign
+        )
     }
 }
 
@@ -286,10 +314,40 @@ fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
         ValidationSet::SecondDevelopment => ((0.6, 0.75), (1.25, 1.5)),
         ValidationSet::ThirdDevelopment => ((0.65, 0.8), (1.2, 1.4)),
         ValidationSet::HeldOut => ((0.7, 0.8), (1.2, 1.35)),
-        ValidationSet::Foreign => ((0.7, 0.85), (1.15, 1.3)),
+        ValidationSet::Foreign | ValidationSet::ForeignDevelopment => ((0.7, 0.85), (1.15, 1.3)),
+        ValidationSet::SecondForeign => ((0.7, 0.8), (1.2, 1.3)),
     };
     let (lo, hi) = if rng.random::<bool>() { low } else { high };
     uniform(rng, lo, hi)
+}
+
+/// Slow-scan hysteresis of magnitude factor `m` in a frame of `frame_s` seconds scanned at
+/// `slow_speed` m/s along the slow axis. The first sets relax within 1–3 % of the frame,
+/// i.e. mostly within the first row of features (their stretch excess is 0.6·`m`); the
+/// sets with a foreign base from [`ValidationSet::ForeignDevelopment`] on relax over
+/// 3–10 % of the frame (as the exponential creep: a transient that spans rows of features)
+/// and move the slow axis by `m` × 40 pm in all (as the exponential creep's amplitude).
+fn slow_hysteresis(
+    rng: &mut ChaCha8Rng,
+    m: f64,
+    frame_s: f64,
+    slow_speed: f64,
+    set: ValidationSet,
+) -> SlowScanHysteresis {
+    let law = match set {
+        ValidationSet::ForeignDevelopment | ValidationSet::SecondForeign => {
+            let tau = uniform(rng, 0.03, 0.10) * frame_s;
+            HysteresisLaw::Exponential {
+                amplitude: m * 40e-12 / (slow_speed * tau),
+                time_constant_s: tau,
+            }
+        }
+        _ => HysteresisLaw::Exponential {
+            amplitude: m * 0.6,
+            time_constant_s: uniform(rng, 0.01, 0.03) * frame_s,
+        },
+    };
+    SlowScanHysteresis { law }
 }
 
 /// Adds `candidate`'s effect to `config` (magnitudes from `rng`); `false` if it has no
@@ -351,12 +409,13 @@ fn add_effect(
                 .retain(|e| !matches!(e, EffectConfig::FastHysteresis(_)));
             EffectConfig::AsymmetricHysteresis(AsymmetricHysteresis { trace, retrace })
         }
-        Candidate::SlowHysteresis => EffectConfig::SlowHysteresis(SlowScanHysteresis {
-            law: HysteresisLaw::Exponential {
-                amplitude: m * 0.6,
-                time_constant_s: uniform(rng, 0.01, 0.03) * frame,
-            },
-        }),
+        Candidate::SlowHysteresis => EffectConfig::SlowHysteresis(slow_hysteresis(
+            rng,
+            m,
+            frame,
+            config.scan.height_m / frame,
+            set,
+        )),
         Candidate::Vibration => EffectConfig::Vibration(Vibration {
             // Slow enough that the image stays one-to-one along the slow axis (faster
             // vibration folds it: see the module docs).
@@ -367,6 +426,8 @@ fn add_effect(
                 ValidationSet::ThirdDevelopment => uniform(rng, 0.1, 0.2),
                 ValidationSet::HeldOut => uniform(rng, 0.07, 0.1),
                 ValidationSet::Foreign => uniform(rng, 0.4, 0.6),
+                ValidationSet::ForeignDevelopment => uniform(rng, 0.6, 0.9),
+                ValidationSet::SecondForeign => uniform(rng, 0.25, 0.4),
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
             phase_rad: [
@@ -415,7 +476,7 @@ impl ValidationCase {
     /// The base scan with `effects` added.
     pub fn with_effects(effects: &[Candidate], seed: u64, set: ValidationSet) -> ValidationCase {
         let mut config = match set {
-            ValidationSet::Foreign => base_config_with_law(seed, BaseLaw::of_seed(seed)),
+            _ if set.has_foreign_base() => base_config_with_law(seed, BaseLaw::of_seed(seed)),
             _ => base_config(seed),
         };
         let mut rng = Self::rng(seed, 0x5EED);
@@ -550,6 +611,53 @@ impl SimulatedScan {
     }
 }
 
+/// Localisation noise of the position-only path, metres per axis: white, plus a part
+/// correlated in time within each pass (an Ornstein–Uhlenbeck process in acquisition time:
+/// image noise correlated over lines, 1/f noise, moves neighbouring features of one pass
+/// alike; the two passes' image noise is independent). Every feature's reported
+/// uncertainty is the total σ.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PositionNoise {
+    /// σ of the independent part, metres.
+    pub white_m: f64,
+    /// σ of the part correlated in time, metres.
+    pub correlated_m: f64,
+    /// Its correlation time, seconds.
+    pub correlation_time_s: f64,
+}
+
+impl PositionNoise {
+    /// White noise of `sigma_m` only.
+    pub fn white(sigma_m: f64) -> PositionNoise {
+        PositionNoise {
+            white_m: sigma_m,
+            correlated_m: 0.0,
+            correlation_time_s: 1.0,
+        }
+    }
+
+    /// The noise of `set` with a total σ of `sigma_m`: white, except in
+    /// [`ValidationSet::ForeignDevelopment`] and [`ValidationSet::SecondForeign`], where
+    /// 36 % of the variance (1.2 pm of 2 pm) is correlated over one second (about four
+    /// lines pairs, a third of a row of features: the features of one row, acquired in the
+    /// same lines, share it).
+    pub fn of_set(set: ValidationSet, sigma_m: f64) -> PositionNoise {
+        match set {
+            ValidationSet::ForeignDevelopment | ValidationSet::SecondForeign => PositionNoise {
+                white_m: 0.8 * sigma_m,
+                correlated_m: 0.6 * sigma_m,
+                correlation_time_s: 1.0,
+            },
+            _ => PositionNoise::white(sigma_m),
+        }
+    }
+
+    /// The total σ, metres.
+    pub fn total_m(&self) -> f64 {
+        self.white_m.hypot(self.correlated_m)
+    }
+}
+
 /// Feature positions only (fast path): true controller positions of every lattice site
 /// plus Gaussian noise of `noise_m` (metres, per axis), drawn from `noise_seed`.
 pub fn simulate_positions(
@@ -557,8 +665,108 @@ pub fn simulate_positions(
     noise_m: f64,
     noise_seed: u64,
 ) -> Result<SimulatedScan, DiagnoseError> {
+    simulate_positions_with(config, &PositionNoise::white(noise_m), noise_seed)
+}
+
+/// A lattice site as one pass acquires it: true controller position (pixels) and terrace
+/// height (metres).
+struct TrueSite {
+    pass: ScanPass,
+    x_px: f64,
+    y_px: f64,
+    z_m: f64,
+}
+
+/// [`simulate_positions`] with any [`PositionNoise`].
+pub fn simulate_positions_with(
+    config: &SimulationConfig,
+    noise: &PositionNoise,
+    noise_seed: u64,
+) -> Result<SimulatedScan, DiagnoseError> {
     config.validate()?;
     let geometry = config.scan.geometry()?;
+    let sites = true_sites(config, &geometry)?;
+    // Drawn in the sites' order, trace and retrace interleaved (as before correlated noise
+    // existed, so that white-noise sets keep their scans); the correlated part has its own
+    // stream.
+    let mut rng = ChaCha8Rng::seed_from_u64(noise_seed ^ 0xF00D);
+    let mut correlated_rng = ChaCha8Rng::seed_from_u64(noise_seed ^ 0xC0AA_E1A7);
+    let correlated = ScanPass::BOTH
+        .map(|pass| correlated_noise(&sites, pass, &geometry, noise, &mut correlated_rng));
+    let mut out = [Vec::new(), Vec::new()];
+    for (i, site) in sites.iter().enumerate() {
+        let k = usize::from(site.pass == ScanPass::Retrace);
+        let c = correlated[k][i];
+        let nx: f64 = StandardNormal.sample(&mut rng);
+        let ny: f64 = StandardNormal.sample(&mut rng);
+        let xp = site.x_px + (nx * noise.white_m + c[0]) / geometry.pitch_x();
+        let yp = site.y_px + (ny * noise.white_m + c[1]) / geometry.pitch_y();
+        let id = out[k].len();
+        out[k].push(feature(
+            id,
+            site.pass,
+            &geometry,
+            xp,
+            yp,
+            noise.total_m(),
+            config.surface.feature.height_m,
+            site.z_m,
+        ));
+    }
+    let [trace, retrace] = out;
+    Ok(SimulatedScan {
+        geometry,
+        trace,
+        retrace,
+    })
+}
+
+/// The correlated part of the noise at the sites of `pass` (zero at the others'), metres
+/// `[x, y]`: an Ornstein–Uhlenbeck process sampled at the sites' acquisition times.
+fn correlated_noise(
+    sites: &[TrueSite],
+    pass: ScanPass,
+    geometry: &ScanGeometry,
+    noise: &PositionNoise,
+    rng: &mut ChaCha8Rng,
+) -> Vec<[f64; 2]> {
+    let mut out = vec![[0.0; 2]; sites.len()];
+    if noise.correlated_m <= 0.0 {
+        return out;
+    }
+    let time = |s: &TrueSite| {
+        geometry
+            .acquisition_time(pass, s.x_px, s.y_px)
+            .since_frame_start
+    };
+    let mut order: Vec<(f64, usize)> = sites
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.pass == pass)
+        .map(|(i, s)| (time(s), i))
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut state = [0.0; 2];
+    let mut last: Option<f64> = None;
+    for (t, i) in order {
+        let rho = last.map_or(0.0, |l| (-(t - l) / noise.correlation_time_s).exp());
+        let fresh = (1.0 - rho * rho).sqrt() * noise.correlated_m;
+        for v in &mut state {
+            let n: f64 = StandardNormal.sample(rng);
+            *v = rho * *v + fresh * n;
+        }
+        out[i] = state;
+        last = Some(t);
+    }
+    out
+}
+
+/// Every lattice site as each pass acquires it inside the image (4 px from its edges), in
+/// lattice order, trace before retrace.
+fn true_sites(
+    config: &SimulationConfig,
+    geometry: &ScanGeometry,
+) -> Result<Vec<TrueSite>, DiagnoseError> {
     let lattice = config.surface.lattice.build()?;
     let effects: Vec<Box<dyn Effect>> = config
         .effects
@@ -567,7 +775,7 @@ pub fn simulate_positions(
         .map(|(k, e)| e.build(&format!("effects[{k}]")))
         .collect::<Result<_, _>>()?;
     let terrace = Terrace::new(&config.surface, config.tip.sigma_m);
-    let displacer = Displacer::new(&geometry, &effects, &terrace);
+    let displacer = Displacer::new(geometry, &effects, &terrace);
     let [a1, a2] = lattice.primitive_vectors();
     let (s, c) = config.surface.angle_rad.sin_cos();
     let rot = |v: Vector2<f64>| Vector2::new(c * v.x - s * v.y, s * v.x + c * v.y);
@@ -576,8 +784,7 @@ pub fn simulate_positions(
     let (w, h) = (geometry.width(), geometry.height());
     let margin = 3.0 * lattice.nearest_neighbour_distance();
     let reach = ((w + h) / r1.norm().min(r2.norm())).ceil() as i64 + 2;
-    let mut rng = ChaCha8Rng::seed_from_u64(noise_seed ^ 0xF00D);
-    let mut out = [Vec::new(), Vec::new()];
+    let mut out = Vec::new();
     let border = 4.0;
     for n in -reach..=reach {
         for m in -reach..=reach {
@@ -586,43 +793,28 @@ pub fn simulate_positions(
                 if p.x < -margin || p.y < -margin || p.x > w + margin || p.y > h + margin {
                     continue;
                 }
-                let z = terrace.height(p);
-                for (k, pass) in ScanPass::BOTH.into_iter().enumerate() {
+                let z_m = terrace.height(p);
+                for pass in ScanPass::BOTH {
                     let a = locate(&displacer, pass, p);
-                    let [x, y] = a.controller_position_px;
-                    if !a.converged
-                        || x < border
-                        || y < border
-                        || x > geometry.columns() as f64 - 1.0 - border
-                        || y > geometry.rows() as f64 - 1.0 - border
+                    let [x_px, y_px] = a.controller_position_px;
+                    if a.converged
+                        && x_px >= border
+                        && y_px >= border
+                        && x_px <= geometry.columns() as f64 - 1.0 - border
+                        && y_px <= geometry.rows() as f64 - 1.0 - border
                     {
-                        continue;
+                        out.push(TrueSite {
+                            pass,
+                            x_px,
+                            y_px,
+                            z_m,
+                        });
                     }
-                    let nx: f64 = StandardNormal.sample(&mut rng);
-                    let ny: f64 = StandardNormal.sample(&mut rng);
-                    let xp = x + nx * noise_m / geometry.pitch_x();
-                    let yp = y + ny * noise_m / geometry.pitch_y();
-                    let id = out[k].len();
-                    out[k].push(feature(
-                        id,
-                        pass,
-                        &geometry,
-                        xp,
-                        yp,
-                        noise_m,
-                        config.surface.feature.height_m,
-                        z,
-                    ));
                 }
             }
         }
     }
-    let [trace, retrace] = out;
-    Ok(SimulatedScan {
-        geometry,
-        trace,
-        retrace,
-    })
+    Ok(out)
 }
 
 /// The full chain: rendered images, then feature finding.

@@ -40,6 +40,36 @@
 //!   with no gap to explain (0.97 × noise: a converged base creep with a short `t0` absorbs
 //!   most of a slow-scan hysteresis at the frame start, as in the tuned set's two misses).
 //!   The method was not changed after this run.
+//! * **Foreign** (seeds 21001–21004, effect-free 22001–22040, out of library 23001–23005):
+//!   issue 17's first held-out set, base fast-scan law cubic, quartic, exponential or
+//!   power by seed, effects outside the library. Its one run (2026-11-25): top-1 27/32,
+//!   false alarms 0/40, out of library 8/10 — top-1 missed: the four slow-scan hystereses
+//!   left no gap (0.99–1.05 × floor). Looked at since, so no longer untouched.
+//! * **Absorbed effects** (from 2026-11-27, every set): a single effect's *visibility* is
+//!   the base model's gap on the same scan without noise ([`CaseResult::visibility`]).
+//!   Measured on the sets above, slow-scan hysteresis that relaxes within the first rows of
+//!   features has 0.04–0.69 (the base creep along the slow axis takes the rest: both are
+//!   functions of time along the slow axis in one frame), every other effect 0.89 or more.
+//!   At ≤ [`ABSORBED_VISIBILITY`] the base model alone would be `no_gap` even with the
+//!   noise known exactly, so no diagnosis can demand the effect: such a case is
+//!   [`CaseKind::Absorbed`], right if nothing or the truth is named, and not in top-1.
+//!   This is a property of the scan, computed from the truth, never from the diagnosis.
+//! * **Foreign development** (seeds 31001–31004, effect-free 32001–32020, out of library
+//!   33001–33005): the second foreign set's forms — localisation noise correlated in time
+//!   ([`crate::synth::PositionNoise::of_set`]) and slow-scan hysteresis over 3–10 % of the
+//!   frame — tried before that set was fixed. They showed two vibrations named in
+//!   effect-free scans (correlated noise raises the lowest octaves of the residual
+//!   spectrum), so a vibration is now proposed only where its peak stands out of the
+//!   spectrum within half an octave ([`crate::spectrum`]'s local level, as the slices'
+//!   view already did). Development data.
+//! * **Second foreign** (seeds 41001–41004, effect-free 42001–42040, out of library
+//!   43001–43005, mixtures seed + 44000): issue 17's second held-out set, fixed in this
+//!   file before it was first run and run once with the method above (2026-11-27): top-1
+//!   25/27 (93 %; the two misses an exponential creep and a second creep taken for each
+//!   other), 5 absorbed (four slow-scan hystereses, visibility 0.04–0.41, and one
+//!   asymmetric hysteresis, 0.24; nothing or the truth named in 2 of them), false alarms
+//!   0/40, out of library 10/10, gap ≤ 1.2 × floor in 25/25 — accepted. Scored with every
+//!   in-library case as identifiable, top-1 would be 26/32 (81 %).
 
 use std::fmt;
 
@@ -47,7 +77,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::synth::{
-    ForeignEffect, ValidationCase, ValidationSet, simulate_images, simulate_positions,
+    ForeignEffect, PositionNoise, ValidationCase, ValidationSet, simulate_images,
+    simulate_positions_with,
 };
 use crate::verdict::VerdictKind;
 use crate::{Candidate, DiagnoseOptions, diagnose};
@@ -164,6 +195,22 @@ impl Default for ValidationOptions {
                     mixture_offset: 24000,
                     foreign_seeds: (23001..23006).collect(),
                 },
+                // Development cases of the second foreign set's forms.
+                SetSeeds {
+                    set: ValidationSet::ForeignDevelopment,
+                    seeds: vec![31001, 31002, 31003, 31004],
+                    null_seeds: (32001..32021).collect(),
+                    mixture_offset: 34000,
+                    foreign_seeds: (33001..33006).collect(),
+                },
+                // Issue 17's second held-out set: fixed here before its first run.
+                SetSeeds {
+                    set: ValidationSet::SecondForeign,
+                    seeds: vec![41001, 41002, 41003, 41004],
+                    null_seeds: (42001..42041).collect(),
+                    mixture_offset: 44000,
+                    foreign_seeds: (43001..43006).collect(),
+                },
             ],
             mixtures: vec![
                 [Candidate::TipChange, Candidate::Vibration],
@@ -193,7 +240,16 @@ pub enum CaseKind {
     /// An effect outside the library: right if the verdict is `unexplained`, or
     /// `partly_explained` with the remaining gap located.
     OutOfLibrary,
+    /// One effect that the base model absorbs: without any noise, the base model alone
+    /// leaves a gap of at most the verdict's 1.2 × floor ([`ABSORBED_VISIBILITY`]), so
+    /// no data of this noise can demand it. Right if nothing is named or the truth is.
+    Absorbed,
 }
+
+/// An effect whose noise-free base residual is at most this many floors is absorbed by
+/// the base model: `√(1 + v²) ≤ 1.2`, the verdict's `no_gap` bound, even with the noise
+/// known exactly.
+pub const ABSORBED_VISIBILITY: f64 = 0.663;
 
 /// One validation case's outcome.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -223,6 +279,10 @@ pub struct CaseResult {
     pub correct: bool,
     /// Gap/noise of the base model.
     pub gap_before: f64,
+    /// Single effects: the base model's RMS residual on the same scan without noise, in
+    /// units of the floor (how visible the effect is beyond what the base absorbs).
+    #[serde(default)]
+    pub visibility: Option<f64>,
     /// Gap/noise after the top-ranked candidate.
     pub gap_after_top: Option<f64>,
     /// Gap/noise after the greedy set.
@@ -259,6 +319,12 @@ pub struct SetSummary {
     /// Of which `unexplained`, or `partly_explained` with the remainder located.
     #[serde(default)]
     pub foreign_correct: usize,
+    /// Single-effect cases the base model absorbs ([`CaseKind::Absorbed`]): not in top-1.
+    #[serde(default)]
+    pub absorbed_cases: usize,
+    /// Of which nothing or the truth named.
+    #[serde(default)]
+    pub absorbed_correct: usize,
     /// Correct single cases with gap/noise after ≤ 1.2.
     pub gap_ok: usize,
     /// Largest gap/noise after the identified effect, over correct single cases.
@@ -296,6 +362,10 @@ impl SetSummary {
             .iter()
             .filter(|c| c.kind == CaseKind::OutOfLibrary)
             .collect();
+        let absorbed: Vec<&&CaseResult> = cases
+            .iter()
+            .filter(|c| c.kind == CaseKind::Absorbed)
+            .collect();
         let mean = |v: Vec<f64>| {
             if v.is_empty() {
                 f64::NAN
@@ -320,6 +390,8 @@ impl SetSummary {
             mixtures_correct: mix.iter().filter(|c| c.correct).count(),
             foreign_cases: foreign.len(),
             foreign_correct: foreign.iter().filter(|c| c.correct).count(),
+            absorbed_cases: absorbed.len(),
+            absorbed_correct: absorbed.iter().filter(|c| c.correct).count(),
             gap_ok: correct.iter().filter(|c| c.gap_after <= 1.2).count(),
             worst_gap_after: correct.iter().map(|c| c.gap_after).fold(0.0, f64::max),
             mean_gap_before: mean(single.iter().map(|c| c.gap_before).collect()),
@@ -402,17 +474,25 @@ fn run_case(
     options: &ValidationOptions,
     seed: u64,
 ) -> CaseResult {
+    let visibility = match case.truth.as_slice() {
+        [c] if case.foreign.is_empty() && *c != Candidate::ScanCoupling => {
+            noise_free_visibility(case, options.noise_m)
+        }
+        _ => None,
+    };
     let kind = match case.truth.as_slice() {
         _ if !case.foreign.is_empty() => CaseKind::OutOfLibrary,
         [] => CaseKind::EffectFree,
         [Candidate::ScanCoupling] => CaseKind::Degenerate,
+        [_] if visibility.is_some_and(|v| v <= ABSORBED_VISIBILITY) => CaseKind::Absorbed,
         [_] => CaseKind::Single,
         _ => CaseKind::Mixture,
     };
     let scan = if images {
         simulate_images(&case.config)
     } else {
-        simulate_positions(&case.config, options.noise_m, seed)
+        let noise = PositionNoise::of_set(case.set, options.noise_m);
+        simulate_positions_with(&case.config, &noise, seed)
     };
     let result = scan.and_then(|scan| {
         let lattice = case.config.surface.lattice.build()?;
@@ -435,6 +515,7 @@ fn run_case(
         identified: Vec::new(),
         correct: false,
         gap_before: f64::NAN,
+        visibility,
         gap_after_top: None,
         gap_after: f64::NAN,
         noise_floor_m: [f64::NAN; 2],
@@ -462,7 +543,7 @@ fn run_case(
     out.correct = out.error.is_none()
         && match kind {
             CaseKind::Single => out.identified.first() == case.truth.first(),
-            CaseKind::Degenerate => {
+            CaseKind::Degenerate | CaseKind::Absorbed => {
                 out.identified.is_empty() || out.identified.first() == case.truth.first()
             }
             CaseKind::EffectFree => {
@@ -482,6 +563,27 @@ fn run_case(
             }
         };
     out
+}
+
+/// How visible `case`'s one effect is beyond what the base model absorbs: the base model's
+/// gap (RMS residual over the floor) on the same scan without noise, every feature still
+/// reporting an uncertainty of `noise_m` (so the floor is that), `None` if it cannot be
+/// computed.
+fn noise_free_visibility(case: &ValidationCase, noise_m: f64) -> Option<f64> {
+    let mut scan = simulate_positions_with(&case.config, &PositionNoise::white(0.0), 0).ok()?;
+    let (px, py) = (scan.geometry.pitch_x(), scan.geometry.pitch_y());
+    for f in scan.trace.iter_mut().chain(scan.retrace.iter_mut()) {
+        f.x_sigma_px = noise_m / px;
+        f.y_sigma_px = noise_m / py;
+    }
+    let lattice = case.config.surface.lattice.build().ok()?;
+    let options = DiagnoseOptions {
+        candidates: Vec::new(),
+        locate: false,
+        ..DiagnoseOptions::default()
+    };
+    let report = diagnose(&scan.inputs(), &scan.geometry, lattice.as_ref(), &options).ok()?;
+    Some(report.shrink.before)
 }
 
 /// Runs the validation sweep (cases in parallel).
@@ -618,7 +720,7 @@ impl fmt::Display for SetSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, out of library unexplained {}/{}, gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
+            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, out of library unexplained {}/{}, absorbed by the base {} (none or the truth named {}), gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
             self.top1_correct,
             self.effect_cases,
             100.0 * self.top1_rate(),
@@ -631,6 +733,8 @@ impl fmt::Display for SetSummary {
             self.mixture_cases,
             self.foreign_correct,
             self.foreign_cases,
+            self.absorbed_cases,
+            self.absorbed_correct,
             self.mean_gap_before,
             self.mean_gap_after,
             self.worst_gap_after,
@@ -649,8 +753,8 @@ impl fmt::Display for ValidationReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<44} {:<9} {:<6} {:<34} {:>6} {:>6} {:>6} {:<17} ok",
-            "case", "set", "path", "identified", "before", "top", "after", "verdict"
+            "{:<44} {:<11} {:<6} {:<34} {:>6} {:>6} {:>6} {:>7} {:<17} ok",
+            "case", "set", "path", "identified", "before", "top", "after", "visible", "verdict"
         )?;
         for c in &self.cases {
             let ids = if let Some(e) = &c.error {
@@ -666,7 +770,7 @@ impl fmt::Display for ValidationReport {
             };
             writeln!(
                 f,
-                "{:<44} {:<9} {:<6} {:<34} {:>6.2} {:>6} {:>6.2} {:<17} {}",
+                "{:<44} {:<11} {:<6} {:<34} {:>6.2} {:>6} {:>6.2} {:>7} {:<17} {}",
                 c.name,
                 c.set.name(),
                 c.path,
@@ -674,6 +778,7 @@ impl fmt::Display for ValidationReport {
                 c.gap_before,
                 c.gap_after_top.map_or("—".into(), |v| format!("{v:.2}")),
                 c.gap_after,
+                c.visibility.map_or("—".into(), |v| format!("{v:.2}")),
                 c.verdict.map_or("—", |v| v.name()),
                 if c.correct { "yes" } else { "NO" }
             )?;
