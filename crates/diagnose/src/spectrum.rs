@@ -198,11 +198,23 @@ pub(crate) fn periodogram_peaks(
     min_cycles: f64,
     max_false_alarm: f64,
 ) -> (Vec<f64>, usize) {
-    let p = periodogram(observations, weighted);
-    let (lo, hi) = observations
+    let times: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
+    peaks_at(&times, weighted, count, min_cycles, max_false_alarm)
+}
+
+/// [`periodogram_peaks`] of samples taken at `times_s` (seconds since frame start).
+fn peaks_at(
+    times_s: &[f64],
+    weighted: &[f64],
+    count: usize,
+    min_cycles: f64,
+    max_false_alarm: f64,
+) -> (Vec<f64>, usize) {
+    let p = periodogram_at(times_s, weighted);
+    let (lo, hi) = times_s
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| {
-            (a.min(o.time_s), b.max(o.time_s))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| {
+            (a.min(t), b.max(t))
         });
     let f_min = min_cycles / (hi - lo).max(1e-12);
     let kept: Vec<(f64, f64)> = p.into_iter().filter(|(f, _)| *f >= f_min).collect();
@@ -257,5 +269,60 @@ pub(crate) fn spectrum(observations: &[Observation], weighted: &[f64]) -> Spectr
         power,
         peaks,
         searched,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// 2000 samples over 100 s (irregular), weighted residuals: white noise of σ 1 plus an
+    /// Ornstein–Uhlenbeck part of σ `red` and correlation time 1 s on both axes, plus a
+    /// sinusoid of `amplitude` at 0.5 Hz along x.
+    fn residuals(red: f64, amplitude: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        let mut times = Vec::new();
+        let mut weighted = Vec::new();
+        let (mut t, mut state) = (0.0, [0.0; 2]);
+        while t < 100.0 {
+            let dt = 0.05 * (0.5 + normal().abs());
+            let rho = (-dt / 1.0f64).exp();
+            for v in &mut state {
+                *v = rho * *v + (1.0 - rho * rho).sqrt() * red * normal();
+            }
+            let wave = amplitude * (std::f64::consts::TAU * 0.5 * t).sin();
+            weighted.push(normal() + state[0] + wave);
+            weighted.push(normal() + state[1]);
+            times.push(t);
+            t += dt;
+        }
+        (times, weighted)
+    }
+
+    #[test]
+    fn correlated_noise_proposes_no_vibration_but_a_line_above_it_is_proposed() {
+        // Red noise three times the white σ: its lowest octaves stand far above white
+        // noise, so a white-noise test would propose peaks there.
+        for seed in 1..6 {
+            let (times, weighted) = residuals(3.0, 0.0, seed);
+            let raw = periodogram_at(&times, &weighted);
+            let highest = raw.iter().map(|p| p.1).fold(0.0, f64::max);
+            assert!(
+                highest > 40.0,
+                "seed {seed}: the red noise is strong ({highest})"
+            );
+            let (peaks, _) = peaks_at(&times, &weighted, 5, 4.0, 1e-3);
+            assert!(peaks.is_empty(), "seed {seed}: {peaks:?}");
+        }
+        let (times, weighted) = residuals(3.0, 1.5, 9);
+        let (peaks, _) = peaks_at(&times, &weighted, 5, 4.0, 1e-3);
+        assert!(
+            peaks.first().is_some_and(|f| (f - 0.5).abs() < 0.01),
+            "{peaks:?}"
+        );
     }
 }

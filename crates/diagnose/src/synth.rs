@@ -837,3 +837,49 @@ pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, Diagn
         retrace,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Noise of each trace feature (noisy minus noise-free position, metres along x), in
+    /// acquisition order.
+    fn trace_noise_x(noise: &PositionNoise) -> Vec<f64> {
+        let case = ValidationCase::effect_free(7, ValidationSet::Tuned);
+        let exact = simulate_positions(&case.config, 0.0, 7).expect("simulates");
+        let noisy = simulate_positions_with(&case.config, noise, 7).expect("simulates");
+        let pitch = exact.geometry.pitch_x();
+        let mut pairs: Vec<(f64, f64)> = exact
+            .trace
+            .iter()
+            .zip(&noisy.trace)
+            .map(|(a, b)| (a.time_s, (b.x_px - a.x_px) * pitch))
+            .collect();
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pairs.into_iter().map(|p| p.1).collect()
+    }
+
+    /// Mean square of the noise, and of the difference between features acquired one after
+    /// the other.
+    fn spreads(d: &[f64]) -> (f64, f64) {
+        let ms = d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64;
+        let diff = d.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>() / (d.len() - 1) as f64;
+        (ms, diff)
+    }
+
+    #[test]
+    fn correlated_position_noise_is_shared_by_features_acquired_together() {
+        let sigma = 2e-12;
+        let (ms, diff) = spreads(&trace_noise_x(&PositionNoise::white(sigma)));
+        // White: successive differences carry twice the variance.
+        assert!((ms / (sigma * sigma) - 1.0).abs() < 0.15, "{ms:e}");
+        assert!((diff / ms - 2.0).abs() < 0.3, "{}", diff / ms);
+        let noise = PositionNoise::of_set(ValidationSet::SecondForeign, sigma);
+        assert!((noise.total_m() - sigma).abs() < 1e-18);
+        let (ms, diff) = spreads(&trace_noise_x(&noise));
+        assert!((ms / (sigma * sigma) - 1.0).abs() < 0.25, "{ms:e}");
+        // Correlated: the shared part (36 % of the variance) cancels in the differences of
+        // features acquired within a fraction of the correlation time.
+        assert!(diff / ms < 1.5, "{}", diff / ms);
+    }
+}
