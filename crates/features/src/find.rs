@@ -9,6 +9,7 @@ use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
+use crate::line_relevel::{WindowPixels, relevel, window_pixels};
 use crate::ncc::NccPlan;
 use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
@@ -230,7 +231,10 @@ fn find_prepared(
     clock.lap(&mut timings.segmentation_s);
 
     let window = fit_window(options, prepared);
-    let fits = fit_regions(&kept, &pre.signed, &ncc, &window);
+    let mut fits = fit_regions(&kept, &pre.signed, &ncc, &window);
+    if options.line_levels_from_fits {
+        relevel_fits(&kept, &mut fits, &pre.signed, &window, geometry.fast_axis());
+    }
     clock.lap(&mut timings.fitting_s);
 
     let edge_margin = (kh.max(kw) / 2) as f64;
@@ -405,29 +409,12 @@ fn fit_region(
     ncc: &Array2<f64>,
     window: &FitWindow,
 ) -> (GaussianFit, usize) {
-    let (rows, columns) = z_values.dim();
+    let columns = z_values.dim().1;
     let (peak_row, peak_col) = (
         (region.peak / columns) as i64,
         (region.peak % columns) as i64,
     );
-    let capacity = window.offsets.len();
-    let (mut xs, mut ys, mut zs) = (
-        Vec::with_capacity(capacity),
-        Vec::with_capacity(capacity),
-        Vec::with_capacity(capacity),
-    );
-    for &(dr, dc) in &window.offsets {
-        let (r, c) = (peak_row + dr, peak_col + dc);
-        if r < 0 || c < 0 || r >= rows as i64 || c >= columns as i64 {
-            continue;
-        }
-        let z = z_values[[r as usize, c as usize]];
-        if z.is_finite() {
-            xs.push(c as f64);
-            ys.push(r as f64);
-            zs.push(z);
-        }
-    }
+    let WindowPixels { xs, ys, zs } = window_pixels(z_values, region.peak, &window.offsets);
     let (x, y) = (peak_col as f64, peak_row as f64);
     let start = subpixel_peak(ncc, peak_row as usize, peak_col as usize);
     let limits = FitLimits {
@@ -458,6 +445,33 @@ fn fit_region(
         }
     }
     (fit, xs.len())
+}
+
+/// Moves the usable fits' centres for the scan-line levels measured against them
+/// ([`crate::line_relevel`]).
+fn relevel_fits(
+    kept: &[Region],
+    fits: &mut [(GaussianFit, usize)],
+    signed: &Array2<f64>,
+    window: &FitWindow,
+    fast_axis: dhct_scan::Axis,
+) {
+    let z = signed.as_standard_layout();
+    let usable: Vec<usize> = (0..fits.len())
+        .filter(|&i| {
+            matches!(
+                fits[i].0.status,
+                FitStatus::Converged | FitStatus::IterationLimit | FitStatus::ConvergedCircular
+            )
+        })
+        .collect();
+    let mut peaked: Vec<(GaussianFit, usize)> =
+        usable.iter().map(|&i| (fits[i].0, kept[i].peak)).collect();
+    relevel(z.view(), &mut peaked, &window.offsets, fast_axis);
+    for (&i, (fit, _)) in usable.iter().zip(peaked) {
+        fits[i].0.x0 = fit.x0;
+        fits[i].0.y0 = fit.y0;
+    }
 }
 
 /// Rejects the fits that failed, hit a bound, came out of shape or whose centre lies

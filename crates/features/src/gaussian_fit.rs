@@ -120,6 +120,63 @@ pub struct GaussianFit {
     pub status: FitStatus,
 }
 
+impl GaussianFit {
+    /// The model's parameter vector `[A, x0, y0, a, b, c, z0]` (caller's units).
+    fn parameters(&self) -> Vector7 {
+        let (s, c) = self.theta.sin_cos();
+        let (i1, i2) = (
+            1.0 / (self.sigma_major * self.sigma_major),
+            1.0 / (self.sigma_minor * self.sigma_minor),
+        );
+        Vector7::from([
+            self.amplitude,
+            self.x0,
+            self.y0,
+            i1 * c * c + i2 * s * s,
+            (i1 - i2) * s * c,
+            i1 * s * s + i2 * c * c,
+            self.offset,
+        ])
+    }
+
+    /// Each pixel's gradient of the model with respect to `[A, x0, y0, a, b, c, z0]` and
+    /// its residual `z − model`. For a circular fit `a` carries the shared width's gradient
+    /// (`a` and `c` together) and `b`, `c` are zero.
+    pub(crate) fn gradients(&self, xs: &[f64], ys: &[f64], zs: &[f64]) -> Vec<([f64; 7], f64)> {
+        let p = self.parameters();
+        let circular = self.status == FitStatus::ConvergedCircular;
+        xs.iter()
+            .zip(ys)
+            .zip(zs)
+            .map(|((&x, &y), &z)| {
+                let (dx, dy) = (x - p[X0], y - p[Y0]);
+                let e = (-0.5 * (p[QA] * dx * dx + 2.0 * p[QB] * dx * dy + p[QC] * dy * dy)).exp();
+                let ae = p[AMPLITUDE] * e;
+                let mut g = [
+                    e,
+                    ae * (p[QA] * dx + p[QB] * dy),
+                    ae * (p[QB] * dx + p[QC] * dy),
+                    -0.5 * ae * dx * dx,
+                    -ae * dx * dy,
+                    -0.5 * ae * dy * dy,
+                    1.0,
+                ];
+                if circular {
+                    g[QA] += g[QC];
+                    g[QB] = 0.0;
+                    g[QC] = 0.0;
+                }
+                (g, z - (ae + p[OFFSET]))
+            })
+            .collect()
+    }
+
+    /// Whether the fit is circular (its `b`, `c` gradients are zero in [`Self::gradients`]).
+    pub(crate) fn is_circular(&self) -> bool {
+        self.status == FitStatus::ConvergedCircular
+    }
+}
+
 /// Normal equations `JᵀJ`, `Jᵀr` and the cost at `p`.
 ///
 /// This is the hot loop of feature finding. Along a run of pixels in one row with unit steps

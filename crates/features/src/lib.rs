@@ -41,6 +41,7 @@ mod feature;
 mod find;
 mod gaussian_fit;
 mod kernel;
+mod line_relevel;
 mod ncc;
 mod options;
 mod preprocess;

@@ -29,6 +29,7 @@
 //! assert!((fit.params[0] - 2.0).abs() < 1e-8 && (fit.params[1] - 0.5).abs() < 1e-8);
 //! ```
 
+pub mod banded;
 pub mod crlb;
 pub mod linalg;
 pub mod lm;
