@@ -8,7 +8,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, FloorSource, GapLocation, PassImage,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, PassImage,
     ValidationOptions, VerdictKind, diagnose_with_model, sub_feature_view, validate,
 };
 use dhct_distortion::PassInput;
@@ -121,17 +121,6 @@ fn bin_plot(title: &str, x_label: &str, bins: &[Bin], noise: [f64; 2]) -> Plot {
             Style::Dashed,
             ORANGE,
         ))
-}
-
-fn floor_source(source: FloorSource) -> &'static str {
-    match source {
-        FloorSource::Localisation => "localisation uncertainty of the feature fits",
-        FloorSource::LocalisationRaisedToSuccessive => {
-            "localisation, raised to the successive differences"
-        }
-        FloorSource::SuccessiveDifferences => "successive differences",
-        FloorSource::ResidualSpread => "residual spread: no independent floor",
-    }
 }
 
 /// The gap binned by frame time and by fast phase, and the residual spectrum.
@@ -343,7 +332,7 @@ fn noise_and_gap_html(html: &mut Html, report: &DiagnosisReport) {
     let n = &report.noise;
     let pm = |v: f64| format!("{:.2} pm", v * 1e12);
     let mut rows = vec![vec![
-        format!("noise floor ({})", floor_source(n.source)),
+        format!("noise floor ({})", n.source.describe()),
         pm(n.sigma_m[0]),
         pm(n.sigma_m[1]),
         "1".into(),

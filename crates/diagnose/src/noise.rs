@@ -147,6 +147,20 @@ pub enum FloorSource {
     ResidualSpread,
 }
 
+impl FloorSource {
+    /// Where the floor comes from, in words (the text report and the HTML report).
+    pub fn describe(self) -> &'static str {
+        match self {
+            FloorSource::Localisation => "the features' localisation uncertainty",
+            FloorSource::LocalisationRaisedToSuccessive => {
+                "localisation, raised to the successive differences"
+            }
+            FloorSource::SuccessiveDifferences => "successive differences",
+            FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
+        }
+    }
+}
+
 /// The noise floor and its independent estimates, metres per axis `[x, y]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NoiseFloor {

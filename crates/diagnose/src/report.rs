@@ -9,7 +9,7 @@ use crate::base::BaseChoice;
 use crate::candidates::Candidate;
 use crate::fit::FittedParameter;
 use crate::location::GapLocation;
-use crate::noise::{FloorSource, NoiseFloor};
+use crate::noise::NoiseFloor;
 use crate::select::CandidateScore;
 use crate::verdict::{Verdict, VerdictKind};
 
@@ -202,18 +202,6 @@ fn gap_line(s: &GapSummary) -> String {
     )
 }
 
-/// Where the noise floor comes from, in words.
-fn floor_source(source: FloorSource) -> &'static str {
-    match source {
-        FloorSource::Localisation => "the features' localisation uncertainty",
-        FloorSource::LocalisationRaisedToSuccessive => {
-            "localisation, raised to the successive differences"
-        }
-        FloorSource::SuccessiveDifferences => "successive differences",
-        FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
-    }
-}
-
 impl fmt::Display for DiagnosisReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         self.write_overview(f)?;
@@ -251,7 +239,7 @@ impl DiagnosisReport {
              trace/retrace {} (not used)",
             pm(n.sigma_m[0]),
             pm(n.sigma_m[1]),
-            floor_source(n.source),
+            n.source.describe(),
             n.localisation.describe(),
             n.successive_differences.describe(),
             n.trace_retrace.describe(),
