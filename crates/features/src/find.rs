@@ -447,7 +447,7 @@ fn fit_region(
     (fit, xs.len())
 }
 
-/// Moves the usable fits' centres for the scan-line levels measured against them
+/// Moves the usable fits' centres for the scan-line levels fitted jointly with them
 /// ([`crate::line_relevel`]).
 fn relevel_fits(
     kept: &[Region],

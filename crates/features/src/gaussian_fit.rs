@@ -144,7 +144,7 @@ impl GaussianFit {
     /// (`a` and `c` together) and `b`, `c` are zero.
     pub(crate) fn gradients(&self, xs: &[f64], ys: &[f64], zs: &[f64]) -> Vec<([f64; 7], f64)> {
         let p = self.parameters();
-        let circular = self.status == FitStatus::ConvergedCircular;
+        let circular = self.is_circular();
         xs.iter()
             .zip(ys)
             .zip(zs)

@@ -128,44 +128,69 @@ fn window_system(fit: &GaussianFit, w: &WindowPixels, fast_axis: Axis) -> Option
     })
 }
 
+/// What a fit keeps of its [`WindowSystem`] for its shift: its first line and, per line
+/// of its window, the `x0`, `y0` rows of `Aᵢ⁻¹Bᵢ` (px per unit level).
+struct ShiftRows {
+    first_line: usize,
+    rows: Vec<[f64; 2]>,
+}
+
+/// One thread's share of [`reduced_system`]: the matrix, the right-hand side and the
+/// shift rows of the fits it visited (with their indices).
+type Partial = (SymmetricBand, Vec<f64>, Vec<(usize, ShiftRows)>);
+
 /// The reduced system `Σᵢ (Dᵢ − BᵢᵀAᵢ⁻¹Bᵢ)` and `Σᵢ Eᵢᵀrᵢ` over every fit, for `lines`
-/// lines and half-bandwidth `w`.
+/// lines and half-bandwidth `w`, and each fit's [`ShiftRows`] (`None` where its window
+/// system is singular or empty), so that each window is visited once.
 fn reduced_system(
     z: ArrayView2<f64>,
     fits: &[(GaussianFit, usize)],
     offsets: &[(i64, i64)],
     fast_axis: Axis,
     (lines, w): (usize, usize),
-) -> (SymmetricBand, Vec<f64>) {
-    fits.par_iter()
-        .fold(
-            || (SymmetricBand::zeros(lines, w), vec![0.0; lines]),
-            |(mut m, mut rhs), (fit, peak)| {
-                let pixels = window_pixels(z, *peak, offsets);
-                if let Some(s) = window_system(fit, &pixels, fast_axis) {
-                    let c = s.b.transpose() * &s.solved;
-                    for a in 0..s.counts.len() {
-                        let la = s.first_line + a;
-                        rhs[la] += s.residuals[a];
-                        m.add(la, la, s.counts[a]);
-                        for bb in 0..=a {
-                            m.add(la, s.first_line + bb, -c[(a, bb)]);
-                        }
+) -> (SymmetricBand, Vec<f64>, Vec<Option<ShiftRows>>) {
+    let empty = || -> Partial { (SymmetricBand::zeros(lines, w), vec![0.0; lines], Vec::new()) };
+    let (m, rhs, kept) = fits
+        .par_iter()
+        .enumerate()
+        .fold(empty, |(mut m, mut rhs, mut kept), (i, (fit, peak))| {
+            let pixels = window_pixels(z, *peak, offsets);
+            if let Some(s) = window_system(fit, &pixels, fast_axis) {
+                let c = s.b.transpose() * &s.solved;
+                for a in 0..s.counts.len() {
+                    let la = s.first_line + a;
+                    rhs[la] += s.residuals[a];
+                    m.add(la, la, s.counts[a]);
+                    for bb in 0..=a {
+                        m.add(la, s.first_line + bb, -c[(a, bb)]);
                     }
                 }
-                (m, rhs)
-            },
-        )
-        .reduce(
-            || (SymmetricBand::zeros(lines, w), vec![0.0; lines]),
-            |(mut m, mut r), (m2, r2)| {
-                m.add_matrix(&m2);
-                for (a, b) in r.iter_mut().zip(r2) {
-                    *a += b;
-                }
-                (m, r)
-            },
-        )
+                let rows = (0..s.counts.len())
+                    .map(|k| [s.solved[(1, k)], s.solved[(2, k)]])
+                    .collect();
+                kept.push((
+                    i,
+                    ShiftRows {
+                        first_line: s.first_line,
+                        rows,
+                    },
+                ));
+            }
+            (m, rhs, kept)
+        })
+        .reduce(empty, |(mut m, mut r, mut kept), (m2, r2, kept2)| {
+            m.add_matrix(&m2);
+            for (a, b) in r.iter_mut().zip(r2) {
+                *a += b;
+            }
+            kept.extend(kept2);
+            (m, r, kept)
+        });
+    let mut shifts: Vec<Option<ShiftRows>> = (0..fits.len()).map(|_| None).collect();
+    for (i, rows) in kept {
+        shifts[i] = Some(rows);
+    }
+    (m, rhs, shifts)
 }
 
 /// The line levels solving `(M + ρ·I)·o = rhs`, `ρ` = [`RIDGE_FRACTION`] × the median
@@ -213,25 +238,25 @@ pub(crate) fn relevel(
     if lines == 0 || fits.is_empty() {
         return;
     }
-    let (m, rhs) = reduced_system(z, fits, offsets, fast_axis, (lines, half_bandwidth));
+    let (m, rhs, shifts) = reduced_system(z, fits, offsets, fast_axis, (lines, half_bandwidth));
     let Some(levels) = regularised_levels(&m, &rhs) else {
         return;
     };
-    fits.par_iter_mut().for_each(|(fit, peak)| {
-        let pixels = window_pixels(z, *peak, offsets);
-        if let Some(s) = window_system(fit, &pixels, fast_axis) {
-            let window_levels = &levels[s.first_line..s.first_line + s.counts.len()];
-            let (mut dx, mut dy) = (0.0, 0.0);
-            for (k, o) in window_levels.iter().enumerate() {
-                dx -= s.solved[(1, k)] * o;
-                dy -= s.solved[(2, k)] * o;
-            }
-            if dx.is_finite() && dy.is_finite() {
-                fit.x0 += dx;
-                fit.y0 += dy;
-            }
+    for ((fit, _), shift) in fits.iter_mut().zip(shifts) {
+        let Some(ShiftRows { first_line, rows }) = shift else {
+            continue;
+        };
+        let window_levels = &levels[first_line..first_line + rows.len()];
+        let (mut dx, mut dy) = (0.0, 0.0);
+        for (row, o) in rows.iter().zip(window_levels) {
+            dx -= row[0] * o;
+            dy -= row[1] * o;
         }
-    });
+        if dx.is_finite() && dy.is_finite() {
+            fit.x0 += dx;
+            fit.y0 += dy;
+        }
+    }
 }
 
 #[cfg(test)]
