@@ -7,17 +7,10 @@ use dhct_features::{
     Background, FeatureOptions, FeatureSet, LineCorrection, Polarity, find_features_in_pair,
 };
 use dhct_scan::ScanPass;
-use dhct_simulate::{GroundTruth, LatticeConfig, Simulation, SimulationConfig, presets};
+use dhct_simulate::{GroundTruth, LatticeConfig, Simulation, SimulationConfig};
 
-/// The headline preset cut to 512 × 512 px at the same pixel pitch (12.2 pm).
-fn headline_512() -> SimulationConfig {
-    let mut config = presets::headline_2048();
-    config.scan.columns = 512;
-    config.scan.rows = 512;
-    config.scan.width_m = 25e-9 / 4.0;
-    config.scan.height_m = 25e-9 / 4.0;
-    config
-}
+mod common;
+use common::headline_512;
 
 struct Score {
     expected: usize,

@@ -7,16 +7,10 @@
 
 use dhct_features::{FeatureOptions, FeatureSet, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
-use dhct_simulate::{GroundTruth, Simulation, SimulationConfig, presets};
+use dhct_simulate::{GroundTruth, Simulation};
 
-fn headline_512() -> SimulationConfig {
-    let mut config = presets::headline_2048();
-    config.scan.columns = 512;
-    config.scan.rows = 512;
-    config.scan.width_m = 25e-9 / 4.0;
-    config.scan.height_m = 25e-9 / 4.0;
-    config
-}
+mod common;
+use common::headline_512;
 
 /// RMS error (px) along x and y of the features matched (within 1 px) to the
 /// true controller positions of their pass.
