@@ -84,6 +84,19 @@ impl Default for FitOptions {
     }
 }
 
+/// Each local distortion's neighbour time offsets (`of` picks frame or line times) when
+/// the secant form is used, else none (the derivative at the feature's own time).
+pub(crate) fn secant_offsets<'a>(
+    local: &'a [LocalDistortion],
+    secant_mode: bool,
+    of: impl Fn(&'a LocalDistortion) -> &'a [f64],
+) -> Vec<&'a [f64]> {
+    local
+        .iter()
+        .map(|l| if secant_mode { of(l) } else { &[] })
+        .collect()
+}
+
 /// `Σ Δ·(g(x+Δ) − g(x)) / Σ Δ²`: the least-squares slope of `g` through the point `x` over
 /// the offsets `Δ`; the derivative (central difference) when there are no offsets.
 pub(crate) fn secant<G: Fn(f64) -> f64>(g: G, x: f64, offsets: &[f64]) -> f64 {
@@ -187,16 +200,7 @@ struct DriftData<'a> {
 impl<'a> DriftData<'a> {
     fn new(local: &'a [LocalDistortion], secant_mode: bool) -> DriftData<'a> {
         let t: Vec<f64> = local.iter().map(|l| l.time_s).collect();
-        let offsets: Vec<&[f64]> = local
-            .iter()
-            .map(|l| {
-                if secant_mode {
-                    l.neighbour_dt_s.as_slice()
-                } else {
-                    &[]
-                }
-            })
-            .collect();
+        let offsets = secant_offsets(local, secant_mode, |l| &l.neighbour_dt_s);
         let dx: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[0] * NM).collect();
         let dy: Vec<f64> = local.iter().map(|l| l.drift_m_per_s[1] * NM).collect();
         // The acceleration column does not depend on any parameter: computed once.

@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::LocalDistortion;
-use crate::fit::{HysteresisChoice, secant};
+use crate::fit::{HysteresisChoice, secant, secant_offsets};
 use crate::model::HysteresisLaw;
 use dhct_numerics::lm::Residuals;
 
@@ -30,16 +30,7 @@ impl<'a> HysteresisData<'a> {
     pub(crate) fn new(local: &'a [LocalDistortion], secant_mode: bool) -> HysteresisData<'a> {
         let tau: Vec<f64> = local.iter().map(|l| l.line_time_s).collect();
         let s: Vec<f64> = local.iter().map(|l| l.scale).collect();
-        let offsets: Vec<&[f64]> = local
-            .iter()
-            .map(|l| {
-                if secant_mode {
-                    l.neighbour_dtau_s.as_slice()
-                } else {
-                    &[]
-                }
-            })
-            .collect();
+        let offsets = secant_offsets(local, secant_mode, |l| &l.neighbour_dtau_s);
         HysteresisData { tau, s, offsets }
     }
 
