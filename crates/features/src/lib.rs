@@ -41,6 +41,7 @@ mod feature;
 mod find;
 mod gaussian_fit;
 mod kernel;
+mod line_level;
 mod line_relevel;
 mod ncc;
 mod options;
@@ -58,6 +59,7 @@ pub use find::{
 };
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
+pub use line_level::{line_taper, tapered_line_level, tapered_line_level_with};
 pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{

@@ -47,6 +47,10 @@ pub enum LineCorrection {
     None,
     /// Subtract each line's median.
     Median,
+    /// Subtract each line's median weighted by a window that falls to zero at both line
+    /// ends (see `line_level.rs`): removes line offsets as robustly as the median with
+    /// less of the lattice's row period imprinted on the image.
+    Tapered,
     /// Subtract each line's least-squares straight line.
     Linear,
 }

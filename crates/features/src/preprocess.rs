@@ -5,8 +5,10 @@
 
 use dhct_scan::Axis;
 use nalgebra::{DMatrix, DVector};
-use ndarray::Array2;
+use ndarray::{Array2, ArrayViewMut1};
+use rayon::prelude::*;
 
+use crate::line_level::{line_taper, tapered_line_level_with};
 use crate::{Background, FeatureError, FeatureOptions, LineCorrection, Polarity};
 
 /// Subtracts a least-squares polynomial surface of total order `order` (1 = plane), fitted
@@ -110,15 +112,15 @@ pub fn subtract_polynomial_in_place(
     Ok(())
 }
 
-/// Removes per-line offsets along the fast axis (each line's median, or its straight-line
-/// fit), then restores the overall median level.
+/// Removes per-line offsets along the fast axis (each line's median, tapered mean or
+/// straight-line fit), then restores the overall median level.
 pub fn correct_lines(z: &Array2<f64>, fast_axis: Axis, method: LineCorrection) -> Array2<f64> {
     let mut out = z.clone();
     correct_lines_in_place(&mut out, fast_axis, method);
     out
 }
 
-/// [`correct_lines`] without a copy.
+/// [`correct_lines`] without a copy (lines levelled in parallel).
 pub fn correct_lines_in_place(out: &mut Array2<f64>, fast_axis: Axis, method: LineCorrection) {
     if method == LineCorrection::None {
         return;
@@ -127,44 +129,62 @@ pub fn correct_lines_in_place(out: &mut Array2<f64>, fast_axis: Axis, method: Li
         Axis::Horizontal => out.rows_mut().into_iter().collect::<Vec<_>>(),
         Axis::Vertical => out.columns_mut().into_iter().collect::<Vec<_>>(),
     };
-    let mut levels = Vec::new();
-    for mut line in lines {
-        let finite: Vec<(f64, f64)> = line
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.is_finite())
-            .map(|(i, v)| (i as f64, *v))
-            .collect();
-        if finite.len() < 2 {
-            continue;
-        }
-        match method {
-            LineCorrection::Median => {
-                let mut values: Vec<f64> = finite.iter().map(|p| p.1).collect();
-                let m = median(&mut values);
-                line.mapv_inplace(|v| v - m);
-                levels.push(m);
-            }
-            LineCorrection::Linear => {
-                let n = finite.len() as f64;
-                let (sx, sy) = finite
-                    .iter()
-                    .fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
-                let (mx, my) = (sx / n, sy / n);
-                let (sxx, sxy) = finite.iter().fold((0.0, 0.0), |(a, b), p| {
-                    (a + (p.0 - mx).powi(2), b + (p.0 - mx) * (p.1 - my))
-                });
-                let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-                for (i, v) in line.iter_mut().enumerate() {
-                    *v -= my + slope * (i as f64 - mx);
-                }
-                levels.push(my);
-            }
-            LineCorrection::None => {}
-        }
-    }
+    let taper = match lines.first() {
+        Some(line) if method == LineCorrection::Tapered => line_taper(line.len()),
+        _ => Vec::new(),
+    };
+    let mut levels: Vec<f64> = lines
+        .into_par_iter()
+        .filter_map(|line| level_line(line, method, &taper))
+        .collect();
     let level = median(&mut levels);
     out.mapv_inplace(|v| v + level);
+}
+
+/// Subtracts one line's level (or straight line) as `method` says (`taper`: the tapered
+/// level's weights); returns the level, or `None` when fewer than two pixels are finite.
+fn level_line(mut line: ArrayViewMut1<f64>, method: LineCorrection, taper: &[f64]) -> Option<f64> {
+    let finite: Vec<(f64, f64)> = line
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.is_finite())
+        .map(|(i, v)| (i as f64, *v))
+        .collect();
+    if finite.len() < 2 {
+        return None;
+    }
+    let level = match method {
+        LineCorrection::None => return None,
+        LineCorrection::Median => {
+            let mut values: Vec<f64> = finite.iter().map(|p| p.1).collect();
+            median(&mut values)
+        }
+        LineCorrection::Tapered => tapered_line_level_with(&line.to_vec(), taper)?,
+        LineCorrection::Linear => {
+            let (level, slope, centre) = straight_line(&finite);
+            for (i, v) in line.iter_mut().enumerate() {
+                *v -= slope * (i as f64 - centre);
+            }
+            level
+        }
+    };
+    line.mapv_inplace(|v| v - level);
+    Some(level)
+}
+
+/// Least-squares straight line through `(position, value)` points: its value at the mean
+/// position, its slope, and that mean position.
+fn straight_line(points: &[(f64, f64)]) -> (f64, f64, f64) {
+    let n = points.len() as f64;
+    let (sx, sy) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
+    let (mx, my) = (sx / n, sy / n);
+    let (sxx, sxy) = points.iter().fold((0.0, 0.0), |(a, b), p| {
+        (a + (p.0 - mx).powi(2), b + (p.0 - mx) * (p.1 - my))
+    });
+    let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    (my, slope, mx)
 }
 
 /// The median (0 for no values): the shared convention of [`dhct_numerics::robust::median`].
