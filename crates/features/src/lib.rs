@@ -41,6 +41,7 @@ mod feature;
 mod find;
 mod gaussian_fit;
 mod kernel;
+mod lattice_levels;
 mod line_level;
 mod line_relevel;
 mod ncc;

@@ -155,7 +155,7 @@ fn level_line(mut line: ArrayViewMut1<f64>, method: LineCorrection, taper: &[f64
     }
     let level = match method {
         LineCorrection::None => return None,
-        LineCorrection::Median => {
+        LineCorrection::Median | LineCorrection::Lattice => {
             let mut values: Vec<f64> = finite.iter().map(|p| p.1).collect();
             median(&mut values)
         }

@@ -1,0 +1,81 @@
+//! Renders effect-free scans with a base model that differs from dhct's (the `foreign-dev`
+//! validation set: other fast-scan hysteresis laws, slow-scan hysteresis), adds image noise,
+//! finds the features with a chosen line levelling and diagnoses each scan: a false-alarm
+//! check on the image path (`docs/diagnose.md`, "Not done").
+//!
+//! ```text
+//! cargo run --release -p dhct-diagnose --example rendered_null -- LEVELLING WHITE_PM OFFSETS_PM PINK_PM [first=51001] [n=16]
+//! ```
+//! (`LEVELLING`: `none`, `median`, `tapered`, `linear` or `lattice`; the noise RMS values in
+//! picometres: white per pixel, one offset per scan line, 1/f over the acquisition).
+
+use dhct_diagnose::synth::{SimulatedScan, ValidationCase, ValidationSet};
+use dhct_diagnose::{DiagnoseOptions, diagnose};
+use dhct_features::{FeatureOptions, LineCorrection, find_features_in_pair};
+use dhct_scan::ScanPass;
+use dhct_simulate::Simulation;
+
+fn levelling(name: &str) -> Option<LineCorrection> {
+    Some(match name {
+        "none" => LineCorrection::None,
+        "median" => LineCorrection::Median,
+        "tapered" => LineCorrection::Tapered,
+        "linear" => LineCorrection::Linear,
+        "lattice" => LineCorrection::Lattice,
+        _ => return None,
+    })
+}
+
+/// The value of `key=…` among `args`, or `default`.
+fn keyed(args: &[String], key: &str, default: u64) -> u64 {
+    args.iter()
+        .find_map(|s| s.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
+        .unwrap_or(default)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: rendered_null LEVELLING WHITE_PM OFFSETS_PM PINK_PM [first=N] [n=N]";
+    let line_correction = args.get(1).and_then(|s| levelling(s)).ok_or(usage)?;
+    let picometres = |i: usize| -> Result<f64, Box<dyn std::error::Error>> {
+        Ok(args.get(i).ok_or(usage)?.parse::<f64>()? * 1e-12)
+    };
+    let (white, offsets, pink) = (picometres(2)?, picometres(3)?, picometres(4)?);
+    let first = keyed(&args, "first", 51001);
+    for seed in first..first + keyed(&args, "n", 16) {
+        let mut case = ValidationCase::effect_free(seed, ValidationSet::ForeignDevelopment);
+        case.config.noise.white_sigma_m = white;
+        case.config.noise.line_offset_sigma_m = offsets;
+        case.config.noise.pink_sigma_m = pink;
+        let output = Simulation::from_config(&case.config)?.run()?;
+        let lattice = case.config.surface.lattice.build()?;
+        let options = FeatureOptions {
+            line_correction,
+            ..FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
+        };
+        let mut scan = SimulatedScan {
+            geometry: output.pair.geometry().clone(),
+            trace: Vec::new(),
+            retrace: Vec::new(),
+        };
+        for set in find_features_in_pair(&output.pair, &options)? {
+            match set.pass {
+                ScanPass::Trace => scan.trace = set.features,
+                ScanPass::Retrace => scan.retrace = set.features,
+            }
+        }
+        let options = DiagnoseOptions::default();
+        match diagnose(&scan.inputs(), &scan.geometry, lattice.as_ref(), &options) {
+            Ok(report) => {
+                let v = &report.verdict_details;
+                let named: Vec<&str> = v.effects.iter().map(|c| c.name()).collect();
+                println!(
+                    "seed {seed}: {:?}, gap {:.2} -> {:.2}, named {named:?}",
+                    report.verdict, v.gap_before, v.gap_after
+                );
+            }
+            Err(e) => println!("seed {seed}: {e}"),
+        }
+    }
+    Ok(())
+}
