@@ -178,6 +178,25 @@ impl AtomTemplate {
     }
 }
 
+/// The lines' levels and how far they vary beyond what pixel noise alone would give.
+pub(crate) struct LineLevels {
+    /// Each line's level (z units).
+    pub levels: Vec<f64>,
+    /// Variance of the level from one line to the next over the variance pixel noise
+    /// alone gives a median of the line's residuals (`(π/2)·σ²/n`): about 1 without line
+    /// offsets, far above with them (NaN when it cannot be told).
+    pub offsets_over_noise: f64,
+}
+
+/// One line's residual median, its residual count and its pixel noise (MAD scale of
+/// successive residual differences over √2), if any pixel was modelled.
+fn line_residual_level(residuals: &mut [f64]) -> Option<(f64, usize, f64)> {
+    let differences: Vec<f64> = residuals.windows(2).map(|w| w[1] - w[0]).collect();
+    let noise = dhct_numerics::robust::mad_sigma_about(&differences, 0.0)
+        .map_or(f64::NAN, |s| s / std::f64::consts::SQRT_2);
+    Some((median(residuals)?, residuals.len(), noise))
+}
+
 /// Each scan line's level: the median along it of `z` minus the lattice model built from
 /// `centres` (`(x, y)` px; `nn_px` the neighbour distance in px). Lines along x when the
 /// fast axis is horizontal, else along y. A line with no modelled pixel gets its plain
@@ -187,7 +206,7 @@ pub(crate) fn lattice_line_levels(
     centres: &[[f64; 2]],
     nn_px: f64,
     fast_axis: Axis,
-) -> Vec<f64> {
+) -> LineLevels {
     let reach_px = CELL_REACH_NN * nn_px;
     let nearest = NearestCentre::assign(centres, z.dim(), reach_px);
     let template = AtomTemplate::measure(z, &nearest, reach_px);
@@ -196,7 +215,7 @@ pub(crate) fn lattice_line_levels(
         Axis::Horizontal => (rows, columns),
         Axis::Vertical => (columns, rows),
     };
-    (0..lines)
+    let per_line: Vec<(f64, Option<(usize, f64)>)> = (0..lines)
         .into_par_iter()
         .map(|line| {
             let pixel = |along: usize| match fast_axis {
@@ -210,11 +229,35 @@ pub(crate) fn lattice_line_levels(
                     Some(z[[r, c]] - model).filter(|v| v.is_finite())
                 })
                 .collect();
-            median(&mut residuals)
-                .or_else(|| finite_median((0..length).map(|along| z[pixel(along)])))
-                .unwrap_or(0.0)
+            match line_residual_level(&mut residuals) {
+                Some((level, count, noise)) => (level, Some((count, noise))),
+                None => (
+                    finite_median((0..length).map(|along| z[pixel(along)])).unwrap_or(0.0),
+                    None,
+                ),
+            }
         })
-        .collect()
+        .collect();
+    let levels: Vec<f64> = per_line.iter().map(|p| p.0).collect();
+    LineLevels {
+        offsets_over_noise: offsets_over_noise(&levels, &per_line),
+        levels,
+    }
+}
+
+/// [`LineLevels::offsets_over_noise`] from the levels and each line's residual count and
+/// pixel noise.
+fn offsets_over_noise(levels: &[f64], per_line: &[(f64, Option<(usize, f64)>)]) -> f64 {
+    let steps: Vec<f64> = levels.windows(2).map(|w| w[1] - w[0]).collect();
+    let observed = dhct_numerics::robust::mad_sigma_about(&steps, 0.0).map(|s| 0.5 * s * s);
+    let count = finite_median(per_line.iter().filter_map(|p| p.1.map(|m| m.0 as f64)));
+    let noise = finite_median(per_line.iter().filter_map(|p| p.1.map(|m| m.1)));
+    match (observed, count, noise) {
+        (Some(observed), Some(n), Some(noise)) if n > 0.0 && noise > 0.0 => {
+            observed / (std::f64::consts::FRAC_PI_2 * noise * noise / n)
+        }
+        _ => f64::NAN,
+    }
 }
 
 /// `z` minus each line's level (`levels` indexed as [`lattice_line_levels`] returns them).
@@ -279,7 +322,7 @@ mod tests {
             .collect();
         // Rows 3° from the lines: any one line's median holds their modulation.
         let (z, centres) = lattice_image(size, 12.0, 0.05, &offsets);
-        let levels = lattice_line_levels(z.view(), &centres, 12.0, Axis::Horizontal);
+        let levels = lattice_line_levels(z.view(), &centres, 12.0, Axis::Horizontal).levels;
         let error = |levels: &[f64]| {
             let d: Vec<f64> = levels.iter().zip(&offsets).map(|(l, o)| l - o).collect();
             let mean = d.iter().sum::<f64>() / d.len() as f64;
@@ -305,9 +348,9 @@ mod tests {
         let size = 96;
         let offsets: Vec<f64> = (0..size).map(|r| 0.1 * (r % 7) as f64).collect();
         let (z, centres) = lattice_image(size, 10.0, 0.4, &offsets);
-        let along_x = lattice_line_levels(z.view(), &centres, 10.0, Axis::Horizontal);
+        let along_x = lattice_line_levels(z.view(), &centres, 10.0, Axis::Horizontal).levels;
         let transposed: Vec<[f64; 2]> = centres.iter().map(|c| [c[1], c[0]]).collect();
-        let along_y = lattice_line_levels(z.t(), &transposed, 10.0, Axis::Vertical);
+        let along_y = lattice_line_levels(z.t(), &transposed, 10.0, Axis::Vertical).levels;
         for (a, b) in along_x.iter().zip(&along_y) {
             assert!((a - b).abs() < 1e-12, "{a} vs {b}");
         }
@@ -323,7 +366,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| lattice_line_levels(z.view(), &centres, 9.0, Axis::Horizontal))
+                .install(|| lattice_line_levels(z.view(), &centres, 9.0, Axis::Horizontal).levels)
         };
         let one = on(1);
         for threads in [2, 3] {

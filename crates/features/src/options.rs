@@ -51,13 +51,11 @@ pub enum LineCorrection {
     /// ends (see `line_level.rs`): removes line offsets as robustly as the median with
     /// less of the lattice's row period imprinted on the image.
     Tapered,
-    /// Level each line against a model of the lattice rendered from the image's own
-    /// average atom, then refit (see `lattice_levels.rs`): removes line offsets without
-    /// removing the rows' modulation, even for rows nearly parallel to the lines. Where
-    /// only an image is at hand (no fitted features: [`crate::correct_lines`]) it is the
-    /// median. Opt-in for now: on the headline simulation it halves the error of the
-    /// corrected positions (3.91 → 1.93 pm vs truth), but on the embedded 256² example
-    /// it moves the creep `C_x` to 3.1 σ from its truth (0.4 σ with the median).
+    /// Level each line against a model of the lattice made from the image's own average
+    /// atom, then refit (see `lattice_levels.rs`): removes line offsets without removing
+    /// the rows' modulation, even for rows nearly parallel to the lines; lines whose
+    /// levels vary no more than pixel noise allows are left as recorded. Where only an
+    /// image is at hand (no fitted features: [`crate::correct_lines`]) it is the median.
     Lattice,
     /// Subtract each line's least-squares straight line.
     Linear,
