@@ -379,4 +379,33 @@ mod tests {
             );
         }
     }
+
+    /// A reproducible stand-in for Gaussian noise of RMS `sigma` (sum of uniforms).
+    fn noise(i: usize, sigma: f64) -> f64 {
+        let u = |k: usize| {
+            ((((i * 7 + k) as f64) * 12.9898).sin() * 43_758.545)
+                .fract()
+                .abs()
+        };
+        sigma * (u(0) + u(1) + u(2) + u(3) - 2.0) * 3f64.sqrt()
+    }
+
+    #[test]
+    fn line_offsets_are_told_from_pixel_noise() {
+        let size = 192;
+        let ratio = |offset_sigma: f64| {
+            let offsets: Vec<f64> = (0..size)
+                .map(|r| noise(100_000 + r, offset_sigma))
+                .collect();
+            let (mut z, centres) = lattice_image(size, 11.0, 0.5, &offsets);
+            for (i, v) in z.iter_mut().enumerate() {
+                *v += noise(i, 0.05);
+            }
+            lattice_line_levels(z.view(), &centres, 11.0, Axis::Horizontal).offsets_over_noise
+        };
+        let (clean, offset) = (ratio(0.0), ratio(0.05));
+        // Pixel noise alone: about 1; offsets as large as the pixel noise: far above 4.
+        assert!((0.5..2.0).contains(&clean), "without offsets {clean}");
+        assert!(offset > 20.0, "with offsets {offset}");
+    }
 }

@@ -108,3 +108,35 @@ fn lattice_levels_remove_the_line_offsets_without_the_rows() {
     assert!(lattice[1] < 0.7 * median[1], "{lattice:?} vs {median:?}");
     assert!(lattice[0] < 1.05 * median[0], "{lattice:?} vs {median:?}");
 }
+
+#[test]
+fn lattice_levelling_leaves_lines_without_offsets_as_recorded() {
+    let mut config = headline_512();
+    config.noise.line_offset_sigma_m = 0.0;
+    config.noise.pink_sigma_m = 0.0;
+    let output = Simulation::from_config(&config).unwrap().run().unwrap();
+    let errors = |line_correction: LineCorrection| {
+        let options = FeatureOptions {
+            line_correction,
+            ..FeatureOptions::for_neighbour_distance(2.46e-10)
+        };
+        let sets = find_features_in_pair(&output.pair, &options).unwrap();
+        let e = rms_error(&sets[0], &output.truth);
+        println!("{line_correction:?}: rms {:.4} × {:.4} px", e[0], e[1]);
+        e
+    };
+    let (none, median, lattice) = (
+        errors(LineCorrection::None),
+        errors(LineCorrection::Median),
+        errors(LineCorrection::Lattice),
+    );
+    // White noise only: levelling could only add noise shared along each line, so the
+    // lattice levelling leaves the lines as recorded and measures as well as no levelling
+    // (the correlation still runs on a median-levelled copy, so a few fit windows start
+    // one pixel apart); the median takes the rows' modulation and measures worse.
+    // Measured: none 0.079 × 0.070 px, median 0.083 × 0.184, lattice 0.079 × 0.071.
+    for axis in 0..2 {
+        assert!(lattice[axis] < 1.05 * none[axis], "{lattice:?} vs {none:?}");
+    }
+    assert!(median[1] > 1.2 * lattice[1], "{median:?} vs {lattice:?}");
+}
