@@ -11,9 +11,12 @@
 //! offset from the centre (on a half-pixel grid), so it holds the measured shape with its
 //! neighbours' tails, whatever the atoms look like. The lattice model puts the template
 //! at every centre; a line's level is the median of the image minus that model along it,
-//! which holds the line offset and not the rows. The centres come from a first fit on a
-//! median-levelled image, and the features are refitted on the image minus the levels;
-//! a second round uses the refitted centres.
+//! which holds the line offset and not the rows. The first centres are the correlation's
+//! peaks; the features are fitted on the image minus those levels, the levels are taken
+//! again around the fitted centres, and the features are refitted if the levels moved
+//! (`find.rs`, `level_against_lattice`). When the first levels vary from line to line no
+//! more than pixel noise allows ([`LineLevels::offsets_over_noise`]), the lines are left
+//! as recorded: levelling would only add noise shared along each line.
 //!
 //! Line offsets average out of the template (each cell is crossed by many lines). The
 //! template is one average shape: where distortion squeezes the lattice (the start of a
