@@ -419,12 +419,8 @@ fn fit_regions(
     signed: &Array2<f64>,
     ncc: &Array2<f64>,
     window: &FitWindow,
-) -> Vec<(GaussianFit, usize)> {
-    let z_values = signed.as_standard_layout();
-    let z_values = z_values.view();
-    kept.par_iter()
-        .map(|region| fit_region(region, z_values, ncc, window, None))
-        .collect()
+) -> Vec<RegionFitResult> {
+    fit_regions_from(kept, signed, ncc, window, None)
 }
 
 /// [`fit_regions`] started from `previous` fits of the same regions where those are
@@ -434,14 +430,27 @@ fn refit_regions(
     signed: &Array2<f64>,
     ncc: &Array2<f64>,
     window: &FitWindow,
-    previous: &[(GaussianFit, usize)],
-) -> Vec<(GaussianFit, usize)> {
+    previous: &[RegionFitResult],
+) -> Vec<RegionFitResult> {
+    fit_regions_from(kept, signed, ncc, window, Some(previous))
+}
+
+/// [`fit_regions`], each region started from its `previous` fit when there is a usable one.
+fn fit_regions_from(
+    kept: &[Region],
+    signed: &Array2<f64>,
+    ncc: &Array2<f64>,
+    window: &FitWindow,
+    previous: Option<&[RegionFitResult]>,
+) -> Vec<RegionFitResult> {
     let z_values = signed.as_standard_layout();
     let z_values = z_values.view();
     kept.par_iter()
-        .zip(previous)
-        .map(|(region, (fit, _))| {
-            let warm = is_usable(fit.status).then_some(fit);
+        .enumerate()
+        .map(|(i, region)| {
+            let warm = previous
+                .map(|p| &p[i].0)
+                .filter(|fit| is_usable(fit.status));
             fit_region(region, z_values, ncc, window, warm)
         })
         .collect()
@@ -523,13 +532,6 @@ const LEVEL_TOLERANCE: f64 = 0.1;
 /// files.
 const OFFSET_EVIDENCE: f64 = 4.0;
 
-/// Root mean square of `values` about their mean (0 for none).
-fn rms_about_mean(values: &[f64]) -> f64 {
-    let n = values.len().max(1) as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
-}
-
 /// Levels the lines of `signed` (background removed, sign applied, lines as recorded)
 /// against the lattice modelled around the correlation's peaks, fits the regions, levels
 /// again around the fitted centres and refits unless those levels moved by less than
@@ -573,7 +575,7 @@ fn level_against_lattice(
         .map(|(f, _)| [f.x0, f.y0])
         .collect();
     let second = level(&mut signed, &centres);
-    let change = rms_about_mean(&second.levels);
+    let change = dhct_numerics::moments::rms_about_mean_1d(&second.levels);
     let noise = dhct_numerics::robust::finite_median(fits.iter().map(|(f, _)| f.residual_rms));
     if noise.is_none_or(|noise| change > LEVEL_TOLERANCE * noise) {
         fits = refit_regions(fit.kept, &signed, fit.ncc, fit.window, &fits);

@@ -7,7 +7,7 @@
 
 use dhct_features::{FeatureOptions, FeatureSet, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
-use dhct_simulate::{GroundTruth, Simulation};
+use dhct_simulate::{GroundTruth, Simulation, SimulationOutput};
 
 mod common;
 use common::headline_512;
@@ -84,22 +84,25 @@ fn line_levels_fitted_with_the_features_remove_the_line_offsets_shifts() {
     }
 }
 
+/// RMS error (px, x and y) of the trace features found in `output` with `line_correction`.
+fn trace_error(output: &SimulationOutput, line_correction: LineCorrection) -> [f64; 2] {
+    let options = FeatureOptions {
+        line_correction,
+        ..FeatureOptions::for_neighbour_distance(2.46e-10)
+    };
+    let sets = find_features_in_pair(&output.pair, &options).unwrap();
+    let e = rms_error(&sets[0], &output.truth);
+    println!("{line_correction:?}: rms {:.4} × {:.4} px", e[0], e[1]);
+    e
+}
+
 #[test]
 fn lattice_levels_remove_the_line_offsets_without_the_rows() {
     let output = Simulation::from_config(&headline_512())
         .unwrap()
         .run()
         .unwrap();
-    let errors = |line_correction: LineCorrection| {
-        let options = FeatureOptions {
-            line_correction,
-            ..FeatureOptions::for_neighbour_distance(2.46e-10)
-        };
-        let sets = find_features_in_pair(&output.pair, &options).unwrap();
-        let e = rms_error(&sets[0], &output.truth);
-        println!("{line_correction:?}: rms {:.4} × {:.4} px", e[0], e[1]);
-        e
-    };
+    let errors = |line_correction| trace_error(&output, line_correction);
     let median = errors(LineCorrection::Median);
     let lattice = errors(LineCorrection::Lattice);
     // The headline's rows run along the lines: the median takes their modulation with the
@@ -115,16 +118,7 @@ fn lattice_levelling_leaves_lines_without_offsets_as_recorded() {
     config.noise.line_offset_sigma_m = 0.0;
     config.noise.pink_sigma_m = 0.0;
     let output = Simulation::from_config(&config).unwrap().run().unwrap();
-    let errors = |line_correction: LineCorrection| {
-        let options = FeatureOptions {
-            line_correction,
-            ..FeatureOptions::for_neighbour_distance(2.46e-10)
-        };
-        let sets = find_features_in_pair(&output.pair, &options).unwrap();
-        let e = rms_error(&sets[0], &output.truth);
-        println!("{line_correction:?}: rms {:.4} × {:.4} px", e[0], e[1]);
-        e
-    };
+    let errors = |line_correction| trace_error(&output, line_correction);
     let (none, median, lattice) = (
         errors(LineCorrection::None),
         errors(LineCorrection::Median),

@@ -16,6 +16,16 @@ pub fn rms_about_mean(d: &[[f64; 2]]) -> f64 {
     (sum / n).sqrt()
 }
 
+/// Root mean square of `values` about their mean, in their unit; 0 for no values.
+pub fn rms_about_mean_1d(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -23,5 +33,7 @@ mod tests {
         let d = [[1.0, 5.0], [3.0, 5.0]];
         assert_eq!(super::rms_about_mean(&d), 1.0);
         assert_eq!(super::rms_about_mean(&[]), 0.0);
+        assert_eq!(super::rms_about_mean_1d(&[1.0, 3.0]), 1.0);
+        assert_eq!(super::rms_about_mean_1d(&[]), 0.0);
     }
 }
