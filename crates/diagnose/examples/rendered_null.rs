@@ -1,7 +1,9 @@
 //! Renders effect-free scans with a base model that differs from dhct's (the `foreign-dev`
 //! validation set: other fast-scan hysteresis laws, slow-scan hysteresis), adds image noise,
 //! finds the features with a chosen line levelling and diagnoses each scan: a false-alarm
-//! check on the image path (`docs/diagnose.md`, "Not done").
+//! check on the image path (`docs/diagnose.md`, "Not done"). Also prints how far the
+//! found centres scatter about the simulated truth against what their fits report, and
+//! the floor's estimates.
 //!
 //! ```text
 //! cargo run --release -p dhct-diagnose --example rendered_null -- LEVELLING WHITE_PM OFFSETS_PM PINK_PM [first=51001] [n=16]
@@ -9,7 +11,9 @@
 //! (`LEVELLING`: `none`, `median`, `tapered`, `linear` or `lattice`; the noise RMS values in
 //! picometres: white per pixel, one offset per scan line, 1/f over the acquisition).
 
-use dhct_diagnose::synth::{SimulatedScan, ValidationCase, ValidationSet};
+use dhct_diagnose::synth::{
+    PositionNoise, SimulatedScan, ValidationCase, ValidationSet, simulate_positions_with,
+};
 use dhct_diagnose::{DiagnoseOptions, diagnose};
 use dhct_features::{FeatureOptions, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
@@ -31,6 +35,37 @@ fn keyed(args: &[String], key: &str, default: u64) -> u64 {
     args.iter()
         .find_map(|s| s.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
         .unwrap_or(default)
+}
+
+/// The found centres' scatter about the noise-free simulated positions (metres per axis,
+/// the mean offset removed; matched within 3 px) and the RMS of their fits' 1σ.
+fn scatter_against_truth(
+    case: &ValidationCase,
+    scan: &SimulatedScan,
+) -> Result<([f64; 2], [f64; 2]), Box<dyn std::error::Error>> {
+    let exact = simulate_positions_with(&case.config, &PositionNoise::white(0.0), 0)?;
+    let pitch = [scan.geometry.pitch_x(), scan.geometry.pitch_y()];
+    let (mut errors, mut reported) = (Vec::new(), [0.0; 2]);
+    for (found, truth) in [(&scan.trace, &exact.trace), (&scan.retrace, &exact.retrace)] {
+        for f in found {
+            let distance2 =
+                |t: &dhct_features::Feature| (t.x_px - f.x_px).powi(2) + (t.y_px - f.y_px).powi(2);
+            let nearest = truth
+                .iter()
+                .min_by(|a, b| distance2(a).total_cmp(&distance2(b)));
+            if let Some(t) = nearest.filter(|t| distance2(t) < 9.0) {
+                errors.push([(f.x_px - t.x_px) * pitch[0], (f.y_px - t.y_px) * pitch[1]]);
+                reported[0] += (f.x_sigma_px * pitch[0]).powi(2);
+                reported[1] += (f.y_sigma_px * pitch[1]).powi(2);
+            }
+        }
+    }
+    let n = errors.len().max(1) as f64;
+    let spread = |a: usize| {
+        let mean = errors.iter().map(|e| e[a]).sum::<f64>() / n;
+        (errors.iter().map(|e| (e[a] - mean).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    Ok(([spread(0), spread(1)], reported.map(|r| (r / n).sqrt())))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -73,9 +108,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "seed {seed}: {:?}, gap {:.2} -> {:.2}, named {named:?}",
                     report.verdict, v.gap_before, v.gap_after
                 );
+                let n = &report.noise;
+                println!(
+                    "    floor: localisation {}, successive {}, trace/retrace {}",
+                    n.localisation.describe(),
+                    n.successive_differences.describe(),
+                    n.trace_retrace.describe()
+                );
             }
             Err(e) => println!("seed {seed}: {e}"),
         }
+        let (truth, reported) = scatter_against_truth(&case, &scan)?;
+        println!(
+            "    centres vs truth: scatter {:.2} × {:.2} pm, fits' 1σ {:.2} × {:.2} pm",
+            truth[0] * 1e12,
+            truth[1] * 1e12,
+            reported[0] * 1e12,
+            reported[1] * 1e12
+        );
     }
     Ok(())
 }

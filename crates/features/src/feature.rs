@@ -188,8 +188,17 @@ pub struct FeatureSet {
     pub candidates: usize,
     /// σ of the correlation kernel used, pixels (NaN for a custom kernel).
     pub kernel_sigma_px: f64,
+    /// Factor per axis `[x, y]` by which the fits' centre uncertainties were raised
+    /// because the pixel noise is correlated (measured on the image minus the lattice
+    /// model; 1 where the noise is white or it could not be measured).
+    #[serde(default = "unit_factors")]
+    pub correlated_noise_factor: [f64; 2],
     /// Time spent per stage (for benchmarks and reports; not deterministic).
     pub timings: StageTimings,
+}
+
+fn unit_factors() -> [f64; 2] {
+    [1.0; 2]
 }
 
 /// Column names of [`FeatureSet::write_csv`].

@@ -9,9 +9,10 @@ use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
-use crate::lattice_levels::{lattice_line_levels, subtract_line_levels};
+use crate::lattice_levels::{lattice_line_levels, lattice_residual, subtract_line_levels};
 use crate::line_relevel::{WindowPixels, relevel, window_pixels};
 use crate::ncc::NccPlan;
+use crate::noise_correlation::centre_variance_ratio;
 use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
@@ -255,6 +256,7 @@ fn find_prepared(
     }
     clock.lap(&mut timings.fitting_s);
 
+    let noise_factor = raise_for_correlated_noise(&mut fits, &pre.signed, &window, geometry);
     let edge_margin = (kh.max(kw) / 2) as f64;
     let accepted = screen_fits(
         &kept,
@@ -287,6 +289,7 @@ fn find_prepared(
             rejected,
             candidates,
             kernel_sigma_px: prepared.kernel_sigma_px,
+            correlated_noise_factor: noise_factor,
             timings,
         },
         ncc,
@@ -581,6 +584,39 @@ fn level_against_lattice(
         fits = refit_regions(fit.kept, &signed, fit.ncc, fit.window, &fits);
     }
     (signed, fits)
+}
+
+/// Multiplies the usable fits' centre uncertainties by how much more their centres
+/// scatter under the image's correlated pixel noise than white noise gives
+/// ([`crate::noise_correlation`]), per axis and never below 1. Returns the factors
+/// `[x, y]` applied (1 when they cannot be measured).
+fn raise_for_correlated_noise(
+    fits: &mut [RegionFitResult],
+    signed: &Array2<f64>,
+    window: &FitWindow,
+    geometry: &ScanGeometry,
+) -> [f64; 2] {
+    let usable: Vec<GaussianFit> = fits
+        .iter()
+        .map(|f| f.0)
+        .filter(|f| is_usable(f.status))
+        .collect();
+    let centres: Vec<[f64; 2]> = usable.iter().map(|f| [f.x0, f.y0]).collect();
+    let residual = lattice_residual(signed.view(), &centres, window.nn_px);
+    let lines_along_rows = geometry.fast_axis() == dhct_scan::Axis::Horizontal;
+    let ratio = centre_variance_ratio(
+        residual.view(),
+        &usable,
+        &window.offsets,
+        window.nn_px,
+        lines_along_rows,
+    );
+    let factor = ratio.map_or([1.0; 2], |r| r.map(|v| v.sqrt().max(1.0)));
+    for (fit, _) in fits.iter_mut().filter(|f| is_usable(f.0.status)) {
+        fit.x0_sigma *= factor[0];
+        fit.y0_sigma *= factor[1];
+    }
+    factor
 }
 
 /// Whether a fit's centre can be used (converged, or stopped at the iteration limit).

@@ -181,6 +181,42 @@ impl AtomTemplate {
     }
 }
 
+/// The measured atom placed at every centre.
+struct LatticeModel<'a> {
+    nearest: NearestCentre<'a>,
+    template: AtomTemplate,
+}
+
+impl<'a> LatticeModel<'a> {
+    /// The model of `z` built from `centres` (`(x, y)` px; `nn_px` the neighbour
+    /// distance in px).
+    fn measure(z: ArrayView2<f64>, centres: &'a [[f64; 2]], nn_px: f64) -> Self {
+        let reach_px = CELL_REACH_NN * nn_px;
+        let nearest = NearestCentre::assign(centres, z.dim(), reach_px);
+        let template = AtomTemplate::measure(z, &nearest, reach_px);
+        LatticeModel { nearest, template }
+    }
+
+    /// The model at pixel `(row, column)`; NaN where no centre is in reach.
+    fn at(&self, row: usize, column: usize) -> f64 {
+        self.nearest
+            .offset(row, column)
+            .map_or(f64::NAN, |o| self.template.at(o))
+    }
+}
+
+/// `z` minus the lattice model built from `centres` (`(x, y)` px; `nn_px` the neighbour
+/// distance in px): what the lattice's own picture does not explain (pixel noise, line
+/// offsets, defects). NaN where no centre is in reach or `z` is missing.
+pub(crate) fn lattice_residual(
+    z: ArrayView2<f64>,
+    centres: &[[f64; 2]],
+    nn_px: f64,
+) -> Array2<f64> {
+    let model = LatticeModel::measure(z, centres, nn_px);
+    Array2::from_shape_fn(z.dim(), |(r, c)| z[[r, c]] - model.at(r, c))
+}
+
 /// The lines' levels and how far they vary beyond what pixel noise alone would give.
 pub(crate) struct LineLevels {
     /// Each line's level (z units).
@@ -210,9 +246,7 @@ pub(crate) fn lattice_line_levels(
     nn_px: f64,
     fast_axis: Axis,
 ) -> LineLevels {
-    let reach_px = CELL_REACH_NN * nn_px;
-    let nearest = NearestCentre::assign(centres, z.dim(), reach_px);
-    let template = AtomTemplate::measure(z, &nearest, reach_px);
+    let model = LatticeModel::measure(z, centres, nn_px);
     let (rows, columns) = z.dim();
     let (lines, length) = match fast_axis {
         Axis::Horizontal => (rows, columns),
@@ -228,8 +262,7 @@ pub(crate) fn lattice_line_levels(
             let mut residuals: Vec<f64> = (0..length)
                 .filter_map(|along| {
                     let (r, c) = pixel(along);
-                    let model = nearest.offset(r, c).map_or(f64::NAN, |o| template.at(o));
-                    Some(z[[r, c]] - model).filter(|v| v.is_finite())
+                    Some(z[[r, c]] - model.at(r, c)).filter(|v| v.is_finite())
                 })
                 .collect();
             match line_residual_level(&mut residuals) {

@@ -45,6 +45,7 @@ mod lattice_levels;
 mod line_level;
 mod line_relevel;
 mod ncc;
+mod noise_correlation;
 mod options;
 mod preprocess;
 mod watershed;
