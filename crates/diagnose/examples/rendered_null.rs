@@ -9,12 +9,14 @@
 //! cargo run --release -p dhct-diagnose --example rendered_null -- LEVELLING WHITE_PM OFFSETS_PM PINK_PM [first=51001] [n=16]
 //! ```
 //! (`LEVELLING`: `none`, `median`, `tapered`, `linear` or `lattice`; the noise RMS values in
-//! picometres: white per pixel, one offset per scan line, 1/f over the acquisition).
+//! picometres: white per pixel, one offset per scan line, 1/f over the acquisition; with
+//! `look=1` the `rendered-dev` set's scans with their own noise and atom shapes instead,
+//! and `effect=NAME` adds that effect to them).
 
 use dhct_diagnose::synth::{
     PositionNoise, SimulatedScan, ValidationCase, ValidationSet, simulate_positions_with,
 };
-use dhct_diagnose::{DiagnoseOptions, diagnose};
+use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
 use dhct_features::{FeatureOptions, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
 use dhct_simulate::Simulation;
@@ -78,10 +80,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (white, offsets, pink) = (picometres(2)?, picometres(3)?, picometres(4)?);
     let first = keyed(&args, "first", 51001);
     for seed in first..first + keyed(&args, "n", 16) {
-        let mut case = ValidationCase::effect_free(seed, ValidationSet::ForeignDevelopment);
-        case.config.noise.white_sigma_m = white;
-        case.config.noise.line_offset_sigma_m = offsets;
-        case.config.noise.pink_sigma_m = pink;
+        // `look=1`: the image-path development set's scans, their own noise and atoms.
+        let case = if keyed(&args, "look", 0) == 1 {
+            let effect = args.iter().find_map(|a| a.strip_prefix("effect="));
+            let effects: Vec<Candidate> = Candidate::ALL
+                .into_iter()
+                .filter(|c| effect == Some(c.name()))
+                .collect();
+            ValidationCase::with_effects(&effects, seed, ValidationSet::RenderedDevelopment)
+        } else {
+            let mut case = ValidationCase::effect_free(seed, ValidationSet::ForeignDevelopment);
+            case.config.noise.white_sigma_m = white;
+            case.config.noise.line_offset_sigma_m = offsets;
+            case.config.noise.pink_sigma_m = pink;
+            case
+        };
         let output = Simulation::from_config(&case.config)?.run()?;
         let lattice = case.config.surface.lattice.build()?;
         let options = FeatureOptions {
@@ -94,6 +107,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             retrace: Vec::new(),
         };
         for set in find_features_in_pair(&output.pair, &options)? {
+            println!(
+                "    {:?}: correlated-noise factor {:.2} × {:.2}",
+                set.pass, set.correlated_noise_factor[0], set.correlated_noise_factor[1]
+            );
             match set.pass {
                 ScanPass::Trace => scan.trace = set.features,
                 ScanPass::Retrace => scan.retrace = set.features,
@@ -110,7 +127,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 );
                 let n = &report.noise;
                 println!(
-                    "    floor: localisation {}, successive {}, trace/retrace {}",
+                    "    floor {:.2} × {:.2} pm from {}",
+                    n.sigma_m[0] * 1e12,
+                    n.sigma_m[1] * 1e12,
+                    n.source.describe()
+                );
+                println!(
+                    "    localisation {}, successive {}, trace/retrace {}",
                     n.localisation.describe(),
                     n.successive_differences.describe(),
                     n.trace_retrace.describe()

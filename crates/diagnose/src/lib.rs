@@ -95,6 +95,6 @@ pub use sub_feature::{
 };
 pub use validate::{
     CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,
-    validate,
+    rendered_held_out, validate,
 };
 pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};

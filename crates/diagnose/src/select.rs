@@ -16,8 +16,10 @@
 //!   look-elsewhere price `2 ln M` of the `M` shapes searched (a periodogram's frequencies).
 //!
 //! The best few by BIC are re-fitted in full (all parameters, shapes free where smooth) and
-//! re-scored. An effect is accepted only if its CV ratio is below `1 − min_cv_gain` and its
-//! ΔBIC below `−min_delta_bic`; the accepted best joins the model and the next round
+//! re-scored. An effect is accepted only if its CV ratio is below `1 − min_cv_gain`, the
+//! held-out mean square drops by more than `min_cv_gain` of the floor's variance too (when
+//! the residual is already below the floor, a relative gain measures the noise), and its
+//! ΔBIC is below `−min_delta_bic`; the accepted best joins the model and the next round
 //! starts. If none passes, the answer is "no further effect needed".
 
 use dhct_scan::ScanGeometry;
@@ -54,6 +56,10 @@ pub struct CandidateScore {
     /// Held-out mean square with the effect ÷ without (< 1 = predicts unseen time blocks
     /// better).
     pub cv_ratio: f64,
+    /// Held-out mean square without the effect minus with it, in units of the noise
+    /// floor's variance.
+    #[serde(default)]
+    pub cv_drop: f64,
     /// Whether the scores come from a full non-linear refit (else linearised screening).
     pub refitted: bool,
     /// Whether it passes both acceptance tests.
@@ -540,6 +546,7 @@ fn screened_entry((p, gain, beta, searched): Screened, base: &Baseline) -> Entry
         delta_bic,
         delta_aic,
         cv_ratio: cv / base.cv0(p.candidate),
+        cv_drop: base.cv0(p.candidate) - cv,
         refitted: false,
         passes: false,
     };
@@ -612,6 +619,7 @@ fn rescore(s: &mut Scored, f: Fitted, complexity: Complexity, base: &Baseline) {
     s.score.delta_bic = delta_bic;
     s.score.delta_aic = delta_aic;
     s.score.cv_ratio = cv / base.cv0(s.score.candidate);
+    s.score.cv_drop = base.cv0(s.score.candidate) - cv;
     s.score.refitted = true;
     s.fitted = Some(f);
 }
@@ -623,7 +631,10 @@ fn rank(scored: Vec<Entry>, options: &SelectionOptions) -> Vec<Scored> {
         .into_iter()
         .map(|entry| {
             let mut s = entry.scored;
+            // The held-out error must drop by `min_cv_gain` of what remains and of the
+            // floor's variance: below the floor a relative gain measures noise.
             s.score.passes = s.score.cv_ratio < 1.0 - options.min_cv_gain
+                && s.score.cv_drop > options.min_cv_gain
                 && s.score.delta_bic < -options.min_delta_bic;
             s
         })

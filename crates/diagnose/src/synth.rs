@@ -27,7 +27,8 @@ use dhct_simulate::raster::Displacer;
 use dhct_simulate::surface::Terrace;
 use dhct_simulate::truth::locate;
 use dhct_simulate::{
-    Effect, EffectConfig, NoiseConfig, ScanConfig, Simulation, SimulationConfig, StepEdge, presets,
+    Effect, EffectConfig, Lobe, NoiseConfig, ScanConfig, Simulation, SimulationConfig, StepEdge,
+    presets,
 };
 use nalgebra::Vector2;
 use rand::{RngExt, SeedableRng};
@@ -116,11 +117,19 @@ pub enum ValidationSet {
     /// slow-scan hysteresis that relaxes over 3–10 % of the frame; magnitudes 0.7–0.8 or
     /// 1.2–1.3 ×, vibration 0.25–0.4 Hz.
     SecondForeign,
+    /// Development cases of [`ValidationSet::Rendered`]'s forms: the base and effects of
+    /// [`ValidationSet::SecondForeign`] rendered as images ([`rendered_look`]) and found
+    /// by the feature finder; magnitudes 0.7–0.85 or 1.15–1.3 ×, vibration 0.5–0.7 Hz.
+    RenderedDevelopment,
+    /// Issue 17's held-out set on the image path, fixed before its first run: as
+    /// [`ValidationSet::RenderedDevelopment`] with its own seeds, magnitudes 0.75–0.85 or
+    /// 1.15–1.25 ×, vibration 0.3–0.45 Hz.
+    Rendered,
 }
 
 impl ValidationSet {
     /// Every set, in report order.
-    pub const ALL: [ValidationSet; 8] = [
+    pub const ALL: [ValidationSet; 10] = [
         ValidationSet::Tuned,
         ValidationSet::Development,
         ValidationSet::SecondDevelopment,
@@ -129,6 +138,8 @@ impl ValidationSet {
         ValidationSet::Foreign,
         ValidationSet::ForeignDevelopment,
         ValidationSet::SecondForeign,
+        ValidationSet::RenderedDevelopment,
+        ValidationSet::Rendered,
     ];
 
     /// Short name.
@@ -142,6 +153,8 @@ impl ValidationSet {
             ValidationSet::Foreign => "foreign",
             ValidationSet::ForeignDevelopment => "foreign-dev",
             ValidationSet::SecondForeign => "foreign-2",
+            ValidationSet::RenderedDevelopment => "rendered-dev",
+            ValidationSet::Rendered => "rendered",
         }
     }
 
@@ -149,7 +162,30 @@ impl ValidationSet {
     pub fn is_evidence(self) -> bool {
         matches!(
             self,
-            ValidationSet::HeldOut | ValidationSet::Foreign | ValidationSet::SecondForeign
+            ValidationSet::HeldOut
+                | ValidationSet::Foreign
+                | ValidationSet::SecondForeign
+                | ValidationSet::Rendered
+        )
+    }
+
+    /// Whether the set's scans are rendered as images and found by the feature finder
+    /// (else simulated as positions with localisation noise).
+    pub fn renders_images(self) -> bool {
+        matches!(
+            self,
+            ValidationSet::RenderedDevelopment | ValidationSet::Rendered
+        )
+    }
+
+    /// Whether slow-scan hysteresis relaxes over 3–10 % of the frame (else 1–3 %).
+    fn has_long_slow_hysteresis(self) -> bool {
+        matches!(
+            self,
+            ValidationSet::ForeignDevelopment
+                | ValidationSet::SecondForeign
+                | ValidationSet::RenderedDevelopment
+                | ValidationSet::Rendered
         )
     }
 
@@ -160,6 +196,8 @@ impl ValidationSet {
             ValidationSet::Foreign
                 | ValidationSet::ForeignDevelopment
                 | ValidationSet::SecondForeign
+                | ValidationSet::RenderedDevelopment
+                | ValidationSet::Rendered
         )
     }
 }
@@ -305,6 +343,36 @@ pub fn base_config_with_law(seed: u64, law: BaseLaw) -> SimulationConfig {
     config
 }
 
+/// What the image-path sets ([`ValidationSet::renders_images`]) add to a scan so that its
+/// images differ from the ones dhct's fits assume, drawn from `seed`: white pixel noise
+/// 1.5–3 pm, 1/f noise over the acquisition 0.5–2 pm, an offset per scan line 2–8 pm, and
+/// atoms that are not one round Gaussian (widths 1–1.2 × apart along a random axis, plus a
+/// halo twice as wide of 15–30 % of the height).
+pub fn rendered_look(config: &mut SimulationConfig, seed: u64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x100C);
+    config.noise.white_sigma_m = uniform(&mut rng, 1.5e-12, 3e-12);
+    config.noise.pink_sigma_m = uniform(&mut rng, 0.5e-12, 2e-12);
+    config.noise.line_offset_sigma_m = uniform(&mut rng, 2e-12, 8e-12);
+    let feature = &mut config.surface.feature;
+    let sigma = feature.sigma_m[0];
+    feature.sigma_m = [sigma * uniform(&mut rng, 1.0, 1.2), sigma];
+    feature.angle_rad = uniform(&mut rng, 0.0, std::f64::consts::PI);
+    feature.lobes = vec![
+        Lobe {
+            offset_m: [0.0, 0.0],
+            relative_height: 1.0,
+            sigma_m: None,
+            angle_rad: None,
+        },
+        Lobe {
+            offset_m: [0.0, 0.0],
+            relative_height: uniform(&mut rng, 0.15, 0.3),
+            sigma_m: Some([2.0 * feature.sigma_m[0], 2.0 * sigma]),
+            angle_rad: None,
+        },
+    ];
+}
+
 /// Magnitude factor of an effect (see [`ValidationSet`]).
 fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
     // The tuned set draws one number, the others first draw which side of it they lie on.
@@ -314,8 +382,11 @@ fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
         ValidationSet::SecondDevelopment => ((0.6, 0.75), (1.25, 1.5)),
         ValidationSet::ThirdDevelopment => ((0.65, 0.8), (1.2, 1.4)),
         ValidationSet::HeldOut => ((0.7, 0.8), (1.2, 1.35)),
-        ValidationSet::Foreign | ValidationSet::ForeignDevelopment => ((0.7, 0.85), (1.15, 1.3)),
+        ValidationSet::Foreign
+        | ValidationSet::ForeignDevelopment
+        | ValidationSet::RenderedDevelopment => ((0.7, 0.85), (1.15, 1.3)),
         ValidationSet::SecondForeign => ((0.7, 0.8), (1.2, 1.3)),
+        ValidationSet::Rendered => ((0.75, 0.85), (1.15, 1.25)),
     };
     let (lo, hi) = if rng.random::<bool>() { low } else { high };
     uniform(rng, lo, hi)
@@ -335,7 +406,7 @@ fn slow_hysteresis(
     set: ValidationSet,
 ) -> SlowScanHysteresis {
     let law = match set {
-        ValidationSet::ForeignDevelopment | ValidationSet::SecondForeign => {
+        _ if set.has_long_slow_hysteresis() => {
             let tau = uniform(rng, 0.03, 0.10) * frame_s;
             HysteresisLaw::Exponential {
                 amplitude: m * 40e-12 / (slow_speed * tau),
@@ -428,6 +499,8 @@ fn add_effect(
                 ValidationSet::Foreign => uniform(rng, 0.4, 0.6),
                 ValidationSet::ForeignDevelopment => uniform(rng, 0.6, 0.9),
                 ValidationSet::SecondForeign => uniform(rng, 0.25, 0.4),
+                ValidationSet::RenderedDevelopment => uniform(rng, 0.5, 0.7),
+                ValidationSet::Rendered => uniform(rng, 0.3, 0.45),
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
             phase_rad: [
@@ -479,6 +552,9 @@ impl ValidationCase {
             _ if set.has_foreign_base() => base_config_with_law(seed, BaseLaw::of_seed(seed)),
             _ => base_config(seed),
         };
+        if set.renders_images() {
+            rendered_look(&mut config, seed);
+        }
         let mut rng = Self::rng(seed, 0x5EED);
         let mut truth = Vec::new();
         for &c in effects {
@@ -817,11 +893,15 @@ fn true_sites(
     Ok(out)
 }
 
-/// The full chain: rendered images, then feature finding.
+/// The full chain: rendered images, then feature finding with the pipeline's default line
+/// levelling (`"lattice"`, as `PipelineOptions::for_lattice` sets it).
 pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, DiagnoseError> {
     let output = Simulation::from_config(config)?.run()?;
     let lattice = config.surface.lattice.build()?;
-    let options = FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance());
+    let options = FeatureOptions {
+        line_correction: dhct_features::LineCorrection::Lattice,
+        ..FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
+    };
     let sets = find_features_in_pair(&output.pair, &options)?;
     let mut trace = Vec::new();
     let mut retrace = Vec::new();

@@ -70,6 +70,20 @@
 //!   asymmetric hysteresis, 0.24; nothing or the truth named in 2 of them), false alarms
 //!   0/40, out of library 10/10, gap ≤ 1.2 × floor in 25/25 — accepted. Scored with every
 //!   in-library case as identifiable, top-1 would be 26/32 (81 %).
+//! * **Rendered development** (seeds 61001–61002, effect-free 62001–62020, out of library
+//!   63001–63003, mixtures seed + 64000): the second foreign set's base and effects
+//!   rendered as images that differ from what dhct's fits assume — white, 1/f and
+//!   line-offset noise, atoms with a wide halo and unequal widths
+//!   ([`crate::synth::rendered_look`]) — and found by the feature finder with the default
+//!   options; the floor a single effect's visibility is measured against is the floor
+//!   the diagnosis found. Run while the image path was checked: development data.
+//! * **Rendered** (seeds 71001–71004, effect-free 72001–72040, out of library
+//!   73001–73005, mixtures seed + 74000): issue 17's held-out set on the image path, as
+//!   the rendered development set with its own seeds, magnitudes 0.75–0.85 or 1.15–1.25 ×
+//!   and vibration 0.3–0.45 Hz; fixed in this file ([`rendered_held_out`]) before it was
+//!   first run, and not run yet: on its development set the image path names an effect
+//!   in 2 of 20 effect-free scans (see `docs/diagnose.md`), so the set waits until the
+//!   method is final.
 
 use std::fmt;
 
@@ -147,6 +161,20 @@ pub const VALIDATED_EFFECTS: [Candidate; 9] = [
     Candidate::ScanCoupling,
 ];
 
+/// Issue 17's held-out set on the image path ([`ValidationSet::Rendered`]), fixed here
+/// before its first run. It is not in [`ValidationOptions::default`] yet: the image path
+/// misses the false-alarm target on its development set, and the set is run once, when the
+/// method is final.
+pub fn rendered_held_out() -> SetSeeds {
+    SetSeeds {
+        set: ValidationSet::Rendered,
+        seeds: vec![71001, 71002, 71003, 71004],
+        null_seeds: (72001..72041).collect(),
+        mixture_offset: 74000,
+        foreign_seeds: (73001..73006).collect(),
+    }
+}
+
 impl Default for ValidationOptions {
     fn default() -> Self {
         ValidationOptions {
@@ -210,6 +238,14 @@ impl Default for ValidationOptions {
                     null_seeds: (42001..42041).collect(),
                     mixture_offset: 44000,
                     foreign_seeds: (43001..43006).collect(),
+                },
+                // Development cases of the image-path set's forms.
+                SetSeeds {
+                    set: ValidationSet::RenderedDevelopment,
+                    seeds: vec![61001, 61002],
+                    null_seeds: (62001..62021).collect(),
+                    mixture_offset: 64000,
+                    foreign_seeds: (63001..63004).collect(),
                 },
             ],
             mixtures: vec![
@@ -474,20 +510,6 @@ fn run_case(
     options: &ValidationOptions,
     seed: u64,
 ) -> CaseResult {
-    let visibility = match case.truth.as_slice() {
-        [c] if case.foreign.is_empty() && *c != Candidate::ScanCoupling => {
-            noise_free_visibility(case, options.noise_m)
-        }
-        _ => None,
-    };
-    let kind = match case.truth.as_slice() {
-        _ if !case.foreign.is_empty() => CaseKind::OutOfLibrary,
-        [] => CaseKind::EffectFree,
-        [Candidate::ScanCoupling] => CaseKind::Degenerate,
-        [_] if visibility.is_some_and(|v| v <= ABSORBED_VISIBILITY) => CaseKind::Absorbed,
-        [_] => CaseKind::Single,
-        _ => CaseKind::Mixture,
-    };
     let scan = if images {
         simulate_images(&case.config)
     } else {
@@ -503,6 +525,27 @@ fn run_case(
             &options.diagnose,
         )
     });
+    // The floor the effect's visibility is measured against: the localisation noise
+    // simulated on the position path, the floor the diagnosis found on the image path.
+    let floor_m = match (&result, images) {
+        (_, false) => Some([options.noise_m; 2]),
+        (Ok(report), true) => Some(report.noise.sigma_m),
+        (Err(_), true) => None,
+    };
+    let visibility = match case.truth.as_slice() {
+        [c] if case.foreign.is_empty() && *c != Candidate::ScanCoupling => {
+            floor_m.and_then(|floor| noise_free_visibility(case, floor))
+        }
+        _ => None,
+    };
+    let kind = match case.truth.as_slice() {
+        _ if !case.foreign.is_empty() => CaseKind::OutOfLibrary,
+        [] => CaseKind::EffectFree,
+        [Candidate::ScanCoupling] => CaseKind::Degenerate,
+        [_] if visibility.is_some_and(|v| v <= ABSORBED_VISIBILITY) => CaseKind::Absorbed,
+        [_] => CaseKind::Single,
+        _ => CaseKind::Mixture,
+    };
     let mut out = CaseResult {
         name: case.name.clone(),
         kind,
@@ -567,14 +610,14 @@ fn run_case(
 
 /// How visible `case`'s one effect is beyond what the base model absorbs: the base model's
 /// gap (RMS residual over the floor) on the same scan without noise, every feature still
-/// reporting an uncertainty of `noise_m` (so the floor is that), `None` if it cannot be
-/// computed.
-fn noise_free_visibility(case: &ValidationCase, noise_m: f64) -> Option<f64> {
+/// reporting an uncertainty of `floor_m` (metres per axis, so the floor is that), `None`
+/// if it cannot be computed.
+fn noise_free_visibility(case: &ValidationCase, floor_m: [f64; 2]) -> Option<f64> {
     let mut scan = simulate_positions_with(&case.config, &PositionNoise::white(0.0), 0).ok()?;
     let (px, py) = (scan.geometry.pitch_x(), scan.geometry.pitch_y());
     for f in scan.trace.iter_mut().chain(scan.retrace.iter_mut()) {
-        f.x_sigma_px = noise_m / px;
-        f.y_sigma_px = noise_m / py;
+        f.x_sigma_px = floor_m[0] / px;
+        f.y_sigma_px = floor_m[1] / py;
     }
     let lattice = case.config.surface.lattice.build().ok()?;
     let options = DiagnoseOptions {
@@ -592,13 +635,15 @@ pub fn validate(options: &ValidationOptions) -> ValidationReport {
     for set in &options.sets {
         for &c in &options.effects {
             for &s in &set.seeds {
-                jobs.push((ValidationCase::single(c, s, set.set), false, s));
+                let images = set.set.renders_images();
+                jobs.push((ValidationCase::single(c, s, set.set), images, s));
             }
         }
     }
     for set in &options.sets {
         for &s in &set.null_seeds {
-            jobs.push((ValidationCase::effect_free(s, set.set), false, s));
+            let images = set.set.renders_images();
+            jobs.push((ValidationCase::effect_free(s, set.set), images, s));
         }
     }
     for &s in &options.mixture_seeds {
@@ -607,7 +652,7 @@ pub fn validate(options: &ValidationOptions) -> ValidationReport {
                 let seed = s + set.mixture_offset;
                 jobs.push((
                     ValidationCase::with_effects(pair, seed, set.set),
-                    false,
+                    set.set.renders_images(),
                     seed,
                 ));
             }
@@ -616,7 +661,8 @@ pub fn validate(options: &ValidationOptions) -> ValidationReport {
     for set in &options.sets {
         for &s in &set.foreign_seeds {
             for effect in ForeignEffect::ALL {
-                jobs.push((ValidationCase::out_of_library(effect, s, set.set), false, s));
+                let case = ValidationCase::out_of_library(effect, s, set.set);
+                jobs.push((case, set.set.renders_images(), s));
             }
         }
     }

@@ -47,6 +47,9 @@ const MIN_SAMPLES: usize = 200;
 /// same within 3 % of the truth either way.
 const BETWEEN_CENTRES_NN: f64 = 0.3;
 
+/// Samples whose mean square noise exceeds this many times the median are left out.
+const OUTLIER_VARIANCE: f64 = 5.0;
+
 /// Neighbours are looked for within this many neighbour distances of a centre.
 const NEIGHBOUR_REACH_NN: f64 = 1.3;
 
@@ -164,6 +167,40 @@ fn differenced(
         .collect()
 }
 
+/// What one sample gives one axis.
+struct Sample {
+    /// The kernel's response to the noise, squared.
+    response2: f64,
+    /// What white noise of the same local variance would give it (`Σ g²d²`).
+    white: f64,
+    /// The sample's mean square noise.
+    noise_variance: f64,
+}
+
+impl Sample {
+    fn of(g: &[f64], d: &[f64]) -> Sample {
+        let response: f64 = g.iter().zip(d).map(|(g, d)| g * d).sum();
+        Sample {
+            response2: response * response,
+            white: g.iter().zip(d).map(|(g, d)| g * g * d * d).sum(),
+            noise_variance: d.iter().map(|d| d * d).sum::<f64>() / d.len().max(1) as f64,
+        }
+    }
+}
+
+/// The samples' `Σ response² / Σ white`, leaving out samples whose noise variance exceeds
+/// [`OUTLIER_VARIANCE`] times the median (a step edge or a defect is not noise).
+fn pooled_ratio(samples: &[Sample]) -> f64 {
+    let mut v: Vec<f64> = samples.iter().map(|s| s.noise_variance).collect();
+    let limit = OUTLIER_VARIANCE * dhct_numerics::robust::median(&mut v).unwrap_or(f64::NAN);
+    let (mut response, mut white) = (0.0, 0.0);
+    for s in samples.iter().filter(|s| s.noise_variance <= limit) {
+        response += s.response2;
+        white += s.white;
+    }
+    response / white
+}
+
 /// The variance of fitted centres over what the fits' covariance gives, per axis `[x, y]`
 /// (1 for white noise), from `residual` (image minus lattice model, NaN where unmodelled),
 /// the usable `fits` with their window `offsets` (`(row, column)` px) and the neighbour
@@ -179,7 +216,8 @@ pub(crate) fn centre_variance_ratio(
     let (rows, columns) = residual.dim();
     let cells = Cells::new(fits, nn_px)?;
     let step = fits.len().div_ceil(KERNELS).max(1);
-    let (mut projected, mut white, mut samples, mut n) = ([0.0; 2], [0.0; 2], 0usize, 0usize);
+    let mut samples: [Vec<Sample>; 2] = [Vec::new(), Vec::new()];
+    let mut n = 0usize;
     for fit in fits.iter().step_by(step) {
         let Some(kernels) = centre_kernels(fit, offsets) else {
             continue;
@@ -192,25 +230,17 @@ pub(crate) fn centre_variance_ratio(
             n += 1;
             let (u, v) = place(n);
             let here = ((u * rows as f64) as usize, (v * columns as f64) as usize);
-            let Some(values) = cells
+            let Some(d) = cells
                 .partner(here, lines_along_rows)
                 .and_then(|there| differenced(residual, here, there, offsets))
             else {
                 continue;
             };
             placed += 1;
-            samples += 1;
-            for axis in 0..2 {
-                let g = &kernels[axis];
-                let a: f64 = g.iter().zip(&values).map(|(g, r)| g * r).sum();
-                projected[axis] += a * a;
-                white[axis] += g
-                    .iter()
-                    .zip(&values)
-                    .map(|(g, r)| g * g * r * r)
-                    .sum::<f64>();
+            for (axis, g) in kernels.iter().enumerate() {
+                samples[axis].push(Sample::of(g, &d));
             }
         }
     }
-    (samples >= MIN_SAMPLES).then(|| [0, 1].map(|a| projected[a] / white[a]))
+    (samples[0].len() >= MIN_SAMPLES).then(|| samples.each_ref().map(|s| pooled_ratio(s)))
 }
