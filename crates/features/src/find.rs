@@ -9,10 +9,10 @@ use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
-use crate::lattice_levels::{lattice_line_levels, lattice_residual, subtract_line_levels};
+use crate::lattice_levels::{lattice_line_levels, subtract_line_levels};
 use crate::line_relevel::{WindowPixels, relevel, window_pixels};
 use crate::ncc::NccPlan;
-use crate::noise_correlation::centre_variance_ratio;
+use crate::noise_correlation::measured_centre_variance_ratio;
 use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
@@ -601,11 +601,9 @@ fn raise_for_correlated_noise(
         .map(|f| f.0)
         .filter(|f| is_usable(f.status))
         .collect();
-    let centres: Vec<[f64; 2]> = usable.iter().map(|f| [f.x0, f.y0]).collect();
-    let residual = lattice_residual(signed.view(), &centres, window.nn_px);
     let lines_along_rows = geometry.fast_axis() == dhct_scan::Axis::Horizontal;
-    let ratio = centre_variance_ratio(
-        residual.view(),
+    let ratio = measured_centre_variance_ratio(
+        signed.view(),
         &usable,
         &window.offsets,
         window.nn_px,

@@ -23,9 +23,14 @@
 //! ratio is a lower bound there (measured below).
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use ndarray::ArrayView2;
+use ndarray::{ArrayView2, s};
 
 use crate::gaussian_fit::GaussianFit;
+use crate::lattice_levels::lattice_residual;
+
+/// The ratio is measured on the central block of the image at most this many px on a
+/// side (it is one number per axis; a larger image only costs time).
+const BLOCK_PX: usize = 640;
 
 /// Fits whose kernels are used (spread evenly over the list).
 const KERNELS: usize = 256;
@@ -206,7 +211,7 @@ fn pooled_ratio(samples: &[Sample]) -> f64 {
 /// the usable `fits` with their window `offsets` (`(row, column)` px) and the neighbour
 /// distance `nn_px`; scan lines along rows if `lines_along_rows`. `None` with too few
 /// samples.
-pub(crate) fn centre_variance_ratio(
+fn centre_variance_ratio(
     residual: ArrayView2<f64>,
     fits: &[GaussianFit],
     offsets: &[(i64, i64)],
@@ -243,4 +248,37 @@ pub(crate) fn centre_variance_ratio(
         }
     }
     (samples[0].len() >= MIN_SAMPLES).then(|| samples.each_ref().map(|s| pooled_ratio(s)))
+}
+
+/// [`centre_variance_ratio`] of the image `z` the usable `fits` saw (centres in its px),
+/// measured on its central block of at most [`BLOCK_PX`] px on a side against the lattice
+/// model of that block.
+pub(crate) fn measured_centre_variance_ratio(
+    z: ArrayView2<f64>,
+    fits: &[GaussianFit],
+    offsets: &[(i64, i64)],
+    nn_px: f64,
+    lines_along_rows: bool,
+) -> Option<[f64; 2]> {
+    let (rows, columns) = z.dim();
+    let (r0, c0) = (
+        rows.saturating_sub(BLOCK_PX) / 2,
+        columns.saturating_sub(BLOCK_PX) / 2,
+    );
+    let (r1, c1) = ((r0 + BLOCK_PX).min(rows), (c0 + BLOCK_PX).min(columns));
+    let block = z.slice(s![r0..r1, c0..c1]);
+    let inside: Vec<GaussianFit> = fits
+        .iter()
+        .map(|f| GaussianFit {
+            x0: f.x0 - c0 as f64,
+            y0: f.y0 - r0 as f64,
+            ..*f
+        })
+        .filter(|f| {
+            f.x0 >= 0.0 && f.y0 >= 0.0 && f.x0 < (c1 - c0) as f64 && f.y0 < (r1 - r0) as f64
+        })
+        .collect();
+    let centres: Vec<[f64; 2]> = inside.iter().map(|f| [f.x0, f.y0]).collect();
+    let residual = lattice_residual(block, &centres, nn_px);
+    centre_variance_ratio(residual.view(), &inside, offsets, nn_px, lines_along_rows)
 }
