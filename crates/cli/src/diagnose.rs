@@ -341,7 +341,10 @@ fn noise_and_gap_html(html: &mut Html, report: &DiagnosisReport) {
     for (name, estimate) in [
         ("localisation (feature fits)", &n.localisation),
         ("successive differences", &n.successive_differences),
-        ("trace/retrace pairs (not used)", &n.trace_retrace),
+        (
+            "trace/retrace pairs (an upper bound only)",
+            &n.trace_retrace,
+        ),
     ] {
         let (x, y) = match estimate {
             FloorEstimate::Estimated { sigma_m, .. } => (pm(sigma_m[0]), pm(sigma_m[1])),

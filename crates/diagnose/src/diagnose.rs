@@ -49,6 +49,10 @@ pub struct DiagnoseOptions {
     pub fit_lattice_scale: bool,
     /// Compute the binned profiles, spectrum and change points.
     pub locate: bool,
+    /// Lower the floor to the trace/retrace spread where the fits' uncertainty exceeds it
+    /// 1.5 times ([`crate::noise`]); off only where that spread is not noise (positions
+    /// simulated without noise).
+    pub lower_floor_to_trace_retrace: bool,
 }
 
 impl Default for DiagnoseOptions {
@@ -64,6 +68,7 @@ impl Default for DiagnoseOptions {
             max_deviation_fraction: 0.3,
             fit_lattice_scale: false,
             locate: true,
+            lower_floor_to_trace_retrace: true,
         }
     }
 }
@@ -317,7 +322,8 @@ fn fit_base(
     let start = start_model(prepared, options.fit_lattice_scale);
     let iterations = options.selection.max_iterations;
     // Noise floor: first from the DHCT gap, then from the base fit's residuals.
-    let mut sigma = estimate(all, &prepared.dhct_gap, geometry).sigma_m;
+    let lower = options.lower_floor_to_trace_retrace;
+    let mut sigma = estimate(all, &prepared.dhct_gap, geometry, lower).sigma_m;
     let t0_bounds = creep_t0_bounds(geometry, all);
     // The hysteresis law chosen by the data (BIC), part of the base model from here on.
     let (first, base_choice) = choose_hysteresis(
@@ -329,7 +335,7 @@ fn fit_base(
         iterations,
         t0_bounds,
     )?;
-    sigma = estimate(all, &first.residuals, geometry).sigma_m;
+    sigma = estimate(all, &first.residuals, geometry, lower).sigma_m;
     let keep = inliers(&first.residuals, sigma, options.outlier_sigma);
     let observations: Vec<Observation> = all
         .iter()
@@ -351,7 +357,7 @@ fn fit_base(
         sigma,
         iterations,
     )?;
-    let noise = estimate(&observations, &base.residuals, geometry);
+    let noise = estimate(&observations, &base.residuals, geometry, lower);
     let base = refit(
         base.model,
         geometry,

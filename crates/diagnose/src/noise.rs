@@ -12,9 +12,13 @@
 //!   exceeds the fits' estimate by more than [`UNDERESTIMATE_RATIO`] (from at least
 //!   [`MIN_RAISE_PAIRS`] pairs) the fits understate the scatter (correlated noise, a shape the fit does not follow) and the floor takes it.
 //!   A rotated lattice may have no two features on one line: then it is not available.
-//! * **Trace/retrace pairs** (reported only): the same site imaged in trace and retrace.
-//!   Anything that differs between the passes (a vibration's phase, a mis-modelled
-//!   hysteresis) enters it, so it is never the floor.
+//! * **Trace/retrace pairs** (an upper bound only): the same site imaged in trace and
+//!   retrace. Anything that differs between the passes (a vibration's phase, a mis-modelled
+//!   hysteresis) enters it, so it never raises the floor; but the same site seen twice
+//!   scatters by at least its localisation noise, so fits more than [`OVERSTATE_RATIO`]
+//!   times that spread (from at least [`MIN_RAISE_PAIRS`] pairs) are lowered to it: their
+//!   correlated-noise factor then took structure for noise (a large cell's unmodelled
+//!   atoms).
 //!
 //! Every estimate that cannot be made says why ([`FloorUnavailable`]); the floor itself is
 //! always finite and positive, and [`FloorSource`] says where it came from.
@@ -33,8 +37,12 @@ pub const MIN_PAIRS: usize = 20;
 pub const UNDERESTIMATE_RATIO: f64 = 1.5;
 
 /// Pairs the successive differences need before they may raise the floor (a few dozen
-/// pairs of a real image are too rough an estimate to let a gap hide in them).
+/// pairs of a real image are too rough an estimate to let a gap hide in them), and the
+/// trace/retrace pairs need before they may lower it.
 pub const MIN_RAISE_PAIRS: usize = 100;
+
+/// Fits' uncertainty more than this many times the trace/retrace spread is lowered to it.
+pub const OVERSTATE_RATIO: f64 = 1.5;
 
 /// Why an estimate of the floor could not be made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -140,6 +148,9 @@ pub enum FloorSource {
     /// The localisation uncertainty, raised on at least one axis to the successive
     /// differences (the fits understate the scatter).
     LocalisationRaisedToSuccessive,
+    /// The localisation uncertainty, lowered on at least one axis to the trace/retrace
+    /// spread (the fits overstate the scatter: the same site seen twice scatters less).
+    LocalisationLoweredToTraceRetrace,
     /// Successive differences (the features carry no uncertainty).
     SuccessiveDifferences,
     /// Neither independent estimate exists: the residuals' own robust spread. A gap
@@ -154,6 +165,9 @@ impl FloorSource {
             FloorSource::Localisation => "the features' localisation uncertainty",
             FloorSource::LocalisationRaisedToSuccessive => {
                 "localisation, raised to the successive differences"
+            }
+            FloorSource::LocalisationLoweredToTraceRetrace => {
+                "localisation, lowered to the trace/retrace spread"
             }
             FloorSource::SuccessiveDifferences => "successive differences",
             FloorSource::ResidualSpread => "the residuals' own spread: no independent floor",
@@ -269,11 +283,59 @@ fn localisation(observations: &[Observation]) -> FloorEstimate {
     FloorEstimate::of(rms, fit.len(), 1)
 }
 
-/// Estimates the floor from the residuals (metres) of any reasonable model.
+/// `localisation` lowered per axis to the `trace_retrace` spread (from at least
+/// [`MIN_RAISE_PAIRS`] pairs) where it exceeds it [`OVERSTATE_RATIO`] times, and whether it
+/// was. The same site imaged twice scatters by at least its localisation noise, so fits
+/// far above that spread take for noise what is structure (a large cell's unmodelled atoms
+/// in the residual their correlated-noise factor is measured on).
+fn lowered_to_trace_retrace(
+    localisation: FloorEstimate,
+    trace_retrace: &FloorEstimate,
+) -> (FloorEstimate, bool) {
+    let (
+        FloorEstimate::Estimated { sigma_m, count },
+        FloorEstimate::Estimated {
+            sigma_m: tr,
+            count: pairs,
+        },
+    ) = (localisation, *trace_retrace)
+    else {
+        return (localisation, false);
+    };
+    if pairs < MIN_RAISE_PAIRS || !(0..2).any(|a| sigma_m[a] > OVERSTATE_RATIO * tr[a]) {
+        return (localisation, false);
+    }
+    let lowered = [0, 1].map(|a| {
+        if sigma_m[a] > OVERSTATE_RATIO * tr[a] {
+            tr[a]
+        } else {
+            sigma_m[a]
+        }
+    });
+    (
+        FloorEstimate::Estimated {
+            sigma_m: lowered,
+            count,
+        },
+        true,
+    )
+}
+
+fn localisation_source(lowered: bool) -> FloorSource {
+    if lowered {
+        FloorSource::LocalisationLoweredToTraceRetrace
+    } else {
+        FloorSource::Localisation
+    }
+}
+
+/// Estimates the floor from the residuals (metres) of any reasonable model; the fits'
+/// uncertainty is lowered to the trace/retrace spread only if `lower`.
 pub(crate) fn estimate(
     observations: &[Observation],
     residuals: &[[f64; 2]],
     geometry: &ScanGeometry,
+    lower: bool,
 ) -> NoiseFloor {
     let diffs = successive_diffs(observations, residuals, geometry);
     let successive_differences = FloorEstimate::of(pair_sigma(&diffs), diffs.len(), MIN_PAIRS);
@@ -289,20 +351,25 @@ pub(crate) fn estimate(
         }
     };
     let localisation = localisation(observations);
+    let (fits, lowered) = if lower {
+        lowered_to_trace_retrace(localisation, &trace_retrace)
+    } else {
+        (localisation, false)
+    };
     let raising = successive_differences
         .sigma_m()
         .filter(|_| diffs.len() >= MIN_RAISE_PAIRS);
-    let (sigma_m, source) = match (localisation.sigma_m(), raising) {
+    let (sigma_m, source) = match (fits.sigma_m(), raising) {
         (Some(l), Some(s)) => {
             let raised = [0, 1].map(|a| s[a] > UNDERESTIMATE_RATIO * l[a]);
             if raised.iter().any(|r| *r) {
                 let floor = [0, 1].map(|a| if raised[a] { s[a] } else { l[a] });
                 (floor, FloorSource::LocalisationRaisedToSuccessive)
             } else {
-                (l, FloorSource::Localisation)
+                (l, localisation_source(lowered))
             }
         }
-        (Some(l), None) => (l, FloorSource::Localisation),
+        (Some(l), None) => (l, localisation_source(lowered)),
         (None, _) if successive_differences.sigma_m().is_some() => (
             successive_differences.sigma_m().unwrap_or([1e-15; 2]),
             FloorSource::SuccessiveDifferences,
@@ -390,7 +457,7 @@ mod tests {
         // line (the cause of the NaN × NaN floors of the field tests).
         let (obs, g) = observations(20f64.to_radians(), 2e-12);
         let r = noise(obs.len(), 2e-12, 1);
-        let floor = estimate(&obs, &r, &g);
+        let floor = estimate(&obs, &r, &g, true);
         assert!(matches!(
             floor.successive_differences,
             FloorEstimate::Unavailable {
@@ -416,7 +483,7 @@ mod tests {
     fn without_any_independent_estimate_the_floor_says_so() {
         let (obs, g) = observations(20f64.to_radians(), f64::NAN);
         let r = noise(obs.len(), 3e-12, 2);
-        let floor = estimate(&obs, &r, &g);
+        let floor = estimate(&obs, &r, &g, true);
         assert_eq!(floor.source, FloorSource::ResidualSpread);
         assert!(matches!(
             floor.localisation,
@@ -432,7 +499,7 @@ mod tests {
         // Aligned rows (pairs along every line); the scatter is 3 pm, the fits claim 1 pm.
         let (obs, g) = observations(0.0, 1e-12);
         let r = noise(obs.len(), 3e-12, 3);
-        let floor = estimate(&obs, &r, &g);
+        let floor = estimate(&obs, &r, &g, true);
         assert_eq!(floor.source, FloorSource::LocalisationRaisedToSuccessive);
         assert!(
             floor
@@ -442,7 +509,47 @@ mod tests {
         );
         // Fits that are right are kept.
         let (obs, g) = observations(0.0, 3e-12);
-        let floor = estimate(&obs, &r, &g);
+        let floor = estimate(&obs, &r, &g, true);
         assert_eq!(floor.source, FloorSource::Localisation);
+    }
+
+    #[test]
+    fn fits_that_overstate_the_scatter_are_lowered_to_the_trace_retrace_spread() {
+        // Every site in trace and retrace, scattering 2 pm in each; the fits claim 6 pm
+        // (a correlated-noise factor that took structure for noise).
+        let (trace, g) = observations(20f64.to_radians(), 6e-12);
+        let mut obs = trace.clone();
+        obs.extend(trace.iter().map(|o| Observation {
+            pass: ScanPass::Retrace,
+            index: o.index + trace.len(),
+            ..*o
+        }));
+        let r = noise(obs.len(), 2e-12, 4);
+        let floor = estimate(&obs, &r, &g, true);
+        assert_eq!(floor.source, FloorSource::LocalisationLoweredToTraceRetrace);
+        assert!(
+            floor
+                .sigma_m
+                .iter()
+                .all(|s| (*s / 2e-12 - 1.0).abs() < 0.15),
+            "{floor:?}"
+        );
+        // The fits' own estimate is still reported; unasked, nothing is lowered.
+        let fits = floor.localisation.sigma_m().expect("estimated");
+        assert!(fits.iter().all(|s| (*s - 6e-12).abs() < 1e-18), "{fits:?}");
+        let kept = estimate(&obs, &r, &g, false);
+        assert_eq!(kept.source, FloorSource::Localisation);
+        // Fits within 1.5 × the spread are kept.
+        let (trace, g) = observations(20f64.to_radians(), 2.5e-12);
+        let mut obs = trace.clone();
+        obs.extend(trace.iter().map(|o| Observation {
+            pass: ScanPass::Retrace,
+            index: o.index + trace.len(),
+            ..*o
+        }));
+        assert_eq!(
+            estimate(&obs, &r, &g, true).source,
+            FloorSource::Localisation
+        );
     }
 }

@@ -236,7 +236,7 @@ impl DiagnosisReport {
         writeln!(
             f,
             "noise floor: {} × {} pm ({}); localisation {}; successive differences {}; \
-             trace/retrace {} (not used)",
+             trace/retrace {} (an upper bound only)",
             pm(n.sigma_m[0]),
             pm(n.sigma_m[1]),
             n.source.describe(),
