@@ -513,17 +513,22 @@ mod tests {
         assert_eq!(floor.source, FloorSource::Localisation);
     }
 
+    /// [`observations`] at 20° seen in trace and in retrace.
+    fn both_passes(fit_sigma_m: f64) -> (Vec<Observation>, ScanGeometry) {
+        let (trace, g) = observations(20f64.to_radians(), fit_sigma_m);
+        let retrace = trace.iter().map(|o| Observation {
+            pass: ScanPass::Retrace,
+            index: o.index + trace.len(),
+            ..*o
+        });
+        (trace.iter().copied().chain(retrace).collect(), g)
+    }
+
     #[test]
     fn fits_that_overstate_the_scatter_are_lowered_to_the_trace_retrace_spread() {
         // Every site in trace and retrace, scattering 2 pm in each; the fits claim 6 pm
         // (a correlated-noise factor that took structure for noise).
-        let (trace, g) = observations(20f64.to_radians(), 6e-12);
-        let mut obs = trace.clone();
-        obs.extend(trace.iter().map(|o| Observation {
-            pass: ScanPass::Retrace,
-            index: o.index + trace.len(),
-            ..*o
-        }));
+        let (obs, g) = both_passes(6e-12);
         let r = noise(obs.len(), 2e-12, 4);
         let floor = estimate(&obs, &r, &g, true);
         assert_eq!(floor.source, FloorSource::LocalisationLoweredToTraceRetrace);
@@ -540,13 +545,7 @@ mod tests {
         let kept = estimate(&obs, &r, &g, false);
         assert_eq!(kept.source, FloorSource::Localisation);
         // Fits within 1.5 × the spread are kept.
-        let (trace, g) = observations(20f64.to_radians(), 2.5e-12);
-        let mut obs = trace.clone();
-        obs.extend(trace.iter().map(|o| Observation {
-            pass: ScanPass::Retrace,
-            index: o.index + trace.len(),
-            ..*o
-        }));
+        let (obs, g) = both_passes(2.5e-12);
         assert_eq!(
             estimate(&obs, &r, &g, true).source,
             FloorSource::Localisation

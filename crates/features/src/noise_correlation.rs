@@ -20,7 +20,11 @@
 //!
 //! Near a fitted centre the residual lacks what the fit absorbed, so the kernels sit
 //! between the centres; the fits still absorb part of noise shared along lines, so the
-//! ratio is a lower bound there (measured below).
+//! ratio is a lower bound there (measured below). What the ratio cannot tell from noise:
+//! structure the lattice model lacks (a large cell's unmodelled atoms) and an effect that
+//! distorts a feature within its own lines (a slow vibration, a step edge). The diagnosis
+//! therefore never lets its floor exceed 1.5 × the trace/retrace spread of the same sites
+//! (`dhct-diagnose`, `noise.rs`).
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use ndarray::{ArrayView2, s};

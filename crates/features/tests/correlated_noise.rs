@@ -4,40 +4,27 @@
 //! centres' true scatter, never above it (`noise_correlation.rs`).
 
 use dhct_features::{FeatureOptions, FeatureSet, find_features_in_pair};
-use dhct_scan::ScanPass;
 use dhct_simulate::{GroundTruth, Simulation};
 
 mod common;
-use common::headline_512;
+use common::{headline_512, matched_errors};
 
 /// The trace centres' scatter about their true controller positions (px per axis, the
 /// mean offset removed; matched within 1 px) and the RMS of their reported 1σ.
 fn scatter_and_reported(set: &FeatureSet, truth: &GroundTruth) -> ([f64; 2], [f64; 2]) {
-    let (mut errors, mut reported) = (Vec::new(), [0.0; 2]);
-    for f in &set.features {
-        let distance = |p: &[f64; 2]| (p[0] - f.x_px).hypot(p[1] - f.y_px);
-        let nearest = truth
-            .features
-            .iter()
-            .map(|t| match set.pass {
-                ScanPass::Trace => t.trace.controller_position_px,
-                ScanPass::Retrace => t.retrace.controller_position_px,
-            })
-            .min_by(|a, b| distance(a).total_cmp(&distance(b)))
-            .expect("atoms");
-        if distance(&nearest) < 1.0 {
-            errors.push([f.x_px - nearest[0], f.y_px - nearest[1]]);
-            reported[0] += f.x_sigma_px * f.x_sigma_px;
-            reported[1] += f.y_sigma_px * f.y_sigma_px;
-        }
-    }
-    assert!(errors.len() > 300, "{} features matched", errors.len());
-    let n = errors.len() as f64;
+    let matched = matched_errors(set, truth);
+    let n = matched.len() as f64;
     let spread = |a: usize| {
-        let mean = errors.iter().map(|e| e[a]).sum::<f64>() / n;
-        (errors.iter().map(|e| (e[a] - mean).powi(2)).sum::<f64>() / n).sqrt()
+        let mean = matched.iter().map(|m| m.1[a]).sum::<f64>() / n;
+        (matched.iter().map(|m| (m.1[a] - mean).powi(2)).sum::<f64>() / n).sqrt()
     };
-    ([spread(0), spread(1)], reported.map(|r| (r / n).sqrt()))
+    let reported = |sigma: fn(&dhct_features::Feature) -> f64| {
+        (matched.iter().map(|m| sigma(m.0).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    (
+        [spread(0), spread(1)],
+        [reported(|f| f.x_sigma_px), reported(|f| f.y_sigma_px)],
+    )
 }
 
 /// The trace set of the headline 512² cut with the given noise (metres RMS), its centres'

@@ -6,39 +6,17 @@
 //! no worse.
 
 use dhct_features::{FeatureOptions, FeatureSet, LineCorrection, find_features_in_pair};
-use dhct_scan::ScanPass;
 use dhct_simulate::{GroundTruth, Simulation, SimulationOutput};
 
 mod common;
-use common::headline_512;
+use common::{headline_512, matched_errors};
 
 /// RMS error (px) along x and y of the features matched (within 1 px) to the
 /// true controller positions of their pass.
 fn rms_error(set: &FeatureSet, truth: &GroundTruth) -> [f64; 2] {
-    let mut sum = [0.0; 2];
-    let mut n = 0usize;
-    for f in &set.features {
-        let nearest = truth
-            .features
-            .iter()
-            .map(|t| match set.pass {
-                ScanPass::Trace => t.trace.controller_position_px,
-                ScanPass::Retrace => t.retrace.controller_position_px,
-            })
-            .min_by(|a, b| {
-                let d = |p: &[f64; 2]| (p[0] - f.x_px).hypot(p[1] - f.y_px);
-                d(a).total_cmp(&d(b))
-            })
-            .expect("atoms");
-        let (dx, dy) = (f.x_px - nearest[0], f.y_px - nearest[1]);
-        if dx.hypot(dy) < 1.0 {
-            sum[0] += dx * dx;
-            sum[1] += dy * dy;
-            n += 1;
-        }
-    }
-    assert!(n > 300, "{n} features matched");
-    [(sum[0] / n as f64).sqrt(), (sum[1] / n as f64).sqrt()]
+    let matched = matched_errors(set, truth);
+    let n = matched.len() as f64;
+    [0, 1].map(|a| (matched.iter().map(|m| m.1[a] * m.1[a]).sum::<f64>() / n).sqrt())
 }
 
 #[test]
