@@ -403,7 +403,15 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
     let counts: Vec<String> = summary
         .passes
         .iter()
-        .map(|p| format!("{} {} ({} indexed)", p.pass, p.features, p.indexed))
+        .map(|p| {
+            let [x, y] = p.correlated_noise_factor;
+            let raised = if x > 1.005 || y > 1.005 {
+                format!("; fit 1σ × {x:.2} × {y:.2} for correlated pixel noise")
+            } else {
+                String::new()
+            };
+            format!("{} {} ({} indexed{raised})", p.pass, p.features, p.indexed)
+        })
         .collect();
     s.push_str(&calibration_lines(summary));
     let _ = writeln!(s, "features: {}", counts.join(", "));

@@ -292,10 +292,13 @@ fn ncc_figure(inputs: &FigureInputs, pass: &PassOutput) -> Option<Figure> {
         &format!("ncc_{}", pass.pass),
         &format!("Normalised cross-correlation ({})", pass.pass),
         format!(
-            "NCC with the Gaussian kernel (σ = {:.2} px); {} features found of {} candidates.",
+            "NCC with the Gaussian kernel (σ = {:.2} px); {} features found of {} candidates; \
+             their fitted 1σ × {:.2} × {:.2} (x × y) for correlated pixel noise.",
             pass.features.kernel_sigma_px,
             pass.features.features.len(),
-            pass.features.candidates
+            pass.features.candidates,
+            pass.features.correlated_noise_factor[0],
+            pass.features.correlated_noise_factor[1]
         ),
         &Canvas::from_image(ncc.view(), Colormap::Viridis, Some((-1.0, 1.0)), scale),
         PictureStyle {

@@ -43,6 +43,9 @@ pub struct PassCounts {
     pub local_distortions: usize,
     /// Features indexed to a lattice site.
     pub indexed: usize,
+    /// Factor per axis `[x, y]` by which the features' fitted 1σ were raised because the
+    /// pixel noise is correlated (1 for white noise).
+    pub correlated_noise_factor: [f64; 2],
     /// Why the other features were not selected for the model fit.
     pub exclusions: ExclusionCounts,
     /// Whether the neighbours were found again in the frame corrected by a first fit (a
@@ -240,6 +243,7 @@ fn pass_counts(analysis: &Analysis, p: &dhct_pipeline::PassOutput) -> PassCounts
         selected_for_model: dhct.map(|d| d.used_selection().selected.len()).unwrap_or(0),
         local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
         indexed: p.indices.iter().flatten().count(),
+        correlated_noise_factor: p.features.correlated_noise_factor,
         exclusions: dhct
             .map(|d| d.used_selection().exclusions)
             .unwrap_or_default(),
