@@ -243,7 +243,7 @@ fn find_prepared(
             window: &window,
         };
         // The median-levelled image served the correlation; the fits see another.
-        pre.signed = Array2::zeros((0, 0));
+        drop(std::mem::take(&mut pre.signed));
         let unlevelled = pre.unlevelled.take().unwrap_or_default();
         let (signed, fits) = level_against_lattice(unlevelled, geometry, &fit);
         pre.signed = signed;
@@ -556,28 +556,23 @@ fn level_against_lattice(
             [x, y]
         })
         .collect();
-    // Each round's levels are medians of what the previous round left, so they add up.
-    let level = |signed: &mut Array2<f64>, centres: &[[f64; 2]]| {
-        let line_levels = lattice_line_levels(signed.view(), centres, nn_px, fast_axis);
-        subtract_line_levels(signed, &line_levels.levels, fast_axis);
-        line_levels
-    };
-    let first = level(&mut signed, &peaks);
+    let first = lattice_line_levels(signed.view(), &peaks, nn_px, fast_axis);
     if first.offsets_over_noise < OFFSET_EVIDENCE {
         // No line offsets beyond what pixel noise gives: levelling would only add noise
-        // shared along each line, so the lines go back as they were.
-        let restore: Vec<f64> = first.levels.iter().map(|v| -v).collect();
-        subtract_line_levels(&mut signed, &restore, fast_axis);
+        // shared along each line, so the lines stay as they were recorded.
         let fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
         return (signed, fits);
     }
+    subtract_line_levels(&mut signed, &first.levels, fast_axis);
     let mut fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
     let centres: Vec<[f64; 2]> = fits
         .iter()
         .filter(|(f, _)| is_usable(f.status))
         .map(|(f, _)| [f.x0, f.y0])
         .collect();
-    let second = level(&mut signed, &centres);
+    // The second round's levels are medians of what the first left, so they add up.
+    let second = lattice_line_levels(signed.view(), &centres, nn_px, fast_axis);
+    subtract_line_levels(&mut signed, &second.levels, fast_axis);
     let change = dhct_numerics::moments::rms_about_mean_1d(&second.levels);
     let noise = dhct_numerics::robust::finite_median(fits.iter().map(|(f, _)| f.residual_rms));
     if noise.is_none_or(|noise| change > LEVEL_TOLERANCE * noise) {

@@ -171,6 +171,22 @@ impl GaussianFit {
             .collect()
     }
 
+    /// `JᵀJ` over `gradients` (from [`Self::gradients`]). A circular fit's frozen `b`, `c`
+    /// get unit rows (their gradients are zero), so the matrix stays invertible and the
+    /// other parameters' rows of its inverse are those of the free parameters.
+    pub(crate) fn gram(&self, gradients: &[([f64; 7], f64)]) -> Matrix7 {
+        let mut a = Matrix7::zeros();
+        for (g, _) in gradients {
+            let g = Vector7::from(*g);
+            a += g * g.transpose();
+        }
+        if self.is_circular() {
+            a[(QB, QB)] = 1.0;
+            a[(QC, QC)] = 1.0;
+        }
+        a
+    }
+
     /// Whether the fit is circular (its `b`, `c` gradients are zero in [`Self::gradients`]).
     pub(crate) fn is_circular(&self) -> bool {
         self.status == FitStatus::ConvergedCircular

@@ -20,7 +20,7 @@
 
 use dhct_numerics::banded::SymmetricBand;
 use dhct_scan::Axis;
-use nalgebra::{DMatrix, SMatrix};
+use nalgebra::DMatrix;
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
@@ -93,27 +93,19 @@ fn window_system(fit: &GaussianFit, w: &WindowPixels, fast_axis: Axis) -> Option
             .collect();
     let first_line = *lines.iter().min()?;
     let span = lines.iter().max()? - first_line + 1;
-    let mut a = SMatrix::<f64, 7, 7>::zeros();
+    let gradients = fit.gradients(&w.xs, &w.ys, &w.zs);
     let mut b = DMatrix::<f64>::zeros(7, span);
     let mut counts = vec![0.0; span];
     let mut residuals = vec![0.0; span];
-    for ((g, r), line) in fit.gradients(&w.xs, &w.ys, &w.zs).into_iter().zip(&lines) {
+    for ((g, r), line) in gradients.iter().zip(&lines) {
         let k = line - first_line;
         for i in 0..7 {
             b[(i, k)] += g[i];
-            for j in 0..7 {
-                a[(i, j)] += g[i] * g[j];
-            }
         }
         counts[k] += 1.0;
         residuals[k] += r;
     }
-    if fit.is_circular() {
-        // Frozen b and c: unit rows (their gradients are zero).
-        a[(4, 4)] = 1.0;
-        a[(5, 5)] = 1.0;
-    }
-    let cholesky = a.cholesky()?;
+    let cholesky = fit.gram(&gradients).cholesky()?;
     let mut solved = DMatrix::<f64>::zeros(7, span);
     for k in 0..span {
         let column = cholesky.solve(&nalgebra::SVector::<f64, 7>::from_fn(|i, _| b[(i, k)]));

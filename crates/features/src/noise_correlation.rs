@@ -70,18 +70,7 @@ fn centre_kernels(fit: &GaussianFit, offsets: &[(i64, i64)]) -> Option<[Vec<f64>
     let ys: Vec<f64> = offsets.iter().map(|o| cy + o.0 as f64).collect();
     let zs = vec![0.0; offsets.len()];
     let gradients = fit.gradients(&xs, &ys, &zs);
-    let mut jtj = nalgebra::SMatrix::<f64, 7, 7>::zeros();
-    for (g, _) in &gradients {
-        let g = nalgebra::SVector::<f64, 7>::from(*g);
-        jtj += g * g.transpose();
-    }
-    for k in 0..7 {
-        // A circular fit's unused widths: a unit pivot leaves the centre rows alone.
-        if jtj[(k, k)] == 0.0 {
-            jtj[(k, k)] = 1.0;
-        }
-    }
-    let inverse = jtj.try_inverse()?;
+    let inverse = fit.gram(&gradients).try_inverse()?;
     let row = |axis: usize| -> Vec<f64> {
         gradients
             .iter()
