@@ -132,6 +132,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     n.sigma_m[1] * 1e12,
                     n.source.describe()
                 );
+                let rms = report.base.gap.rms_m;
+                println!(
+                    "    base model's residual {:.2} × {:.2} pm ({:.2} × {:.2} floors)",
+                    rms[0] * 1e12,
+                    rms[1] * 1e12,
+                    rms[0] / n.sigma_m[0],
+                    rms[1] / n.sigma_m[1]
+                );
                 println!(
                     "    localisation {}, successive {}, trace/retrace {}",
                     n.localisation.describe(),

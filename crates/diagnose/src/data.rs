@@ -45,6 +45,11 @@ pub struct Observation {
     pub indices: (i64, i64, usize),
     /// Ideal lattice vector `n·a1 + m·a2 + f_site`, metres, lattice frame (unrotated).
     pub lattice_vector_m: [f64; 2],
+    /// `G⁻¹`, rows: the residual is compared with `fit_sigma_m` after this map, which
+    /// undoes how a localisation error reaches it through the acquisition time assigned
+    /// from the measured position (`timing_gain.rs`); the identity until the base model
+    /// is known.
+    pub whitening: [[f64; 2]; 2],
 }
 
 /// Result of the base stage.
@@ -351,6 +356,7 @@ impl<'a> BaseStage<'a> {
             fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
             indices: (p.n, p.m, p.site),
             lattice_vector_m: [x.x, x.y],
+            whitening: crate::timing_gain::IDENTITY,
         }
     }
 }

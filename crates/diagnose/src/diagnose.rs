@@ -20,6 +20,7 @@ use crate::report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
 use crate::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
+use crate::timing_gain::whitened;
 use crate::verdict::decide;
 
 /// Options of [`diagnose`].
@@ -335,6 +336,13 @@ fn fit_base(
         iterations,
         t0_bounds,
     )?;
+    // From here on, residuals are compared with the fits' 1σ through the first model's
+    // timing gain (held fixed).
+    let all = &whitened(&first.model, geometry, all);
+    let first = Fitted {
+        residuals: first.model.residuals(geometry, all),
+        ..first
+    };
     sigma = estimate(all, &first.residuals, geometry, lower).sigma_m;
     let keep = inliers(&first.residuals, sigma, options.outlier_sigma);
     let observations: Vec<Observation> = all

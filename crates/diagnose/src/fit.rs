@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::DiagnoseError;
 use crate::data::Observation;
 use crate::model::{GlobalModel, Transform, term_displacements};
+use crate::timing_gain;
 
 /// A fitted model with what the ranking needs.
 #[derive(Debug, Clone)]
@@ -99,6 +100,7 @@ pub(crate) fn jacobian(
             .iter()
             .enumerate()
         {
+            let dsite = timing_gain::apply(&o.whitening, *dsite);
             j[(2 * i, column + k)] = -dsite[0] / sigma[0];
             j[(2 * i + 1, column + k)] = -dsite[1] / sigma[1];
         }

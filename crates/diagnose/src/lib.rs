@@ -74,6 +74,7 @@ mod spectrum;
 mod sub_feature;
 pub mod synth;
 mod terms;
+mod timing_gain;
 mod validate;
 mod verdict;
 

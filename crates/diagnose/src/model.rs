@@ -20,6 +20,7 @@ use dhct_simulate::{AcquisitionContext, Effect, EffectConfig};
 use nalgebra::Vector2;
 
 use crate::data::Observation;
+use crate::timing_gain;
 
 /// A displacement term of the model: the simulator's [`Effect`]s (wrapped by [`SimEffect`])
 /// and the diagnosis's own extra terms ([`crate::terms`]).
@@ -260,7 +261,8 @@ pub(crate) fn context<'a>(geometry: &'a ScanGeometry, o: &Observation) -> Acquis
     }
 }
 
-/// Displacement of one effect at every observation, metres.
+/// Displacement of one effect at every observation, metres, as the residuals see it (each
+/// observation's [`Observation::whitening`] applied).
 pub(crate) fn term_displacements(
     effect: &dyn ModelTerm,
     geometry: &ScanGeometry,
@@ -270,7 +272,7 @@ pub(crate) fn term_displacements(
         .iter()
         .map(|o| {
             let d = effect.displacement(&context(geometry, o));
-            [d.x, d.y]
+            timing_gain::apply(&o.whitening, [d.x, d.y])
         })
         .collect()
 }
@@ -336,7 +338,8 @@ impl GlobalModel {
         Some(GlobalModel { terms, lattice })
     }
 
-    /// Unweighted residuals `[r_x, r_y]` (metres, sample frame) of every observation.
+    /// Unweighted residuals `[r_x, r_y]` (metres, sample frame) of every observation, each
+    /// with its [`Observation::whitening`] applied.
     pub fn residuals(
         &self,
         geometry: &ScanGeometry,
@@ -346,7 +349,8 @@ impl GlobalModel {
             .iter()
             .map(|o| {
                 let site = self.lattice.site(o.lattice_vector_m);
-                [o.controller_m[0] - site[0], o.controller_m[1] - site[1]]
+                let r = [o.controller_m[0] - site[0], o.controller_m[1] - site[1]];
+                timing_gain::apply(&o.whitening, r)
             })
             .collect();
         for term in &self.terms {
