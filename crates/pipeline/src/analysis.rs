@@ -40,6 +40,10 @@ pub struct Analysis {
     /// The lattice of each corrected image measured by FFT against the lattice given (an
     /// independent check of the result; empty when the lattice could not be measured).
     pub corrected_images: Vec<CorrectedImageCheck>,
+    /// The same checks of the drift model's corrected images when they failed and the
+    /// global affine correction, whose images did better, was kept instead (the model
+    /// fitted the features but not the image between them); empty otherwise.
+    pub rejected_model_images: Vec<CorrectedImageCheck>,
     /// What not to trust, and what to do: weak spots of the fit, implausible results,
     /// assumptions (see [`WarningCode`]).
     pub warnings: Vec<Warning>,

@@ -63,6 +63,9 @@ pub enum WarningCode {
     CorrectedImageOff,
     /// The drift model could not be fitted; the global affine correction was used.
     ModelNotFitted,
+    /// The drift model's corrected image was not the lattice given; the global affine
+    /// correction, whose image did better, was kept.
+    ModelImageOff,
 }
 
 /// An input the user can give to change a result. Each front end spells it its own way
@@ -151,6 +154,7 @@ impl WarningCode {
             WarningCode::FewIndexed => "few_indexed",
             WarningCode::CorrectedImageOff => "corrected_image_off",
             WarningCode::ModelNotFitted => "model_not_fitted",
+            WarningCode::ModelImageOff => "model_image_off",
         }
     }
 }
@@ -407,6 +411,38 @@ pub(crate) fn corrected_image_warnings(
                 UserInput::ScanDirections,
                 UserInput::Mask,
             ])
+        })
+        .collect()
+}
+
+/// The drift model's corrected images that failed the FFT check, when the affine
+/// correction was kept for that reason.
+pub(crate) fn model_image_warnings(
+    lattice: &dyn Lattice,
+    rejected: &[CorrectedImageCheck],
+) -> Vec<Warning> {
+    rejected
+        .iter()
+        .filter(|c| !c.passes())
+        .map(|c| {
+            let k = &c.calibration;
+            Warning::new(
+                WarningCode::ModelImageOff,
+                format!(
+                    "the drift/creep/hysteresis model fitted the features, but its corrected {} \
+                     image showed the {} lattice at {:.2} % × {:.2} % along x × y with angles \
+                     {:.2}° off (measured by FFT): the global affine correction, whose images \
+                     did better, was kept",
+                    c.pass,
+                    lattice.name(),
+                    100.0 * k.scale[0],
+                    100.0 * k.scale[1],
+                    c.angle_error_deg
+                ),
+                "take lengths from the corrected images, not drift values; a mask over the \
+                 whole atomically resolved area, or dhct diagnose, shows where the model fails",
+            )
+            .with_inputs(&[UserInput::Mask])
         })
         .collect()
 }
