@@ -426,11 +426,13 @@ struct Checked {
 }
 
 /// The images corrected with the correction `chosen` and their lattices checked. When the
-/// drift model's images fail the check, the global affine correction is tried: a model can
-/// fit the features of the region it was fitted in and still be wrong between and beyond
-/// them (a degenerate creep extrapolated over the frame: the HOPG terrace file's trace came
-/// out 147 % × 105 % with the model, 99.6 % × 100.4 % with the affine map). The affine
-/// correction is kept when fewer of its images fail.
+/// drift model's images fail the check and the global affine correction fits the largest
+/// region's features about as well ([`AffineComparison::affine_is_as_good`]), the affine
+/// correction is tried: a model can fit the features of the region it was fitted in and
+/// still be wrong between and beyond them (a degenerate creep extrapolated over the frame:
+/// the HOPG terrace file's trace came out 147 % × 105 % with the model, 99.6 % × 100.4 %
+/// with the affine map). It is kept when fewer of its images fail. A model that fits the
+/// features far better than the affine map is kept whatever its images' check says.
 fn correct_and_check(
     inputs: &Inputs,
     sets: &[&FeatureSet],
@@ -445,7 +447,12 @@ fn correct_and_check(
         checks,
         rejected_checks: Vec::new(),
     };
-    if chosen.correction != CorrectionSource::DriftModel || failing(&checks) == 0 {
+    let affine_as_good = chosen
+        .comparisons
+        .first()
+        .is_some_and(AffineComparison::affine_is_as_good);
+    if chosen.correction != CorrectionSource::DriftModel || failing(&checks) == 0 || !affine_as_good
+    {
         return Ok(kept(chosen, images, checks));
     }
     let affine = timed(&mut timings.lattice_fit_s, || {
