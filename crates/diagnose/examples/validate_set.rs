@@ -5,10 +5,10 @@
 //! cargo run --release -p dhct-diagnose --example validate_set -- rendered-dev
 //! ```
 //! (set names as printed by the full sweep: `tuned`, `held-out`, `foreign-2`,
-//! `rendered-dev`, `rendered`, …).
+//! `rendered-dev`, `rendered`, `rendered-2`, …).
 
 use dhct_diagnose::synth::ValidationSet;
-use dhct_diagnose::{ValidationOptions, rendered_held_out, validate};
+use dhct_diagnose::{ValidationOptions, rendered_held_out, second_rendered_held_out, validate};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let name = std::env::args().nth(1).ok_or("usage: validate_set SET")?;
@@ -18,9 +18,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok_or_else(|| format!("no validation set named {name:?}"))?;
     let mut options = ValidationOptions::default();
     options.sets.retain(|s| s.set == set);
+    // The image-path held-out sets are fixed but not in the default sweep: each is run
+    // once, when the method is final.
     if set == ValidationSet::Rendered {
-        // Fixed but not in the default sweep: run it once, when the method is final.
         options.sets = vec![rendered_held_out()];
+    }
+    if set == ValidationSet::SecondRendered {
+        options.sets = vec![second_rendered_held_out()];
     }
     let report = validate(&options);
     println!("{report}");

@@ -125,11 +125,16 @@ pub enum ValidationSet {
     /// [`ValidationSet::RenderedDevelopment`] with its own seeds, magnitudes 0.75–0.85 or
     /// 1.15–1.25 ×, vibration 0.3–0.45 Hz.
     Rendered,
+    /// Issue 17's second held-out set on the image path, fixed (2026-11-27) after the
+    /// first one was run and before any change made after that run: as
+    /// [`ValidationSet::RenderedDevelopment`] with its own seeds, magnitudes 0.7–0.8 or
+    /// 1.2–1.3 ×, vibration 0.8–1.0 Hz.
+    SecondRendered,
 }
 
 impl ValidationSet {
     /// Every set, in report order.
-    pub const ALL: [ValidationSet; 10] = [
+    pub const ALL: [ValidationSet; 11] = [
         ValidationSet::Tuned,
         ValidationSet::Development,
         ValidationSet::SecondDevelopment,
@@ -140,6 +145,7 @@ impl ValidationSet {
         ValidationSet::SecondForeign,
         ValidationSet::RenderedDevelopment,
         ValidationSet::Rendered,
+        ValidationSet::SecondRendered,
     ];
 
     /// Short name.
@@ -155,6 +161,7 @@ impl ValidationSet {
             ValidationSet::SecondForeign => "foreign-2",
             ValidationSet::RenderedDevelopment => "rendered-dev",
             ValidationSet::Rendered => "rendered",
+            ValidationSet::SecondRendered => "rendered-2",
         }
     }
 
@@ -166,6 +173,7 @@ impl ValidationSet {
                 | ValidationSet::Foreign
                 | ValidationSet::SecondForeign
                 | ValidationSet::Rendered
+                | ValidationSet::SecondRendered
         )
     }
 
@@ -174,7 +182,9 @@ impl ValidationSet {
     pub fn renders_images(self) -> bool {
         matches!(
             self,
-            ValidationSet::RenderedDevelopment | ValidationSet::Rendered
+            ValidationSet::RenderedDevelopment
+                | ValidationSet::Rendered
+                | ValidationSet::SecondRendered
         )
     }
 
@@ -186,6 +196,7 @@ impl ValidationSet {
                 | ValidationSet::SecondForeign
                 | ValidationSet::RenderedDevelopment
                 | ValidationSet::Rendered
+                | ValidationSet::SecondRendered
         )
     }
 
@@ -198,6 +209,7 @@ impl ValidationSet {
                 | ValidationSet::SecondForeign
                 | ValidationSet::RenderedDevelopment
                 | ValidationSet::Rendered
+                | ValidationSet::SecondRendered
         )
     }
 }
@@ -387,6 +399,7 @@ fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
         | ValidationSet::RenderedDevelopment => ((0.7, 0.85), (1.15, 1.3)),
         ValidationSet::SecondForeign => ((0.7, 0.8), (1.2, 1.3)),
         ValidationSet::Rendered => ((0.75, 0.85), (1.15, 1.25)),
+        ValidationSet::SecondRendered => ((0.7, 0.8), (1.2, 1.3)),
     };
     let (lo, hi) = if rng.random::<bool>() { low } else { high };
     uniform(rng, lo, hi)
@@ -501,6 +514,7 @@ fn add_effect(
                 ValidationSet::SecondForeign => uniform(rng, 0.25, 0.4),
                 ValidationSet::RenderedDevelopment => uniform(rng, 0.5, 0.7),
                 ValidationSet::Rendered => uniform(rng, 0.3, 0.45),
+                ValidationSet::SecondRendered => uniform(rng, 0.8, 1.0),
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
             phase_rad: [

@@ -88,6 +88,11 @@
 //!   25/28 — the last target (90 %) missed by one case: the three height couplings were
 //!   named but left at 2.0–2.5 × the floor; mixtures 1/3. Not in the default sweep
 //!   (`validate_set rendered` reproduces it); no longer untouched.
+//! * **Second rendered** (seeds 81001–81004, effect-free 82001–82040, out of library
+//!   83001–83005, mixtures seed + 84000): issue 17's second held-out set on the image
+//!   path, magnitudes 0.7–0.8 or 1.2–1.3 ×, vibration 0.8–1.0 Hz; fixed in this file
+//!   ([`second_rendered_held_out`]) right after the first one's run, before anything was
+//!   changed for what that run showed; not run yet.
 
 use std::fmt;
 
@@ -175,6 +180,20 @@ pub fn rendered_held_out() -> SetSeeds {
         null_seeds: (72001..72041).collect(),
         mixture_offset: 74000,
         foreign_seeds: (73001..73006).collect(),
+    }
+}
+
+/// Issue 17's second held-out set on the image path ([`ValidationSet::SecondRendered`]),
+/// fixed here (2026-11-27) after [`rendered_held_out`] was run and before any change made
+/// after that run; not run yet. `validate_set rendered-2` runs it, once, when the method
+/// is final.
+pub fn second_rendered_held_out() -> SetSeeds {
+    SetSeeds {
+        set: ValidationSet::SecondRendered,
+        seeds: vec![81001, 81002, 81003, 81004],
+        null_seeds: (82001..82041).collect(),
+        mixture_offset: 84000,
+        foreign_seeds: (83001..83006).collect(),
     }
 }
 

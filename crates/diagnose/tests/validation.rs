@@ -17,8 +17,43 @@
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images};
 use dhct_diagnose::{
     Candidate, CaseKind, DiagnoseOptions, SetSeeds, ValidationOptions, VerdictKind, diagnose,
-    validate,
+    rendered_held_out, second_rendered_held_out, validate,
 };
+
+/// Every set's scans are its own: no seed of any kind (single effects, effect-free,
+/// out of library, mixtures) is shared between two sets, the held-out image-path sets
+/// included, so a held-out set never holds a scan another set was looked at on.
+#[test]
+fn no_two_sets_share_a_scan() {
+    let options = ValidationOptions::default();
+    let mut sets = options.sets.clone();
+    sets.extend([rendered_held_out(), second_rendered_held_out()]);
+    let mixture_seeds = |s: &SetSeeds| -> Vec<u64> {
+        let seeds = options.mixture_seeds.iter();
+        seeds.map(|seed| seed + s.mixture_offset).collect()
+    };
+    for (i, a) in sets.iter().enumerate() {
+        for b in &sets[i + 1..] {
+            let kinds = |s: &SetSeeds| {
+                [
+                    s.seeds.clone(),
+                    s.null_seeds.clone(),
+                    s.foreign_seeds.clone(),
+                    mixture_seeds(s),
+                ]
+            };
+            for (ka, kb) in kinds(a).iter().zip(kinds(b).iter()) {
+                let shared: Vec<&u64> = ka.iter().filter(|x| kb.contains(x)).collect();
+                assert!(
+                    shared.is_empty(),
+                    "{} and {} share seeds {shared:?}",
+                    a.set.name(),
+                    b.set.name()
+                );
+            }
+        }
+    }
+}
 
 /// A handful of tuned-set cases of every kind (an effect, effect-free, out of library);
 /// what it checks can fail: a missed effect, a false alarm, a foreign effect called
