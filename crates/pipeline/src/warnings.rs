@@ -379,6 +379,19 @@ pub(crate) fn affine_warnings(comparisons: &[AffineComparison], fell_back: bool)
         .collect()
 }
 
+/// How far a corrected image's lattice is from `lattice`: "`x` % × `y` % of the … lattice
+/// along x × y with angles `a`° off".
+fn how_far_off(lattice: &dyn Lattice, c: &CorrectedImageCheck) -> String {
+    let k = &c.calibration;
+    format!(
+        "{:.2} % × {:.2} % of the {} lattice along x × y with angles {:.2}° off",
+        100.0 * k.scale[0],
+        100.0 * k.scale[1],
+        lattice.name(),
+        c.angle_error_deg
+    )
+}
+
 /// Corrected images whose lattice, measured by FFT, is not the lattice given.
 pub(crate) fn corrected_image_warnings(
     lattice: &dyn Lattice,
@@ -388,17 +401,13 @@ pub(crate) fn corrected_image_warnings(
         .iter()
         .filter(|c| !c.passes())
         .map(|c| {
-            let k = &c.calibration;
             Warning::new(
                 WarningCode::CorrectedImageOff,
                 format!(
-                    "corrected {}: its lattice, measured by FFT, is {:.2} % × {:.2} % of the {} \
-                     lattice along x × y with angles {:.2}° off (more than {:.1} % or {:.0}° off)",
+                    "corrected {}: its lattice, measured by FFT, is {} (more than {:.1} % or \
+                     {:.0}° off)",
                     c.pass,
-                    100.0 * k.scale[0],
-                    100.0 * k.scale[1],
-                    lattice.name(),
-                    c.angle_error_deg,
+                    how_far_off(lattice, c),
                     100.0 * CORRECTED_SCALE_TOLERANCE,
                     CORRECTED_ANGLE_TOLERANCE_DEG
                 ),
@@ -425,19 +434,14 @@ pub(crate) fn model_image_warnings(
         .iter()
         .filter(|c| !c.passes())
         .map(|c| {
-            let k = &c.calibration;
             Warning::new(
                 WarningCode::ModelImageOff,
                 format!(
-                    "the drift/creep/hysteresis model fitted the features, but its corrected {} \
-                     image showed the {} lattice at {:.2} % × {:.2} % along x × y with angles \
-                     {:.2}° off (measured by FFT): the global affine correction, whose images \
-                     did better, was kept",
+                    "the drift/creep/hysteresis model fitted the features, but the lattice of \
+                     its corrected {}, measured by FFT, is {}: the global affine correction, \
+                     whose images did better, was kept",
                     c.pass,
-                    lattice.name(),
-                    100.0 * k.scale[0],
-                    100.0 * k.scale[1],
-                    c.angle_error_deg
+                    how_far_off(lattice, c)
                 ),
                 "take lengths from the corrected images, not drift values; a mask over the \
                  whole atomically resolved area, or dhct diagnose, shows where the model fails",
