@@ -11,7 +11,9 @@
 //! (`LEVELLING`: `none`, `median`, `tapered`, `linear` or `lattice`; the noise RMS values in
 //! picometres: white per pixel, one offset per scan line, 1/f over the acquisition; with
 //! `look=1` the `rendered-dev` set's scans with their own noise and atom shapes instead,
-//! and `effect=NAME` adds that effect to them).
+//! `effect=NAME` adds that effect to them, `coupling=0` keeps a height coupling's step
+//! edge but not its lateral shift, and `summary=1` prints the verdict in words). With a
+//! step edge, the centres' y error is also shown by distance from it.
 
 use dhct_diagnose::synth::{
     PositionNoise, SimulatedScan, ValidationCase, ValidationSet, simulate_positions_with,
@@ -48,6 +50,7 @@ fn scatter_against_truth(
     let exact = simulate_positions_with(&case.config, &PositionNoise::white(0.0), 0)?;
     let pitch = [scan.geometry.pitch_x(), scan.geometry.pitch_y()];
     let (mut errors, mut reported) = (Vec::new(), [0.0; 2]);
+    let mut errors_at = Vec::new();
     for (found, truth) in [(&scan.trace, &exact.trace), (&scan.retrace, &exact.retrace)] {
         for f in found {
             let distance2 =
@@ -57,6 +60,7 @@ fn scatter_against_truth(
                 .min_by(|a, b| distance2(a).total_cmp(&distance2(b)));
             if let Some(t) = nearest.filter(|t| distance2(t) < 9.0) {
                 errors.push([(f.x_px - t.x_px) * pitch[0], (f.y_px - t.y_px) * pitch[1]]);
+                errors_at.push(([t.x_px, t.y_px], *errors.last().unwrap()));
                 reported[0] += (f.x_sigma_px * pitch[0]).powi(2);
                 reported[1] += (f.y_sigma_px * pitch[1]).powi(2);
             }
@@ -67,7 +71,47 @@ fn scatter_against_truth(
         let mean = errors.iter().map(|e| e[a]).sum::<f64>() / n;
         (errors.iter().map(|e| (e[a] - mean).powi(2)).sum::<f64>() / n).sqrt()
     };
+    step_profile(case, scan, &errors_at);
     Ok(([spread(0), spread(1)], reported.map(|r| (r / n).sqrt())))
+}
+
+/// The centres' y error RMS by distance from the first step edge (controller frame,
+/// neighbour distances), when the scan has one.
+fn step_profile(case: &ValidationCase, scan: &SimulatedScan, errors_at: &[([f64; 2], [f64; 2])]) {
+    let Some(step) = case.config.surface.steps.first() else {
+        return;
+    };
+    let dhct_simulate::Region::HalfPlane { point_m, normal } = step.region else {
+        return;
+    };
+    let nn = case
+        .config
+        .surface
+        .lattice
+        .build()
+        .map(|l| l.nearest_neighbour_distance())
+        .unwrap_or(1.0);
+    let norm = normal[0].hypot(normal[1]);
+    let pitch = [scan.geometry.pitch_x(), scan.geometry.pitch_y()];
+    let edges = [0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 5.0, f64::INFINITY];
+    let mut line = String::from("    y error by distance from the step (nn):");
+    for w in edges.windows(2) {
+        let e: Vec<f64> = errors_at
+            .iter()
+            .filter(|(at, _)| {
+                let d = ((at[0] * pitch[0] - point_m[0]) * normal[0]
+                    + (at[1] * pitch[1] - point_m[1]) * normal[1])
+                    .abs()
+                    / norm
+                    / nn;
+                d >= w[0] && d < w[1]
+            })
+            .map(|(_, e)| e[1])
+            .collect();
+        let rms = (e.iter().map(|v| v * v).sum::<f64>() / e.len().max(1) as f64).sqrt();
+        line += &format!(" <{}: {:.1} pm ({})", w[1], rms * 1e12, e.len());
+    }
+    println!("{line}");
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -87,7 +131,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .into_iter()
                 .filter(|c| effect == Some(c.name()))
                 .collect();
-            ValidationCase::with_effects(&effects, seed, ValidationSet::RenderedDevelopment)
+            let mut case =
+                ValidationCase::with_effects(&effects, seed, ValidationSet::RenderedDevelopment);
+            if keyed(&args, "coupling", 1) == 0 {
+                for e in &mut case.config.effects {
+                    if let dhct_simulate::EffectConfig::HeightCoupling(c) = e {
+                        c.lateral_per_height = [0.0; 2];
+                    }
+                }
+            }
+            case
         } else {
             let mut case = ValidationCase::effect_free(seed, ValidationSet::ForeignDevelopment);
             case.config.noise.white_sigma_m = white;
@@ -125,6 +178,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "seed {seed}: {:?}, gap {:.2} -> {:.2}, named {named:?}",
                     report.verdict, v.gap_before, v.gap_after
                 );
+                if keyed(&args, "summary", 0) == 1 {
+                    println!("    {}", v.summary);
+                }
                 let n = &report.noise;
                 println!(
                     "    floor {:.2} × {:.2} pm from {}",

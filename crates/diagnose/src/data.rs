@@ -35,7 +35,8 @@ pub struct Observation {
     pub time_s: f64,
     /// Seconds since the start of the feature's line (its own pass).
     pub line_time_s: f64,
-    /// Local terrace level (the feature fit's background `z0` minus its median), metres.
+    /// Local terrace level (the feature fit's background `z0` plus the line level removed
+    /// before the fit, minus their median), metres.
     pub terrace_height_m: f64,
     /// Apparent feature height (signed amplitude), z units.
     pub apparent_height: f64,
@@ -62,7 +63,25 @@ pub(crate) struct Prepared {
     pub dhct_gap: Vec<[f64; 2]>,
     /// Features dropped: not indexed or farther than the deviation limit from their site.
     pub unindexed: usize,
+    /// Features dropped: their fit residual is over [`POOR_FIT_FACTOR`] × the median.
+    pub poor_fits: usize,
     pub input_features: usize,
+}
+
+/// A feature whose Gaussian fit leaves a residual RMS this many times the median one is
+/// not used: the model does not describe it, so neither its centre nor its background
+/// (the terrace height a height coupling acts on) can be trusted. Measured on the
+/// `rendered-dev` scans with a step edge: the few such fits (residual 43 pm against a
+/// median of 2–4 pm, background 500–900 pm off) held a height coupling's gap at 1.88 and
+/// 1.26 × the floor; without them 1.39 and 1.01.
+pub(crate) const POOR_FIT_FACTOR: f64 = 4.0;
+
+/// The features the base stage turned into observations, and the numbers it dropped.
+struct Observed {
+    observations: Vec<Observation>,
+    dhct_gap: Vec<[f64; 2]>,
+    unindexed: usize,
+    poor_fits: usize,
 }
 
 fn check(sets: &[&[Feature]]) -> Result<(), DiagnoseError> {
@@ -187,8 +206,12 @@ pub(crate) fn prepare(
     }
     let (model, fit) = base_fits(&sets, geometry, lattice, source)?;
     let base = BaseStage::new(&model, &fit, geometry, lattice, &sets);
-    let (observations, dhct_gap, unindexed) =
-        base.observe(&sets, &masked.original, max_deviation_fraction);
+    let Observed {
+        observations,
+        dhct_gap,
+        unindexed,
+        poor_fits,
+    } = base.observe(&sets, &masked.original, max_deviation_fraction);
     if observations.len() < MIN_FEATURES {
         return Err(DiagnoseError::TooFewFeatures {
             what: "diagnosis (indexed features)",
@@ -202,6 +225,7 @@ pub(crate) fn prepare(
         lattice_fit: fit,
         dhct_gap,
         unindexed,
+        poor_fits,
         input_features,
     })
 }
@@ -256,8 +280,8 @@ fn base_fits(
 }
 
 /// What turns the features into observations: the base stage's fits, the scan, the
-/// lattice and its primitive vectors (metres), and the median background level `z0` of
-/// every feature.
+/// lattice and its primitive vectors (metres), and the median local background
+/// (`z0 + removed_level`) of every feature.
 struct BaseStage<'a> {
     model: &'a DistortionModel,
     fit: &'a LatticeFit,
@@ -275,9 +299,11 @@ impl<'a> BaseStage<'a> {
         lattice: &'a dyn Lattice,
         sets: &[&[Feature]],
     ) -> BaseStage<'a> {
-        let z0_median =
-            dhct_numerics::robust::finite_median(sets.iter().flat_map(|s| s.iter().map(|f| f.z0)))
-                .unwrap_or(0.0);
+        let z0_median = dhct_numerics::robust::finite_median(
+            sets.iter()
+                .flat_map(|s| s.iter().map(|f| f.z0 + f.removed_level)),
+        )
+        .unwrap_or(0.0);
         BaseStage {
             model,
             fit,
@@ -289,22 +315,32 @@ impl<'a> BaseStage<'a> {
     }
 
     /// Every indexed feature of `sets` within `max_deviation_fraction` of the NN distance
-    /// of its site, as an observation, with the DHCT sim's gap (controller frame, metres);
-    /// and the number of features dropped. `original` maps back to the input indices.
+    /// of its site and with a fit residual within [`POOR_FIT_FACTOR`] of the median, as an
+    /// observation, with the DHCT sim's gap (controller frame, metres); and the numbers of
+    /// features dropped. `original` maps back to the input indices.
     fn observe(
         &self,
         sets: &[&[Feature]],
         original: &[Vec<usize>],
         max_deviation_fraction: f64,
-    ) -> (Vec<Observation>, Vec<[f64; 2]>, usize) {
+    ) -> Observed {
         let (fit, lattice, geometry) = (self.fit, self.lattice, self.geometry);
         let nn = lattice.nearest_neighbour_distance() * fit.scale[0].abs().max(fit.scale[1].abs());
         let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+        let poor_limit = dhct_numerics::robust::finite_median(
+            sets.iter().flat_map(|s| s.iter().map(|f| f.residual_rms)),
+        )
+        .filter(|m| *m > 0.0)
+        .map_or(f64::INFINITY, |m| POOR_FIT_FACTOR * m);
         let mut observations = Vec::new();
         let mut dhct_gap = Vec::new();
-        let mut unindexed = 0;
+        let (mut unindexed, mut poor_fits) = (0, 0);
         for (s, set) in sets.iter().enumerate() {
             for (i, f) in set.iter().enumerate() {
+                if f.residual_rms > poor_limit {
+                    poor_fits += 1;
+                    continue;
+                }
                 let Some(p) = fit.points.get(s).and_then(|pts| pts.get(i)) else {
                     unindexed += 1;
                     continue;
@@ -320,7 +356,12 @@ impl<'a> BaseStage<'a> {
                 observations.push(self.observation((s, original[s][i]), f, p));
             }
         }
-        (observations, dhct_gap, unindexed)
+        Observed {
+            observations,
+            dhct_gap,
+            unindexed,
+            poor_fits,
+        }
     }
 
     /// The observation of feature `f` (input `index` of set `set`) indexed as `p`.
@@ -347,10 +388,9 @@ impl<'a> BaseStage<'a> {
             controller_m: [f.x_px * px, f.y_px * py],
             time_s: f.time_s,
             line_time_s: f.line_time_s,
-            terrace_height_m: if f.z0.is_finite() {
-                f.z0 - self.z0_median
-            } else {
-                0.0
+            terrace_height_m: match f.z0 + f.removed_level {
+                z if z.is_finite() => z - self.z0_median,
+                _ => 0.0,
             },
             apparent_height: f.height,
             fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],

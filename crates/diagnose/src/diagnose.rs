@@ -245,6 +245,7 @@ fn diagnose_from(
         features_in: prepared.input_features,
         features_used: observations.len(),
         unindexed: prepared.unindexed,
+        poor_fits: prepared.poor_fits,
         outliers: all.len() - observations.len(),
         dhct: GapSummary::of(&prepared.dhct_gap, sigma, 0),
         base: base_summary.clone(),

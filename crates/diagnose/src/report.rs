@@ -142,6 +142,9 @@ pub struct DiagnosisReport {
     pub features_used: usize,
     /// Features not indexed (or too far from any lattice site).
     pub unindexed: usize,
+    /// Features whose fit residual is far above the others' (not used).
+    #[serde(default)]
+    pub poor_fits: usize,
     /// Features dropped as outliers of the base fit.
     pub outliers: usize,
     /// The noise floor.
@@ -229,8 +232,8 @@ impl DiagnosisReport {
         }
         writeln!(
             f,
-            "features: {} in, {} used, {} not indexed, {} outliers",
-            self.features_in, self.features_used, self.unindexed, self.outliers
+            "features: {} in, {} used, {} not indexed, {} poorly fitted, {} outliers",
+            self.features_in, self.features_used, self.unindexed, self.poor_fits, self.outliers
         )?;
         let n = &self.noise;
         writeln!(

@@ -675,6 +675,7 @@ fn feature(
         amplitude: height.abs(),
         height,
         z0,
+        removed_level: 0.0,
         residual_rms: 0.0,
         pixel_count: 100,
         ncc_peak: 1.0,

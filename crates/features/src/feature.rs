@@ -37,8 +37,15 @@ pub struct Feature {
     pub amplitude: f64,
     /// Signed apparent height (z units): +amplitude for bright, −amplitude for dark features.
     pub height: f64,
-    /// Fitted background level z0, z units.
+    /// Fitted background level z0, z units (of the image the fit saw: after the line
+    /// levelling).
     pub z0: f64,
+    /// What the lattice line levelling subtracted at the centre before the fit (line
+    /// offsets and the height steps a line crosses), z units: `z0 + removed_level` is the
+    /// local background as recorded (less the background surface). 0 when the lines were
+    /// not levelled against the lattice.
+    #[serde(default)]
+    pub removed_level: f64,
     /// RMS residual of the fit, z units.
     pub residual_rms: f64,
     /// Pixels in the fitted region.
@@ -75,6 +82,10 @@ pub enum Rejection {
     Duplicate,
     /// Shallower than the options' `min_relative_height` of the deepest features allow.
     TooShallow,
+    /// The fit window straddles a height step (a terrace edge or a tip change within a
+    /// line): the Gaussian with a constant background cannot follow it, so the centre is
+    /// not where the atom is.
+    OnStep,
 }
 
 /// A candidate region that was not accepted, with where it was and why.
@@ -108,6 +119,9 @@ pub struct RejectionCounts {
     /// [`Rejection::TooShallow`].
     #[serde(default)]
     pub too_shallow: usize,
+    /// [`Rejection::OnStep`].
+    #[serde(default)]
+    pub on_step: usize,
 }
 
 impl RejectionCounts {
@@ -124,6 +138,7 @@ impl RejectionCounts {
                 Rejection::EdgeCut => &mut counts.edge_cut,
                 Rejection::Duplicate => &mut counts.duplicate,
                 Rejection::TooShallow => &mut counts.too_shallow,
+                Rejection::OnStep => &mut counts.on_step,
             } += 1;
         }
         counts
@@ -139,6 +154,7 @@ impl RejectionCounts {
             + self.edge_cut
             + self.duplicate
             + self.too_shallow
+            + self.on_step
     }
 }
 
@@ -147,7 +163,7 @@ impl std::fmt::Display for RejectionCounts {
         write!(
             f,
             "{} area too small, {} area too large, {} fit failed, {} centre on bound, \
-             {} bad shape, {} edge-cut, {} duplicate, {} too shallow",
+             {} bad shape, {} edge-cut, {} duplicate, {} too shallow, {} on a step",
             self.area_too_small,
             self.area_too_large,
             self.fit_failed,
@@ -155,7 +171,8 @@ impl std::fmt::Display for RejectionCounts {
             self.bad_shape,
             self.edge_cut,
             self.duplicate,
-            self.too_shallow
+            self.too_shallow,
+            self.on_step
         )
     }
 }
@@ -203,7 +220,7 @@ fn unit_factors() -> [f64; 2] {
 
 /// Column names of [`FeatureSet::write_csv`].
 pub const CSV_HEADER: &str = "id,pass,x_px,y_px,x_m,y_m,x_sigma_px,y_sigma_px,sigma_major_px,\
-sigma_minor_px,theta_rad,amplitude,height,z0,residual_rms,pixel_count,ncc_peak,status,fit_iterations,time_s,line_time_s";
+sigma_minor_px,theta_rad,amplitude,height,z0,removed_level,residual_rms,pixel_count,ncc_peak,status,fit_iterations,time_s,line_time_s";
 
 impl FeatureSet {
     /// Counts of rejected candidates by reason.
@@ -231,7 +248,7 @@ impl FeatureSet {
                 .unwrap_or_default();
             writeln!(
                 w,
-                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{},{},{status},{},{},{}",
+                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{status},{},{},{}",
                 f.id,
                 f.x_px,
                 f.y_px,
@@ -245,6 +262,7 @@ impl FeatureSet {
                 f.amplitude,
                 f.height,
                 f.z0,
+                f.removed_level,
                 f.residual_rms,
                 f.pixel_count,
                 f.ncc_peak,

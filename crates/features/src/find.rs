@@ -9,8 +9,11 @@ use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
-use crate::lattice_levels::{lattice_line_levels, subtract_line_levels};
+use crate::lattice_levels::{
+    lattice_line_levels, levels_as_recorded, replace_line_levels, subtract_line_levels,
+};
 use crate::line_relevel::{WindowPixels, relevel, window_pixels};
+use crate::line_steps::LineLevel;
 use crate::ncc::NccPlan;
 use crate::noise_correlation::measured_centre_variance_ratio;
 use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
@@ -236,7 +239,7 @@ fn find_prepared(
     clock.lap(&mut timings.segmentation_s);
 
     let window = fit_window(options, prepared);
-    let mut fits = if options.line_correction == LineCorrection::Lattice {
+    let (mut fits, removed) = if options.line_correction == LineCorrection::Lattice {
         let fit = RegionFit {
             kept: &kept,
             ncc: &ncc,
@@ -245,11 +248,12 @@ fn find_prepared(
         // The median-levelled image served the correlation; the fits see another.
         drop(std::mem::take(&mut pre.signed));
         let unlevelled = pre.unlevelled.take().unwrap_or_default();
-        let (signed, fits) = level_against_lattice(unlevelled, geometry, &fit);
+        let (signed, fits, removed) = level_against_lattice(unlevelled, geometry, &fit);
         pre.signed = signed;
-        fits
+        (fits, removed)
     } else {
-        fit_regions(&kept, &pre.signed, &ncc, &window)
+        let removed = RemovedLevels::none(geometry.fast_axis());
+        (fit_regions(&kept, &pre.signed, &ncc, &window), removed)
     };
     if options.line_levels_from_fits {
         relevel_fits(&kept, &mut fits, &pre.signed, &window, geometry.fast_axis());
@@ -271,11 +275,12 @@ fn find_prepared(
         accepted,
         duplicates,
         geometry,
-        pass,
-        pre.sign,
+        (pass, pre.sign),
+        &removed,
         &mut rejected,
     );
     drop_shallow(&mut features, options.min_relative_height, &mut rejected);
+    drop_on_steps(&mut features, &removed, window.radius, &mut rejected);
     features.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
     for (id, f) in features.iter_mut().enumerate() {
         f.id = id;
@@ -555,7 +560,7 @@ fn level_against_lattice(
     mut signed: Array2<f64>,
     geometry: &ScanGeometry,
     fit: &RegionFit,
-) -> (Array2<f64>, Vec<RegionFitResult>) {
+) -> (Array2<f64>, Vec<RegionFitResult>, RemovedLevels) {
     let (nn_px, fast_axis) = (fit.window.nn_px, geometry.fast_axis());
     let columns = signed.dim().1;
     let peaks: Vec<[f64; 2]> = fit
@@ -571,9 +576,10 @@ fn level_against_lattice(
         // No line offsets beyond what pixel noise gives: levelling would only add noise
         // shared along each line, so the lines stay as they were recorded.
         let fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
-        return (signed, fits);
+        return (signed, fits, RemovedLevels::none(fast_axis));
     }
     subtract_line_levels(&mut signed, &first.levels, fast_axis);
+    let mut levels = first;
     let mut fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
     for _ in 0..MAX_LEVEL_ROUNDS {
         let centres: Vec<[f64; 2]> = fits
@@ -581,17 +587,72 @@ fn level_against_lattice(
             .filter(|(f, _)| is_usable(f.status))
             .map(|(f, _)| [f.x0, f.y0])
             .collect();
-        // Each round's levels are medians of what the previous left, so they add up.
-        let again = lattice_line_levels(signed.view(), &centres, nn_px, fast_axis);
-        subtract_line_levels(&mut signed, &again.levels, fast_axis);
-        let change = dhct_numerics::moments::rms_about_mean_1d(&again.levels);
+        // Every round levels the lines as recorded, so each finds the whole of every step.
+        let again = levels_as_recorded(signed.view(), &levels.levels, &centres, nn_px, fast_axis);
+        let moved: Vec<f64> = (again.typical().iter().zip(levels.typical()))
+            .map(|(a, b)| a - b)
+            .collect();
+        let change = dhct_numerics::moments::rms_about_mean_1d(&moved);
+        replace_line_levels(&mut signed, &levels.levels, &again.levels, fast_axis);
+        levels = again;
         let noise = dhct_numerics::robust::finite_median(fits.iter().map(|(f, _)| f.residual_rms));
         if noise.is_some_and(|noise| change <= LEVEL_TOLERANCE * noise) {
             break;
         }
         fits = refit_regions(fit.kept, &signed, fit.ncc, fit.window, &fits);
     }
-    (signed, fits)
+    let removed = RemovedLevels {
+        fast_axis,
+        levels: levels.levels,
+    };
+    (signed, fits, removed)
+}
+
+/// The line levels the lattice levelling subtracted (none when the lines were left as
+/// recorded).
+struct RemovedLevels {
+    fast_axis: dhct_scan::Axis,
+    levels: Vec<LineLevel>,
+}
+
+impl RemovedLevels {
+    fn none(fast_axis: dhct_scan::Axis) -> Self {
+        RemovedLevels {
+            fast_axis,
+            levels: Vec::new(),
+        }
+    }
+
+    /// Whether a line crossing the disc of `radius` px around `(x, y)` px steps inside it.
+    fn has_step_within(&self, x: f64, y: f64, radius: f64) -> bool {
+        let (line, along) = match self.fast_axis {
+            dhct_scan::Axis::Horizontal => (y, x),
+            dhct_scan::Axis::Vertical => (x, y),
+        };
+        let first = (line - radius).ceil().max(0.0) as usize;
+        let last = (line + radius).floor().max(0.0) as usize;
+        (first..=last.min(self.levels.len().saturating_sub(1))).any(|l| {
+            let half = (radius * radius - (l as f64 - line).powi(2))
+                .max(0.0)
+                .sqrt();
+            self.levels[l]
+                .step_positions()
+                .any(|p| (p - 0.5 - along).abs() <= half + 0.5)
+        })
+    }
+
+    /// The level subtracted at `(x, y)` px (signed z units), on the nearest line.
+    fn at(&self, x: f64, y: f64) -> f64 {
+        let (line, along) = match self.fast_axis {
+            dhct_scan::Axis::Horizontal => (y, x),
+            dhct_scan::Axis::Vertical => (x, y),
+        };
+        let line = line.round().max(0.0) as usize;
+        self.levels
+            .get(line)
+            .or(self.levels.last())
+            .map_or(0.0, |level| level.at(along))
+    }
 }
 
 /// Multiplies the usable fits' centre uncertainties by how much more their centres
@@ -736,8 +797,8 @@ fn assemble_features(
     accepted: Vec<Candidate>,
     is_duplicate: Vec<bool>,
     geometry: &ScanGeometry,
-    pass: ScanPass,
-    sign: f64,
+    (pass, sign): (ScanPass, f64),
+    removed: &RemovedLevels,
     rejected: &mut Vec<RejectedCandidate>,
 ) -> Vec<Feature> {
     let mut features = Vec::with_capacity(accepted.len());
@@ -767,6 +828,7 @@ fn assemble_features(
             amplitude: fit.amplitude,
             height: sign * fit.amplitude,
             z0: sign * fit.offset,
+            removed_level: sign * removed.at(fit.x0, fit.y0),
             residual_rms: fit.residual_rms,
             pixel_count: candidate.pixel_count,
             ncc_peak: candidate.ncc_peak,
@@ -861,6 +923,30 @@ fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<R
     });
 }
 
+/// Drops the features whose fit disc (radius `radius_px`) holds a height step that the
+/// lattice levelling found within a line ([`crate::line_steps`]).
+fn drop_on_steps(
+    features: &mut Vec<Feature>,
+    removed: &RemovedLevels,
+    radius_px: f64,
+    rejected: &mut Vec<RejectedCandidate>,
+) {
+    if removed.levels.iter().all(|l| l.steps() == 0) {
+        return;
+    }
+    features.retain(|f| {
+        let keep = !removed.has_step_within(f.x_px, f.y_px, radius_px);
+        if !keep {
+            rejected.push(RejectedCandidate {
+                x_px: f.x_px,
+                y_px: f.y_px,
+                reason: Rejection::OnStep,
+            });
+        }
+        keep
+    });
+}
+
 /// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
 /// over regions larger than 10 px.
 fn area_filter(
@@ -923,6 +1009,7 @@ mod tests {
             amplitude,
             height: -amplitude,
             z0: 0.0,
+            removed_level: 0.0,
             residual_rms: 0.0,
             pixel_count: 10,
             ncc_peak: 0.9,

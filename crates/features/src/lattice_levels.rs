@@ -23,10 +23,15 @@
 //! fast-scan line) or where features differ in kind, the model is less exact there, and
 //! the median keeps such places from setting a line's level.
 
-use dhct_numerics::robust::{finite_median, median};
+use dhct_numerics::robust::finite_median;
+
+use crate::line_steps::{LineLevel, line_slope, stepped_line_level};
 use dhct_scan::Axis;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
+
+/// Lines the background's slope along the lines is measured on (evenly spread).
+const SLOPE_LINES: usize = 64;
 
 /// Template grid spacing, px.
 const TEMPLATE_STEP_PX: f64 = 0.5;
@@ -219,26 +224,46 @@ pub(crate) fn lattice_residual(
 
 /// The lines' levels and how far they vary beyond what pixel noise alone would give.
 pub(crate) struct LineLevels {
-    /// Each line's level (z units).
-    pub levels: Vec<f64>,
+    /// Each line's level along it (z units), cut at the steps the line crosses
+    /// ([`crate::line_steps`]).
+    pub levels: Vec<LineLevel>,
     /// Variance of the level from one line to the next over the variance pixel noise
     /// alone gives a median of the line's residuals (`(π/2)·σ²/n`): about 1 without line
     /// offsets, far above with them (NaN when it cannot be told).
     pub offsets_over_noise: f64,
 }
 
-/// One line's residual median, its residual count and its pixel noise (MAD scale of
-/// successive residual differences over √2), if any pixel was modelled.
-fn line_residual_level(residuals: &mut [f64]) -> Option<(f64, usize, f64)> {
-    let differences: Vec<f64> = residuals.windows(2).map(|w| w[1] - w[0]).collect();
-    let noise = dhct_numerics::robust::mad_sigma_about(&differences, 0.0)
-        .map_or(f64::NAN, |s| s / std::f64::consts::SQRT_2);
-    Some((median(residuals)?, residuals.len(), noise))
+impl LineLevels {
+    /// Each line's level over the longest piece of it (z units).
+    pub fn typical(&self) -> Vec<f64> {
+        self.levels.iter().map(LineLevel::typical).collect()
+    }
+}
+
+/// Pixel `(row, column)` at `along` px on `line`.
+fn line_pixel(fast_axis: Axis, line: usize, along: usize) -> (usize, usize) {
+    match fast_axis {
+        Axis::Horizontal => (line, along),
+        Axis::Vertical => (along, line),
+    }
+}
+
+/// A line's pixel noise: the MAD scale of successive finite residual differences over √2
+/// (NaN if there are none).
+fn line_pixel_noise(residuals: &[f64]) -> f64 {
+    let differences: Vec<f64> = residuals
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.is_finite())
+        .collect();
+    dhct_numerics::robust::mad_sigma_about(&differences, 0.0)
+        .map_or(f64::NAN, |s| s / std::f64::consts::SQRT_2)
 }
 
 /// Each scan line's level: the median along it of `z` minus the lattice model built from
-/// `centres` (`(x, y)` px; `nn_px` the neighbour distance in px). Lines along x when the
-/// fast axis is horizontal, else along y. A line with no modelled pixel gets its plain
+/// `centres` (`(x, y)` px; `nn_px` the neighbour distance in px), taken piece by piece
+/// between the height steps the line crosses ([`crate::line_steps`]). Lines along x when
+/// the fast axis is horizontal, else along y. A line with no modelled pixel gets its plain
 /// median (0 if it has no finite pixel).
 pub(crate) fn lattice_line_levels(
     z: ArrayView2<f64>,
@@ -246,45 +271,103 @@ pub(crate) fn lattice_line_levels(
     nn_px: f64,
     fast_axis: Axis,
 ) -> LineLevels {
-    let model = LatticeModel::measure(z, centres, nn_px);
+    levels_as_recorded(z, &[], centres, nn_px, fast_axis)
+}
+
+/// [`lattice_line_levels`] of the lines as recorded, given them levelled: `levelled` is
+/// the image with `removed` subtracted (indexed as [`lattice_line_levels`] returns them).
+/// The atom template is measured on `levelled` (line offsets blur it less once they are
+/// out); the levels are taken of `levelled` plus `removed`, so that each finds the whole
+/// of every step, however the lines were levelled before.
+pub(crate) fn levels_as_recorded(
+    levelled: ArrayView2<f64>,
+    removed: &[LineLevel],
+    centres: &[[f64; 2]],
+    nn_px: f64,
+    fast_axis: Axis,
+) -> LineLevels {
+    let (z, template_image) = (levelled, levelled);
+    let model = LatticeModel::measure(template_image, centres, nn_px);
     let (rows, columns) = z.dim();
     let (lines, length) = match fast_axis {
         Axis::Horizontal => (rows, columns),
         Axis::Vertical => (columns, rows),
     };
-    let per_line: Vec<(f64, Option<(usize, f64)>)> = (0..lines)
+    let block_px = (0.5 * nn_px).round().max(2.0) as usize;
+    let recorded = |line: usize, along: usize| {
+        let level = removed.get(line).map_or(0.0, |l| l.at(along as f64));
+        z[line_pixel(fast_axis, line, along)] + level
+    };
+    let residuals_of = |line: usize| -> Vec<f64> {
+        (0..length)
+            .map(|along| {
+                let (r, c) = line_pixel(fast_axis, line, along);
+                recorded(line, along) - model.at(r, c)
+            })
+            .collect()
+    };
+    // The background plane was fitted across any steps, so it may leave a slope along the
+    // lines on every terrace; the jumps within lines show it.
+    // It is one number: a few dozen lines spread over the image measure it.
+    let stride = (lines / SLOPE_LINES).max(1);
+    let slope = finite_median(
+        (0..lines)
+            .into_par_iter()
+            .step_by(stride)
+            .map(|line| line_slope(&residuals_of(line), block_px).unwrap_or(f64::NAN))
+            .collect::<Vec<f64>>(),
+    )
+    .unwrap_or(0.0);
+    let per_line: Vec<(LineLevel, Option<(usize, f64)>)> = (0..lines)
         .into_par_iter()
         .map(|line| {
-            let pixel = |along: usize| match fast_axis {
-                Axis::Horizontal => (line, along),
-                Axis::Vertical => (along, line),
-            };
-            let mut residuals: Vec<f64> = (0..length)
-                .filter_map(|along| {
-                    let (r, c) = pixel(along);
-                    Some(z[[r, c]] - model.at(r, c)).filter(|v| v.is_finite())
-                })
-                .collect();
-            match line_residual_level(&mut residuals) {
-                Some((level, count, noise)) => (level, Some((count, noise))),
+            let residuals = residuals_of(line);
+            let count = residuals.iter().filter(|v| v.is_finite()).count();
+            let noise = line_pixel_noise(&residuals);
+            match stepped_line_level(&residuals, slope, block_px, noise) {
+                Some(level) => (level, Some((count, noise))),
                 None => (
-                    finite_median((0..length).map(|along| z[pixel(along)])).unwrap_or(0.0),
+                    LineLevel::flat(
+                        finite_median((0..length).map(|along| recorded(line, along)))
+                            .unwrap_or(0.0),
+                    ),
                     None,
                 ),
             }
         })
         .collect();
-    let levels: Vec<f64> = per_line.iter().map(|p| p.0).collect();
+    let offsets_over_noise = offsets_over_noise(&per_line, length, block_px);
     LineLevels {
-        offsets_over_noise: offsets_over_noise(&levels, &per_line),
-        levels,
+        levels: per_line.into_iter().map(|p| p.0).collect(),
+        offsets_over_noise,
     }
 }
 
-/// [`LineLevels::offsets_over_noise`] from the levels and each line's residual count and
-/// pixel noise.
-fn offsets_over_noise(levels: &[f64], per_line: &[(f64, Option<(usize, f64)>)]) -> f64 {
-    let steps: Vec<f64> = levels.windows(2).map(|w| w[1] - w[0]).collect();
+/// How far line `b`'s level lies above line `a`'s: the median over the line of their
+/// difference (sampled every `block_px`), so that a step both lines cross cancels.
+fn level_difference(a: &LineLevel, b: &LineLevel, length: usize, block_px: usize) -> f64 {
+    if a.steps() == 0 && b.steps() == 0 {
+        return b.at(0.0) - a.at(0.0);
+    }
+    finite_median(
+        (0..length)
+            .step_by(block_px)
+            .map(|p| b.at(p as f64) - a.at(p as f64)),
+    )
+    .unwrap_or(f64::NAN)
+}
+
+/// [`LineLevels::offsets_over_noise`] from each line's level, residual count and pixel
+/// noise.
+fn offsets_over_noise(
+    per_line: &[(LineLevel, Option<(usize, f64)>)],
+    length: usize,
+    block_px: usize,
+) -> f64 {
+    let steps: Vec<f64> = per_line
+        .windows(2)
+        .map(|w| level_difference(&w[0].0, &w[1].0, length, block_px))
+        .collect();
     let observed = dhct_numerics::robust::mad_sigma_about(&steps, 0.0).map(|s| 0.5 * s * s);
     let count = finite_median(per_line.iter().filter_map(|p| p.1.map(|m| m.0 as f64)));
     let noise = finite_median(per_line.iter().filter_map(|p| p.1.map(|m| m.1)));
@@ -296,14 +379,33 @@ fn offsets_over_noise(levels: &[f64], per_line: &[(f64, Option<(usize, f64)>)]) 
     }
 }
 
+/// `z` with each line's level `old` replaced by `new` (both indexed as
+/// [`lattice_line_levels`] returns them).
+pub(crate) fn replace_line_levels(
+    z: &mut Array2<f64>,
+    old: &[LineLevel],
+    new: &[LineLevel],
+    fast_axis: Axis,
+) {
+    let lines = match fast_axis {
+        Axis::Horizontal => z.rows_mut().into_iter().collect::<Vec<_>>(),
+        Axis::Vertical => z.columns_mut().into_iter().collect::<Vec<_>>(),
+    };
+    for ((mut line, old), new) in lines.into_iter().zip(old).zip(new) {
+        for (along, v) in line.iter_mut().enumerate() {
+            *v += old.at(along as f64) - new.at(along as f64);
+        }
+    }
+}
+
 /// `z` minus each line's level (`levels` indexed as [`lattice_line_levels`] returns them).
-pub(crate) fn subtract_line_levels(z: &mut Array2<f64>, levels: &[f64], fast_axis: Axis) {
+pub(crate) fn subtract_line_levels(z: &mut Array2<f64>, levels: &[LineLevel], fast_axis: Axis) {
     let lines = match fast_axis {
         Axis::Horizontal => z.rows_mut().into_iter().collect::<Vec<_>>(),
         Axis::Vertical => z.columns_mut().into_iter().collect::<Vec<_>>(),
     };
     for (mut line, level) in lines.into_iter().zip(levels) {
-        line.mapv_inplace(|v| v - level);
+        level.subtract_from(line.iter_mut());
     }
 }
 
@@ -358,7 +460,7 @@ mod tests {
             .collect();
         // Rows 3° from the lines: any one line's median holds their modulation.
         let (z, centres) = lattice_image(size, 12.0, 0.05, &offsets);
-        let levels = lattice_line_levels(z.view(), &centres, 12.0, Axis::Horizontal).levels;
+        let levels = lattice_line_levels(z.view(), &centres, 12.0, Axis::Horizontal).typical();
         let error = |levels: &[f64]| {
             let d: Vec<f64> = levels.iter().zip(&offsets).map(|(l, o)| l - o).collect();
             let mean = d.iter().sum::<f64>() / d.len() as f64;
@@ -384,9 +486,9 @@ mod tests {
         let size = 96;
         let offsets: Vec<f64> = (0..size).map(|r| 0.1 * (r % 7) as f64).collect();
         let (z, centres) = lattice_image(size, 10.0, 0.4, &offsets);
-        let along_x = lattice_line_levels(z.view(), &centres, 10.0, Axis::Horizontal).levels;
+        let along_x = lattice_line_levels(z.view(), &centres, 10.0, Axis::Horizontal).typical();
         let transposed: Vec<[f64; 2]> = centres.iter().map(|c| [c[1], c[0]]).collect();
-        let along_y = lattice_line_levels(z.t(), &transposed, 10.0, Axis::Vertical).levels;
+        let along_y = lattice_line_levels(z.t(), &transposed, 10.0, Axis::Vertical).typical();
         for (a, b) in along_x.iter().zip(&along_y) {
             assert!((a - b).abs() < 1e-12, "{a} vs {b}");
         }
@@ -402,7 +504,9 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| lattice_line_levels(z.view(), &centres, 9.0, Axis::Horizontal).levels)
+                .install(|| {
+                    lattice_line_levels(z.view(), &centres, 9.0, Axis::Horizontal).typical()
+                })
         };
         let one = on(1);
         for threads in [2, 3] {
@@ -443,5 +547,56 @@ mod tests {
         // Pixel noise alone: about 1; offsets as large as the pixel noise: far above 4.
         assert!((0.5..2.0).contains(&clean), "without offsets {clean}");
         assert!(offset > 20.0, "with offsets {offset}");
+    }
+
+    #[test]
+    fn a_step_across_the_lines_is_levelled_on_both_terraces() {
+        let size = 192;
+        let offsets: Vec<f64> = (0..size).map(|r| noise(200_000 + r, 0.05)).collect();
+        let (mut z, centres) = lattice_image(size, 11.0, 0.3, &offsets);
+        // A step 8 times the atoms' height, crossing the lines near their middle at 80°,
+        // blurred over 2 px, and a slope along the lines.
+        let step = |r: usize, c: usize| {
+            let across = (c as f64 - 96.0) * 0.98 + (r as f64 - 96.0) * 0.17;
+            8.0 * 0.5 * (1.0 + libm_erf(across / 2.0))
+        };
+        for ((r, c), v) in z.indexed_iter_mut() {
+            *v += step(r, c) + noise(r * size + c, 0.02) + 0.01 * c as f64;
+        }
+        let found = lattice_line_levels(z.view(), &centres, 11.0, Axis::Horizontal);
+        let stepped = found.levels.iter().filter(|l| l.steps() == 1).count();
+        assert!(
+            stepped > size * 9 / 10,
+            "{stepped} of {size} lines cut once"
+        );
+        // What is left on each line away from the step: its atoms and pixel noise only.
+        let mut levelled = z.clone();
+        subtract_line_levels(&mut levelled, &found.levels, Axis::Horizontal);
+        let (atoms, _) = lattice_image(size, 11.0, 0.3, &vec![0.0; size]);
+        let (mut worst, mut tilt): (f64, f64) = (0.0, 0.0);
+        for r in 0..size {
+            let left: Vec<f64> = (10..70).map(|c| levelled[[r, c]] - atoms[[r, c]]).collect();
+            let right: Vec<f64> = (120..180)
+                .map(|c| levelled[[r, c]] - atoms[[r, c]])
+                .collect();
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+            worst = worst.max((mean(&left) - mean(&right)).abs());
+            tilt += (mean(&left[40..]) - mean(&left[..20])) / 40.0 / size as f64;
+        }
+        // Without the cut, lines keep the step's 8 on one side or the other.
+        assert!(worst < 0.1, "terraces left apart by up to {worst}");
+        // The background plane's slope along the lines (0.01 per px) is taken out too.
+        assert!(tilt.abs() < 1e-3, "slope left along the lines {tilt}");
+    }
+
+    /// The error function (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
+    fn libm_erf(x: f64) -> f64 {
+        let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        let y = 1.0 - poly * (-x * x).exp();
+        if x >= 0.0 { y } else { -y }
     }
 }

@@ -44,6 +44,7 @@ mod kernel;
 mod lattice_levels;
 mod line_level;
 mod line_relevel;
+mod line_steps;
 mod ncc;
 mod noise_correlation;
 mod options;

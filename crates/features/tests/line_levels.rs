@@ -112,3 +112,63 @@ fn lattice_levelling_leaves_lines_without_offsets_as_recorded() {
     }
     assert!(median[1] > 1.2 * lattice[1], "{median:?} vs {lattice:?}");
 }
+
+#[test]
+fn a_step_edge_across_the_lines_moves_no_centre() {
+    // A graphite step (335 pm, eight times the atoms) crossing every line near its middle:
+    // a line's median there is whichever terrace covers more of it, so neighbouring lines
+    // are levelled to different terraces. Its lines are cut where they cross it.
+    let flat = Simulation::from_config(&headline_512())
+        .unwrap()
+        .run()
+        .unwrap();
+    let mut config = headline_512();
+    config.surface.steps.push(dhct_simulate::StepEdge {
+        region: dhct_simulate::Region::HalfPlane {
+            point_m: [3.2e-9, 3.1e-9],
+            normal: [0.98, -0.17],
+        },
+        height_m: 3.35e-10,
+    });
+    let stepped = Simulation::from_config(&config).unwrap().run().unwrap();
+    let options = FeatureOptions::for_neighbour_distance(2.46e-10);
+    let sets = find_features_in_pair(&stepped.pair, &options).unwrap();
+    let with_step = rms_error(&sets[0], &stepped.truth);
+    let without = trace_error(&flat, LineCorrection::Lattice);
+    println!(
+        "with the step: rms {:.4} × {:.4} px",
+        with_step[0], with_step[1]
+    );
+    // Measured: 0.xxx × 0.xxx px without the step, 0.xxx × 0.xxx with it.
+    for axis in 0..2 {
+        assert!(
+            with_step[axis] < 1.3 * without[axis],
+            "{with_step:?} vs {without:?}"
+        );
+    }
+    // The features whose fit disc holds the step are dropped, and only those.
+    let on_step = sets[0].rejection_counts().on_step;
+    let found = sets[0].features.len();
+    assert!(
+        on_step > 10 && on_step < found / 10,
+        "{on_step} on the step, {found} kept"
+    );
+    // The terrace each feature sits on is kept in its background (what the levelling took
+    // out plus the fit's own): next to the step, the two terraces differ by about the step
+    // (less the background plane's tilt over that distance, the plane having been fitted
+    // across the step).
+    let across = |f: &dhct_features::Feature| 0.98 * (f.x_m - 3.2e-9) - 0.17 * (f.y_m - 3.1e-9);
+    let background = |upper: bool| {
+        let mut v: Vec<f64> = sets[0]
+            .features
+            .iter()
+            .filter(|f| (across(f) > 0.0) == upper && across(f).abs() < 3.0 * 2.46e-10)
+            .map(|f| f.z0 + f.removed_level)
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let step = background(true) - background(false);
+    println!("terraces apart by {:.0} pm", step * 1e12);
+    assert!(step > 2e-10 && step < 3.5e-10, "terraces apart by {step}");
+}

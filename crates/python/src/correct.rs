@@ -230,6 +230,7 @@ fn feature_row(c: &mut Columns, pass: &dhct_pipeline::PassOutput, k: usize) {
             ("theta_rad", f.theta_rad),
             ("height", f.height),
             ("z0", f.z0),
+            ("removed_level", f.removed_level),
             ("residual_rms", f.residual_rms),
         ],
     );

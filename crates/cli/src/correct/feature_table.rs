@@ -42,8 +42,10 @@ pub struct FeatureRow {
     pub theta_rad: f64,
     /// Signed apparent height of the fitted Gaussian (positive: bright, negative: dark).
     pub height: f64,
-    /// Fitted background level.
+    /// Fitted background level (after the line levelling).
     pub z0: f64,
+    /// What the lattice line levelling subtracted at the centre (line offsets and steps).
+    pub removed_level: f64,
     /// RMS residual of the fit.
     pub residual_rms: f64,
     /// Pixels in the fitted region.
@@ -99,6 +101,7 @@ pub fn feature_row(pass: &PassOutput, k: usize) -> FeatureRow {
         theta_rad: f.theta_rad,
         height: f.height,
         z0: f.z0,
+        removed_level: f.removed_level,
         residual_rms: f.residual_rms,
         pixel_count: f.pixel_count,
         ncc_peak: f.ncc_peak,
