@@ -227,27 +227,40 @@ fn find_prepared(
     let mut clock = Stopwatch::start();
     let mut pre = preprocess(image, geometry, options, mask, finite)?;
     clock.lap(&mut timings.preprocess_s);
-    let ncc = prepared
+    let mut ncc = prepared
         .plan
         .apply(pre.filled.as_ref().unwrap_or(&pre.signed).view());
     clock.lap(&mut timings.correlation_s);
 
-    let regions = watershed_regions(&ncc, options.threshold);
-    let candidates = regions.len();
+    let segment = |ncc: &Array2<f64>, rejected: &mut Vec<RejectedCandidate>| {
+        let regions = watershed_regions(ncc, options.threshold);
+        let candidates = regions.len();
+        (
+            area_filter(regions, options.area_filter, columns, rejected),
+            candidates,
+        )
+    };
     let mut rejected = Vec::new();
-    let kept = area_filter(regions, options.area_filter, columns, &mut rejected);
+    let (mut kept, mut candidates) = segment(&ncc, &mut rejected);
     clock.lap(&mut timings.segmentation_s);
 
     let window = fit_window(options, prepared);
     let (mut fits, removed) = if options.line_correction == LineCorrection::Lattice {
+        // The median-levelled image served the correlation; the fits see another.
+        drop(std::mem::take(&mut pre.signed));
+        let unlevelled = pre.unlevelled.take().unwrap_or_default();
+        if let Some(levelled) = levelled_across_steps(&unlevelled, geometry, &kept, &ncc, &window) {
+            // Medians across a step level neighbouring lines to different terraces, and
+            // the correlation with them: it is taken again on the lines cut at the steps.
+            ncc = prepared.plan.apply(filled_for_correlation(levelled).view());
+            rejected.clear();
+            (kept, candidates) = segment(&ncc, &mut rejected);
+        }
         let fit = RegionFit {
             kept: &kept,
             ncc: &ncc,
             window: &window,
         };
-        // The median-levelled image served the correlation; the fits see another.
-        drop(std::mem::take(&mut pre.signed));
-        let unlevelled = pre.unlevelled.take().unwrap_or_default();
         let (signed, fits, removed) = level_against_lattice(unlevelled, geometry, &fit);
         pre.signed = signed;
         (fits, removed)
@@ -376,21 +389,59 @@ fn preprocess(
         Polarity::Bright => 1.0,
         Polarity::Dark => -1.0,
     };
-    // The correlation needs every pixel: fill missing ones with the median (only if any).
-    let filled = if finite == rows * columns {
-        None
-    } else {
-        let mut values: Vec<f64> = signed.iter().copied().filter(|v| v.is_finite()).collect();
-        let middle = values.len() / 2;
-        let fill = *values.select_nth_unstable_by(middle, f64::total_cmp).1;
-        Some(signed.mapv(|v| if v.is_finite() { v } else { fill }))
-    };
+    // The correlation needs every pixel: fill missing ones (only if any).
+    let filled = (finite < rows * columns).then(|| filled_for_correlation(signed.clone()));
     Ok(Preprocessed {
         sign,
         signed,
         filled,
         unlevelled,
     })
+}
+
+/// `image` with its missing pixels set to the median of the others (the correlation needs
+/// every pixel).
+fn filled_for_correlation(mut image: Array2<f64>) -> Array2<f64> {
+    let mut values: Vec<f64> = image.iter().copied().filter(|v| v.is_finite()).collect();
+    if values.len() == image.len() || values.is_empty() {
+        return image;
+    }
+    let middle = values.len() / 2;
+    let fill = *values.select_nth_unstable_by(middle, f64::total_cmp).1;
+    image.mapv_inplace(|v| if v.is_finite() { v } else { fill });
+    image
+}
+
+/// `unlevelled` with the lines levelled against the lattice around the correlation's
+/// peaks of the `kept` regions, if those levels find a height step within some line (and
+/// the lines are to be levelled at all); `None` otherwise.
+fn levelled_across_steps(
+    unlevelled: &Array2<f64>,
+    geometry: &ScanGeometry,
+    kept: &[Region],
+    ncc: &Array2<f64>,
+    window: &FitWindow,
+) -> Option<Array2<f64>> {
+    let fast_axis = geometry.fast_axis();
+    let peaks = correlation_peaks(kept, ncc);
+    let first = lattice_line_levels(unlevelled.view(), &peaks, window.nn_px, fast_axis);
+    if first.offsets_over_noise < OFFSET_EVIDENCE || first.levels.iter().all(|l| l.steps() == 0) {
+        return None;
+    }
+    let mut levelled = unlevelled.clone();
+    subtract_line_levels(&mut levelled, &first.levels, fast_axis);
+    Some(levelled)
+}
+
+/// The sub-pixel correlation peak `(x, y)` px of each region.
+fn correlation_peaks(kept: &[Region], ncc: &Array2<f64>) -> Vec<[f64; 2]> {
+    let columns = ncc.dim().1;
+    kept.iter()
+        .map(|region| {
+            let (x, y) = subpixel_peak(ncc, region.peak / columns, region.peak % columns);
+            [x, y]
+        })
+        .collect()
 }
 
 /// The fit disc and starting width for this search.
@@ -562,15 +613,7 @@ fn level_against_lattice(
     fit: &RegionFit,
 ) -> (Array2<f64>, Vec<RegionFitResult>, RemovedLevels) {
     let (nn_px, fast_axis) = (fit.window.nn_px, geometry.fast_axis());
-    let columns = signed.dim().1;
-    let peaks: Vec<[f64; 2]> = fit
-        .kept
-        .iter()
-        .map(|region| {
-            let (x, y) = subpixel_peak(fit.ncc, region.peak / columns, region.peak % columns);
-            [x, y]
-        })
-        .collect();
+    let peaks = correlation_peaks(fit.kept, fit.ncc);
     let first = lattice_line_levels(signed.view(), &peaks, nn_px, fast_axis);
     if first.offsets_over_noise < OFFSET_EVIDENCE {
         // No line offsets beyond what pixel noise gives: levelling would only add noise
