@@ -30,6 +30,10 @@ use dhct_scan::Axis;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
+/// How far (in blocks of half a neighbour distance) from where a neighbouring line steps a
+/// line's own step is looked for with the lower threshold.
+const HINT_REACH_BLOCKS: usize = 4;
+
 /// Lines the background's slope along the lines is measured on (evenly spread).
 const SLOPE_LINES: usize = 64;
 
@@ -318,28 +322,59 @@ pub(crate) fn levels_as_recorded(
             .collect::<Vec<f64>>(),
     )
     .unwrap_or(0.0);
-    let per_line: Vec<(LineLevel, Option<(usize, f64)>)> = (0..lines)
-        .into_par_iter()
-        .map(|line| {
-            let residuals = residuals_of(line);
-            let count = residuals.iter().filter(|v| v.is_finite()).count();
-            let noise = line_pixel_noise(&residuals);
-            match stepped_line_level(&residuals, slope, block_px, noise) {
-                Some(level) => (level, Some((count, noise))),
-                None => (
-                    LineLevel::flat(
-                        finite_median((0..length).map(|along| recorded(line, along)))
-                            .unwrap_or(0.0),
-                    ),
-                    None,
+    let level_of = |line: usize, hints: &[f64]| {
+        let residuals = residuals_of(line);
+        let count = residuals.iter().filter(|v| v.is_finite()).count();
+        let noise = line_pixel_noise(&residuals);
+        let reach = (HINT_REACH_BLOCKS * block_px) as f64;
+        match stepped_line_level(&residuals, slope, (block_px, noise), (hints, reach)) {
+            Some(level) => (level, Some((count, noise))),
+            None => (
+                LineLevel::flat(
+                    finite_median((0..length).map(|along| recorded(line, along))).unwrap_or(0.0),
                 ),
-            }
-        })
+                None,
+            ),
+        }
+    };
+    let mut per_line: Vec<(LineLevel, Option<(usize, f64)>)> = (0..lines)
+        .into_par_iter()
+        .map(|line| level_of(line, &[]))
         .collect();
+    follow_steps_across_lines(&mut per_line, |line, hints| level_of(line, hints));
     let offsets_over_noise = offsets_over_noise(&per_line, length, block_px);
     LineLevels {
         levels: per_line.into_iter().map(|p| p.0).collect(),
         offsets_over_noise,
+    }
+}
+
+/// Looks again, down the lines and then up, for a step on each line next to one that has
+/// steps and has none near them, with the neighbour's step positions as hints
+/// (`level_of(line, hints)`): a step edge crosses many lines, and a line cut at it next to
+/// one that is not puts the two on different terraces.
+fn follow_steps_across_lines(
+    per_line: &mut [(LineLevel, Option<(usize, f64)>)],
+    level_of: impl Fn(usize, &[f64]) -> (LineLevel, Option<(usize, f64)>),
+) {
+    let lines = per_line.len();
+    let order: Vec<(usize, usize)> = (1..lines)
+        .map(|l| (l - 1, l))
+        .chain((0..lines.saturating_sub(1)).rev().map(|l| (l + 1, l)))
+        .collect();
+    for (from, to) in order {
+        let hints: Vec<f64> = per_line[from].0.step_positions().collect();
+        let own: Vec<f64> = per_line[to].0.step_positions().collect();
+        let unmatched = hints
+            .iter()
+            .any(|h| own.iter().all(|p| (p - h).abs() > 1.0));
+        if hints.is_empty() || !unmatched {
+            continue;
+        }
+        let again = level_of(to, &hints);
+        if again.0.steps() > per_line[to].0.steps() {
+            per_line[to] = again;
+        }
     }
 }
 

@@ -35,6 +35,13 @@ const JUMP_SIGMAS: f64 = 8.0;
 /// Jumps farther than this many robust σ from the median are left out of a line's slope.
 const SLOPE_CLIP_SIGMAS: f64 = 3.0;
 
+/// Where a neighbouring line steps, a jump this fraction of the usual threshold is taken for
+/// a step: a step edge crosses many lines, and a cut found on some but not on their
+/// neighbours levels neighbouring lines to different terraces (measured on the HOPG file's
+/// wide step band: cuts found on 53 of the ~300 lines it crosses put its terrace's rms
+/// deviation from 40.2 to 42.8 pm).
+const HINTED_FRACTION: f64 = 0.5;
+
 /// Fewest finite pixels a piece needs for a level of its own.
 const MIN_PIECE_BLOCKS: usize = 2;
 
@@ -139,12 +146,14 @@ pub(crate) fn line_slope(residuals: &[f64], block_px: usize) -> Option<f64> {
 /// The level of one line from its residuals (the image minus the lattice model, NaN where
 /// nothing is modelled) with `slope` (z units per px, shared by all lines) taken out, cut
 /// at the steps found with blocks of `block_px` pixels; `pixel_noise` is the line's pixel
-/// noise (z units). `None` if no residual is finite.
+/// noise (z units). Within `hint_reach_px` of a position in `hints` (px: where a
+/// neighbouring line steps) a jump of half the usual size is taken for a step. `None` if
+/// no residual is finite.
 pub(crate) fn stepped_line_level(
     residuals: &[f64],
     slope: f64,
-    block_px: usize,
-    pixel_noise: f64,
+    (block_px, pixel_noise): (usize, f64),
+    (hints, hint_reach_px): (&[f64], f64),
 ) -> Option<LineLevel> {
     let residuals: Vec<f64> = residuals
         .iter()
@@ -158,16 +167,26 @@ pub(crate) fn stepped_line_level(
     let Some(threshold) = blocks.jump_threshold(pixel_noise) else {
         return flat();
     };
-    let mut cuts = blocks.steps(threshold);
+    let hinted = |at: usize| hints.iter().any(|h| (h - at as f64).abs() <= hint_reach_px);
+    let needed = |at: usize| {
+        if hinted(at) {
+            HINTED_FRACTION * threshold
+        } else {
+            threshold
+        }
+    };
+    let mut cuts = blocks.steps(HINTED_FRACTION * threshold);
+    cuts.retain(|c| c.jump.abs() > needed(c.at));
     if cuts.is_empty() {
         return flat();
     }
-    // Cut until every remaining step separates pieces that differ by the threshold.
+    // Cut until every remaining step separates pieces that differ by what it needs.
     loop {
-        let pieces = pieces_between(residuals, &cuts, blocks.size);
+        let spans: Vec<(usize, usize)> = cuts.iter().map(|c| c.span).collect();
+        let pieces = pieces_between(residuals, &spans, blocks.size);
         let weak = pieces
             .windows(2)
-            .find(|w| (w[1].level - w[0].level).abs() < threshold);
+            .find(|w| (w[1].level - w[0].level).abs() < needed(cuts[w[0].ending_cut].at));
         match weak {
             Some(w) => {
                 cuts.remove(w[0].ending_cut);
@@ -176,6 +195,14 @@ pub(crate) fn stepped_line_level(
             None => return flat(),
         }
     }
+}
+
+/// A jump taken for a step: its size (z units), its boundary `at` (px) and its
+/// transition (first pixel, one past the last).
+struct Cut {
+    jump: f64,
+    at: usize,
+    span: (usize, usize),
 }
 
 /// The means of a line's blocks of `size` pixels that have at least half their pixels
@@ -241,10 +268,9 @@ impl Blocks {
         (threshold > 0.0).then_some(threshold)
     }
 
-    /// The steps: jumps above `threshold` that are the largest within two blocks, each as
-    /// its transition (first pixel, one past the last): the two blocks either side of the
-    /// boundary and any gap between them.
-    fn steps(&self, threshold: f64) -> Vec<(usize, usize)> {
+    /// The steps: jumps above `threshold` that are the largest within two blocks, each with
+    /// its transition: the two blocks either side of the boundary and any gap between them.
+    fn steps(&self, threshold: f64) -> Vec<Cut> {
         let size = |i: usize| {
             self.jumps
                 .get(i)
@@ -259,7 +285,11 @@ impl Blocks {
             })
             .map(|i| {
                 let (before, after) = (self.means[i - 1].0, self.means[i].0);
-                (before * self.size, (after + 1) * self.size)
+                Cut {
+                    jump: self.jumps[i],
+                    at: after * self.size,
+                    span: (before * self.size, (after + 1) * self.size),
+                }
             })
             .collect()
     }
@@ -366,7 +396,7 @@ mod tests {
     #[test]
     fn a_line_without_steps_keeps_one_level() {
         let residuals = line(400, |_| 3.0);
-        let level = stepped_line_level(&residuals, 0.0, 6, 1.0).unwrap();
+        let level = stepped_line_level(&residuals, 0.0, (6, 1.0), (&[], 0.0)).unwrap();
         assert_eq!(level.steps(), 0);
         assert!((level.at(200.0) - 3.0).abs() < 0.2, "{}", level.at(200.0));
     }
@@ -374,7 +404,7 @@ mod tests {
     #[test]
     fn a_step_is_cut_where_it_is_and_each_side_keeps_its_level() {
         let residuals = line(400, |i| if i < 157 { 0.0 } else { 20.0 });
-        let level = stepped_line_level(&residuals, 0.0, 6, 1.0).unwrap();
+        let level = stepped_line_level(&residuals, 0.0, (6, 1.0), (&[], 0.0)).unwrap();
         assert_eq!(level.steps(), 1);
         let at: Vec<f64> = level.step_positions().collect();
         assert!((at[0] - 157.0).abs() <= 1.0, "step at {at:?}");
@@ -385,7 +415,7 @@ mod tests {
     fn a_bump_narrower_than_two_blocks_is_no_step() {
         // An adsorbate or a defect: up and down again within 8 px.
         let residuals = line(400, |i| if (200..208).contains(&i) { 30.0 } else { 0.0 });
-        let level = stepped_line_level(&residuals, 0.0, 6, 1.0).unwrap();
+        let level = stepped_line_level(&residuals, 0.0, (6, 1.0), (&[], 0.0)).unwrap();
         assert_eq!(level.steps(), 0, "{level:?}");
     }
 
@@ -395,7 +425,7 @@ mod tests {
         let slope = line_slope(&residuals, 6).unwrap();
         // One line of 400 px with unit noise measures it to about ±0.005.
         assert!((slope - 0.05).abs() < 0.012, "slope {slope}");
-        let level = stepped_line_level(&residuals, slope, 6, 1.0).unwrap();
+        let level = stepped_line_level(&residuals, slope, (6, 1.0), (&[], 0.0)).unwrap();
         assert_eq!(level.steps(), 1);
         for along in [20.0, 150.0, 260.0, 390.0] {
             let expected = 0.05 * along + if along < 230.0 { 0.0 } else { -25.0 };
@@ -405,5 +435,19 @@ mod tests {
                 level.at(along)
             );
         }
+    }
+
+    #[test]
+    fn a_weaker_step_is_cut_only_where_a_neighbouring_line_steps() {
+        // Between half and all of the usual threshold (about 3.3 here).
+        let residuals = line(400, |i| if i < 211 { 0.0 } else { 2.5 });
+        let steps = |hints: &[f64]| {
+            stepped_line_level(&residuals, 0.0, (6, 1.0), (hints, 24.0))
+                .unwrap()
+                .steps()
+        };
+        assert_eq!(steps(&[]), 0);
+        assert_eq!(steps(&[205.0]), 1);
+        assert_eq!(steps(&[100.0]), 0);
     }
 }
