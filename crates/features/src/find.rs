@@ -13,10 +13,10 @@ use crate::lattice_levels::{
     lattice_line_levels, levels_as_recorded, replace_line_levels, subtract_line_levels,
 };
 use crate::line_relevel::{WindowPixels, relevel, window_pixels};
-use crate::line_steps::LineLevel;
 use crate::ncc::NccPlan;
 use crate::noise_correlation::measured_centre_variance_ratio;
 use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
+use crate::removed_levels::{RemovedLevels, drop_on_steps};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice,
@@ -651,53 +651,6 @@ fn level_against_lattice(
     (signed, fits, removed)
 }
 
-/// The line levels the lattice levelling subtracted (none when the lines were left as
-/// recorded).
-struct RemovedLevels {
-    fast_axis: dhct_scan::Axis,
-    levels: Vec<LineLevel>,
-}
-
-impl RemovedLevels {
-    fn none(fast_axis: dhct_scan::Axis) -> Self {
-        RemovedLevels {
-            fast_axis,
-            levels: Vec::new(),
-        }
-    }
-
-    /// Whether a line crossing the disc of `radius` px around `(x, y)` px steps inside it.
-    fn has_step_within(&self, x: f64, y: f64, radius: f64) -> bool {
-        let (line, along) = match self.fast_axis {
-            dhct_scan::Axis::Horizontal => (y, x),
-            dhct_scan::Axis::Vertical => (x, y),
-        };
-        let first = (line - radius).ceil().max(0.0) as usize;
-        let last = (line + radius).floor().max(0.0) as usize;
-        (first..=last.min(self.levels.len().saturating_sub(1))).any(|l| {
-            let half = (radius * radius - (l as f64 - line).powi(2))
-                .max(0.0)
-                .sqrt();
-            self.levels[l]
-                .step_positions()
-                .any(|p| (p - 0.5 - along).abs() <= half + 0.5)
-        })
-    }
-
-    /// The level subtracted at `(x, y)` px (signed z units), on the nearest line.
-    fn at(&self, x: f64, y: f64) -> f64 {
-        let (line, along) = match self.fast_axis {
-            dhct_scan::Axis::Horizontal => (y, x),
-            dhct_scan::Axis::Vertical => (x, y),
-        };
-        let line = line.round().max(0.0) as usize;
-        self.levels
-            .get(line)
-            .or(self.levels.last())
-            .map_or(0.0, |level| level.at(along))
-    }
-}
-
 /// Multiplies the usable fits' centre uncertainties by how much more their centres
 /// scatter under the image's correlated pixel noise than white noise gives
 /// ([`crate::noise_correlation`]), per axis and never below 1. Returns the factors
@@ -960,30 +913,6 @@ fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<R
                 x_px: f.x_px,
                 y_px: f.y_px,
                 reason: Rejection::TooShallow,
-            });
-        }
-        keep
-    });
-}
-
-/// Drops the features whose fit disc (radius `radius_px`) holds a height step that the
-/// lattice levelling found within a line ([`crate::line_steps`]).
-fn drop_on_steps(
-    features: &mut Vec<Feature>,
-    removed: &RemovedLevels,
-    radius_px: f64,
-    rejected: &mut Vec<RejectedCandidate>,
-) {
-    if removed.levels.iter().all(|l| l.steps() == 0) {
-        return;
-    }
-    features.retain(|f| {
-        let keep = !removed.has_step_within(f.x_px, f.y_px, radius_px);
-        if !keep {
-            rejected.push(RejectedCandidate {
-                x_px: f.x_px,
-                y_px: f.y_px,
-                reason: Rejection::OnStep,
             });
         }
         keep

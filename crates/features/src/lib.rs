@@ -49,6 +49,7 @@ mod ncc;
 mod noise_correlation;
 mod options;
 mod preprocess;
+mod removed_levels;
 mod watershed;
 
 pub use correlate::{Correlator, RealSpectrum, correlate_same};

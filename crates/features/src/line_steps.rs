@@ -378,16 +378,7 @@ fn split(gap: &[f64], before: f64, after: f64) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A reproducible stand-in for Gaussian noise of RMS `sigma` (sum of uniforms).
-    fn noise(i: usize, sigma: f64) -> f64 {
-        let u = |k: usize| {
-            ((((i * 7 + k) as f64) * 12.9898).sin() * 43_758.545)
-                .fract()
-                .abs()
-        };
-        sigma * (u(0) + u(1) + u(2) + u(3) - 2.0) * 3f64.sqrt()
-    }
+    use crate::lattice_levels::tests::noise;
 
     fn line(length: usize, shape: impl Fn(usize) -> f64) -> Vec<f64> {
         (0..length).map(|i| shape(i) + noise(i, 1.0)).collect()
