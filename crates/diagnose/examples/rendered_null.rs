@@ -12,7 +12,8 @@
 //! picometres: white per pixel, one offset per scan line, 1/f over the acquisition; with
 //! `look=1` the `rendered-dev` set's scans with their own noise and atom shapes instead,
 //! `effect=NAME` adds that effect to them, `coupling=0` keeps a height coupling's step
-//! edge but not its lateral shift, and `summary=1` prints the verdict in words). With a
+//! edge but not its lateral shift, `vibration_mhz=N` sets a vibration's frequency, and
+//! `summary=1` prints the verdict in words). With a
 //! step edge, the centres' y error is also shown by distance from it.
 
 use dhct_diagnose::synth::{
@@ -133,6 +134,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .collect();
             let mut case =
                 ValidationCase::with_effects(&effects, seed, ValidationSet::RenderedDevelopment);
+            let vibration_mhz = keyed(&args, "vibration_mhz", 0);
+            for e in &mut case.config.effects {
+                if let (dhct_simulate::EffectConfig::Vibration(v), true) = (e, vibration_mhz > 0) {
+                    v.frequency_hz = vibration_mhz as f64 * 1e-3;
+                }
+            }
             if keyed(&args, "coupling", 1) == 0 {
                 for e in &mut case.config.effects {
                     if let dhct_simulate::EffectConfig::HeightCoupling(c) = e {
