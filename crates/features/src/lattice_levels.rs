@@ -26,6 +26,7 @@
 use dhct_numerics::robust::finite_median;
 
 use crate::line_steps::{LineLevel, line_slope, stepped_line_level};
+use crate::preprocess::scan_lines_mut;
 use dhct_scan::Axis;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
@@ -290,8 +291,8 @@ pub(crate) fn levels_as_recorded(
     nn_px: f64,
     fast_axis: Axis,
 ) -> LineLevels {
-    let (z, template_image) = (levelled, levelled);
-    let model = LatticeModel::measure(template_image, centres, nn_px);
+    let z = levelled;
+    let model = LatticeModel::measure(z, centres, nn_px);
     let (rows, columns) = z.dim();
     let (lines, length) = match fast_axis {
         Axis::Horizontal => (rows, columns),
@@ -422,11 +423,7 @@ pub(crate) fn replace_line_levels(
     new: &[LineLevel],
     fast_axis: Axis,
 ) {
-    let lines = match fast_axis {
-        Axis::Horizontal => z.rows_mut().into_iter().collect::<Vec<_>>(),
-        Axis::Vertical => z.columns_mut().into_iter().collect::<Vec<_>>(),
-    };
-    for ((mut line, old), new) in lines.into_iter().zip(old).zip(new) {
+    for ((mut line, old), new) in scan_lines_mut(z, fast_axis).into_iter().zip(old).zip(new) {
         for (along, v) in line.iter_mut().enumerate() {
             *v += old.at(along as f64) - new.at(along as f64);
         }
@@ -435,11 +432,7 @@ pub(crate) fn replace_line_levels(
 
 /// `z` minus each line's level (`levels` indexed as [`lattice_line_levels`] returns them).
 pub(crate) fn subtract_line_levels(z: &mut Array2<f64>, levels: &[LineLevel], fast_axis: Axis) {
-    let lines = match fast_axis {
-        Axis::Horizontal => z.rows_mut().into_iter().collect::<Vec<_>>(),
-        Axis::Vertical => z.columns_mut().into_iter().collect::<Vec<_>>(),
-    };
-    for (mut line, level) in lines.into_iter().zip(levels) {
+    for (mut line, level) in scan_lines_mut(z, fast_axis).into_iter().zip(levels) {
         level.subtract_from(line.iter_mut());
     }
 }

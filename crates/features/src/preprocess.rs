@@ -120,15 +120,21 @@ pub fn correct_lines(z: &Array2<f64>, fast_axis: Axis, method: LineCorrection) -
     out
 }
 
+/// The scan lines of `z`, in order: its rows when the fast axis is horizontal, else its
+/// columns.
+pub(crate) fn scan_lines_mut(z: &mut Array2<f64>, fast_axis: Axis) -> Vec<ArrayViewMut1<'_, f64>> {
+    match fast_axis {
+        Axis::Horizontal => z.rows_mut().into_iter().collect(),
+        Axis::Vertical => z.columns_mut().into_iter().collect(),
+    }
+}
+
 /// [`correct_lines`] without a copy (lines levelled in parallel).
 pub fn correct_lines_in_place(out: &mut Array2<f64>, fast_axis: Axis, method: LineCorrection) {
     if method == LineCorrection::None {
         return;
     }
-    let lines = match fast_axis {
-        Axis::Horizontal => out.rows_mut().into_iter().collect::<Vec<_>>(),
-        Axis::Vertical => out.columns_mut().into_iter().collect::<Vec<_>>(),
-    };
+    let lines = scan_lines_mut(out, fast_axis);
     let taper = match lines.first() {
         Some(line) if method == LineCorrection::Tapered => line_taper(line.len()),
         _ => Vec::new(),
