@@ -8,11 +8,11 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, PassImage,
-    ValidationOptions, VerdictKind, diagnose_with_model, sub_feature_view, validate,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ValidationOptions,
+    VerdictKind, diagnose_with_model, sub_feature_view_of_pair, validate,
 };
 use dhct_distortion::PassInput;
-use dhct_features::{FeatureOptions, FeatureSet, signed_flattened};
+use dhct_features::{FeatureOptions, FeatureSet};
 use dhct_scan::{ScanGeometry, ScanPair};
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
@@ -81,23 +81,7 @@ pub fn with_sub_feature_view(
     options: &FeatureOptions,
     mask: Option<&Array2<bool>>,
 ) -> DiagnosisReport {
-    let geometry = pair.geometry();
-    let images: Vec<(&FeatureSet, Array2<f64>)> = sets
-        .iter()
-        .filter_map(|set| {
-            let raw = &pair.image(set.pass)?.z;
-            Some((*set, signed_flattened(raw, options, mask).ok()?))
-        })
-        .collect();
-    let passes: Vec<PassImage> = images
-        .iter()
-        .map(|(set, image)| PassImage {
-            pass: set.pass,
-            image: image.view(),
-            features: &set.features,
-        })
-        .collect();
-    match sub_feature_view(&passes, geometry) {
+    match sub_feature_view_of_pair(pair, sets, options, mask) {
         Some(view) => report.with_sub_feature_view(view),
         None => report,
     }

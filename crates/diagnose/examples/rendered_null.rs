@@ -19,7 +19,7 @@
 use dhct_diagnose::synth::{
     PositionNoise, SimulatedScan, ValidationCase, ValidationSet, simulate_positions_with,
 };
-use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
+use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose, sub_feature_view_of_pair};
 use dhct_features::{FeatureOptions, LineCorrection, find_features_in_pair};
 use dhct_scan::ScanPass;
 use dhct_simulate::Simulation;
@@ -166,7 +166,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             trace: Vec::new(),
             retrace: Vec::new(),
         };
-        for set in find_features_in_pair(&output.pair, &options)? {
+        let sets = find_features_in_pair(&output.pair, &options)?;
+        let view = sub_feature_view_of_pair(
+            &output.pair,
+            &sets.iter().collect::<Vec<_>>(),
+            &options,
+            None,
+        );
+        for set in sets {
             println!(
                 "    {:?}: correlated-noise factor {:.2} × {:.2}",
                 set.pass, set.correlated_noise_factor[0], set.correlated_noise_factor[1]
@@ -179,6 +186,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let options = DiagnoseOptions::default();
         match diagnose(&scan.inputs(), &scan.geometry, lattice.as_ref(), &options) {
             Ok(report) => {
+                let report = match view {
+                    Some(view) => report.with_sub_feature_view(view),
+                    None => report,
+                };
                 let v = &report.verdict_details;
                 let named: Vec<&str> = v.effects.iter().map(|c| c.name()).collect();
                 println!(
@@ -187,6 +198,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 );
                 if keyed(&args, "summary", 0) == 1 {
                     println!("    {}", v.summary);
+                }
+                if let Some(view) = &report.sub_feature {
+                    println!("    {}", view.describe());
                 }
                 let n = &report.noise;
                 println!(

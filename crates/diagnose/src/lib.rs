@@ -68,6 +68,7 @@ mod fit;
 mod location;
 mod model;
 mod noise;
+mod pair_images;
 mod report;
 mod select;
 mod spectrum;
@@ -86,13 +87,15 @@ pub use error::DiagnoseError;
 pub use fit::FittedParameter;
 pub use location::{Bin, ChangePoint, GapLocation};
 pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
+pub use pair_images::sub_feature_view_of_pair;
 pub use report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
 };
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
 pub use sub_feature::{
-    PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView, sub_feature_view,
+    MIN_PERIODS_PER_LINE_ACROSS, PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration,
+    SubFeatureView, sub_feature_view,
 };
 pub use validate::{
     CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,

@@ -171,6 +171,43 @@ pub(crate) fn false_alarm_probability(power: f64, searched: usize) -> f64 {
     (1.0 - (1.0 - single).powf(searched.max(1) as f64)).clamp(0.0, 1.0)
 }
 
+/// The spectrum's own upper tail starts at this quantile of its normalised powers.
+const TAIL_QUANTILE: f64 = 0.99;
+/// Fewer normalised powers than this have no upper tail of their own to calibrate on.
+const MIN_TAIL_POINTS: usize = 20;
+
+/// Probability that a peak of `power` (over the local level) arises somewhere among
+/// `searched` independent frequencies, judged by the spectrum's own upper tail: the
+/// normalised powers `spectrum` above their 99th percentile are taken as exponential
+/// (peaks over a threshold; their scale is their mean excess, never below the χ²₄ tail's 2)
+/// and extrapolated to `power`. Noise that is not independent from sample to sample
+/// (slices sharing a line, a feature, a pixel phase) gives heavier tails than χ²₄, and
+/// this is what keeps its highest peaks from counting as found. `None` when the spectrum
+/// is too short to have a tail.
+pub(crate) fn tail_false_alarm_probability(
+    spectrum: &[f64],
+    power: f64,
+    searched: usize,
+) -> Option<f64> {
+    let mut sorted: Vec<f64> = spectrum.iter().copied().filter(|p| p.is_finite()).collect();
+    if sorted.len() < MIN_TAIL_POINTS * 10 {
+        return None;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let start = ((sorted.len() as f64) * TAIL_QUANTILE) as usize;
+    let threshold = sorted[start];
+    let tail = &sorted[start..];
+    let excess = tail.iter().map(|p| p - threshold).sum::<f64>() / tail.len() as f64;
+    let scale = excess.max(2.0);
+    let above = tail.len() as f64 / sorted.len() as f64;
+    let single = if power > threshold {
+        above * (-(power - threshold) / scale).exp()
+    } else {
+        sorted.iter().filter(|p| **p >= power).count() as f64 / sorted.len() as f64
+    };
+    Some((1.0 - (1.0 - single).powf(searched.max(1) as f64)).clamp(0.0, 1.0))
+}
+
 /// Indices of the `count` highest local maxima of `p` (frequency, power), highest first.
 pub(crate) fn local_maxima(p: &[(f64, f64)], count: usize) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..p.len())
@@ -278,6 +315,35 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
+
+    /// Powers with an exponential tail of scale `scale` (χ²₂-like, heavier than χ²₄'s 2).
+    fn exponential_powers(scale: f64, n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| -scale * (1.0 - rand::RngExt::random::<f64>(&mut rng)).ln())
+            .collect()
+    }
+
+    #[test]
+    fn a_heavy_tailed_spectrum_keeps_its_own_highest_peak_from_counting_as_found() {
+        // 12 000 powers of scale 5: the highest is near 5 ln 12 000 ≈ 47, which χ²₄ calls
+        // significant among 6 000 frequencies; against the spectrum's own tail it is not.
+        let spectrum = exponential_powers(5.0, 12_000, 3);
+        let highest = spectrum.iter().copied().fold(0.0, f64::max);
+        assert!(false_alarm_probability(highest, 6_000) < 1e-3, "{highest}");
+        let tail = tail_false_alarm_probability(&spectrum, highest, spectrum.len()).unwrap();
+        assert!(tail > 0.1, "{tail}");
+        // A peak well beyond the tail is found by both.
+        let tail = tail_false_alarm_probability(&spectrum, 150.0, spectrum.len()).unwrap();
+        assert!(tail < 1e-6, "{tail}");
+    }
+
+    #[test]
+    fn a_short_spectrum_has_no_tail_of_its_own() {
+        assert!(
+            tail_false_alarm_probability(&exponential_powers(2.0, 150, 4), 30.0, 150).is_none()
+        );
+    }
 
     /// 2000 samples over 100 s (irregular), weighted residuals: white noise of σ 1 plus an
     /// Ornstein–Uhlenbeck part of σ `red` and correlation time 1 s on both axes, plus a

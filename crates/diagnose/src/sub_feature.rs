@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::spectrum::{
     LevelWindow, false_alarm_probability, local_maxima, local_noise_levels, periodogram_at,
+    tail_false_alarm_probability,
 };
 
 /// One pass's image as the feature fits saw it but with each line's level kept
@@ -47,10 +48,22 @@ pub struct SliceVibration {
     pub frequency_hz: f64,
     /// Peak amplitude along the scan lines (the fast axis), metres: the slices' shift.
     pub amplitude_along_m: f64,
-    /// Peak amplitude across the scan lines (the slow axis), metres. Approximate (within
-    /// a factor of about two): it is read from how bright each line's slice is, which the
-    /// line levelling of the feature fits also changes.
-    pub amplitude_across_m: f64,
+    /// Peak amplitude across the scan lines (the slow axis), metres, when it can be read
+    /// ([`SubFeatureView::across_measured`]). Approximate (within a factor of about two):
+    /// it is read from how bright each line's slice is, which the line levelling of the
+    /// feature fits also changes.
+    pub amplitude_across_m: Option<f64>,
+    /// Periods of the vibration within one scan line. Below
+    /// [`MIN_PERIODS_PER_LINE_ACROSS`] each line moves across as a whole, which its slices
+    /// cannot tell from the line's level, so the amplitude across is not read.
+    #[serde(default)]
+    pub periods_per_line: f64,
+    /// Whether the frequency is a harmonic of the line-pair frequency (within two
+    /// frequency resolutions): there, a displacement that varies with time cannot be told
+    /// from a pattern fixed along the lines (every line pair starts at the same phase), so
+    /// it is not reported as a vibration.
+    #[serde(default)]
+    pub raster_locked: bool,
     /// χ² reduction of one sinusoid per axis at that frequency over the local noise level
     /// of the periodogram (≈ χ²₄ under noise).
     pub power: f64,
@@ -83,7 +96,8 @@ pub struct SubFeatureView {
     /// Whether the amplitude across the lines can be read: the slices' scatter across the
     /// lines is at most [`ACROSS_SCATTER_LIMIT`] × their fit noise (line levels a model
     /// does not remove make a slice's brightness, and so its across reading, scatter far
-    /// more on real files: Pb/Pt(111) 108×).
+    /// more on real files: Pb/Pt(111) 108×), and the vibration is fast enough to move
+    /// within one line ([`SliceVibration::periods_per_line`]).
     #[serde(default = "measured")]
     pub across_measured: bool,
 }
@@ -91,6 +105,12 @@ pub struct SubFeatureView {
 /// Above this scatter across the lines (in units of the slices' fit noise) the across
 /// amplitude of a slice vibration is not reported.
 pub const ACROSS_SCATTER_LIMIT: f64 = 10.0;
+
+/// The least [`SliceVibration::periods_per_line`] whose amplitude across the lines is
+/// read. Each line's mean displacement across is taken out with its level, which keeps
+/// only what varies within the line: at one period per line most of the motion is kept;
+/// at 0.1 (a 0.9 Hz vibration on 0.12 s lines) under a tenth is.
+pub const MIN_PERIODS_PER_LINE_ACROSS: f64 = 1.0;
 
 fn measured() -> bool {
     true
@@ -103,6 +123,8 @@ pub const SIGNIFICANT_FALSE_ALARM: f64 = 1e-3;
 const MIN_SLICE_PIXELS: usize = 5;
 /// Offset bins (pixels across the line) for the shape-mismatch median.
 const OFFSET_BIN_PX: f64 = 0.25;
+/// Bins of the feature centre's position within its pixel along the lines.
+const ALONG_PHASE_BINS: f64 = 4.0;
 
 /// One slice's displacement.
 #[derive(Debug, Clone, Copy)]
@@ -114,7 +136,7 @@ struct Slice {
     /// Its 1σ, pixels.
     sigma_px: [f64; 2],
     /// Bin key: pass and the line's offset from the feature centre.
-    bin: (bool, i64),
+    bin: (bool, i64, i64),
     /// Line key: pass and line number.
     line: (bool, i64),
 }
@@ -179,15 +201,19 @@ pub fn sub_feature_view(passes: &[PassImage], geometry: &ScanGeometry) -> Option
     let pitch = [geometry.pitch_x(), geometry.pitch_y()];
     let f_min = 1.0 / feature_duration_s(passes, geometry)?;
     let along_x = geometry.fast_axis() == Axis::Horizontal;
-    let strongest = strongest_vibration(&slices, pitch, f_min, along_x);
+    let strongest = strongest_vibration(&slices, pitch, f_min, along_x, geometry.line_period());
     let vibration_found = strongest.as_ref().is_some_and(SliceVibration::is_found);
     let across_spread = spread_over_noise[usize::from(along_x)];
+    let across_measured = across_spread <= ACROSS_SCATTER_LIMIT
+        && strongest
+            .as_ref()
+            .is_none_or(|v| v.amplitude_across_m.is_some());
     Some(SubFeatureView {
         slices: slices.len(),
         spread_over_noise,
         strongest,
         vibration_found,
-        across_measured: across_spread <= ACROSS_SCATTER_LIMIT,
+        across_measured,
     })
 }
 
@@ -292,6 +318,7 @@ fn measure_slice(
     } else {
         (line as f64, cy)
     };
+    let along_centre = if lines_along_x { cx } else { cy };
     let offset = if lines_along_x {
         line as f64 - cy
     } else {
@@ -304,6 +331,7 @@ fn measure_slice(
         bin: (
             p.pass == ScanPass::Trace,
             (offset / OFFSET_BIN_PX).round() as i64,
+            ((along_centre - along_centre.floor()) * ALONG_PHASE_BINS).floor() as i64,
         ),
         line: (p.pass == ScanPass::Trace, line),
     })
@@ -339,7 +367,7 @@ fn remove_line_levels(slices: &mut [Slice]) {
 /// robust spread of what is left in units of each slice's σ, per axis.
 fn remove_shape_mismatch(slices: &mut Vec<Slice>) -> [f64; 2] {
     slices.retain(|s| s.sigma_px.iter().any(|v| *v < 1.0));
-    let mut bins: HashMap<(bool, i64), Vec<usize>> = HashMap::new();
+    let mut bins: HashMap<(bool, i64, i64), Vec<usize>> = HashMap::new();
     for (i, s) in slices.iter().enumerate() {
         bins.entry(s.bin).or_default().push(i);
     }
@@ -375,14 +403,16 @@ fn remove_shape_mismatch(slices: &mut Vec<Slice>) -> [f64; 2] {
 /// Peaks of the periodogram tried, highest (over the local level) first.
 const PEAKS_TRIED: usize = 5;
 
-/// The strongest periodic displacement at or above `f_min` (Hz): of the highest
-/// periodogram peaks (over the local level), each refined on a fine grid, the first that
-/// is significant and seen alike by trace and retrace, else the highest.
+/// The strongest periodic displacement at or above `f_min` (Hz) on lines of
+/// `line_period_s` seconds: of the highest periodogram peaks (over the local level), each
+/// refined on a fine grid, the first that is significant, seen alike by trace and retrace
+/// and not locked to the raster, else the highest.
 fn strongest_vibration(
     slices: &[Slice],
     pitch_m: [f64; 2],
     f_min: f64,
     along_x: bool,
+    line_period_s: f64,
 ) -> Option<SliceVibration> {
     let times: Vec<f64> = slices.iter().map(|s| s.time_s).collect();
     let weighted: Vec<f64> = slices
@@ -400,7 +430,10 @@ fn strongest_vibration(
         .map(|(&(f, power), level)| (f, power / level))
         .collect();
     let searched = p.len().div_ceil(2).max(1);
+    let spectrum: Vec<f64> = normalised.iter().map(|(_, power)| *power).collect();
     let step = if p.len() > 1 { p[1].0 - p[0].0 } else { 0.0 };
+    let span_s = times.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - times.iter().copied().fold(f64::INFINITY, f64::min);
     let tried: Vec<SliceVibration> = local_maxima(&normalised, PEAKS_TRIED)
         .into_iter()
         .map(|k| {
@@ -408,12 +441,20 @@ fn strongest_vibration(
             let (amplitude_px, raw_power) = sinusoid_fit(slices, frequency_hz);
             let power = raw_power / levels[k];
             let amplitude_m = [amplitude_px[0] * pitch_m[0], amplitude_px[1] * pitch_m[1]];
+            let periods_per_line = frequency_hz * line_period_s;
             SliceVibration {
                 frequency_hz,
                 amplitude_along_m: amplitude_m[usize::from(!along_x)],
-                amplitude_across_m: amplitude_m[usize::from(along_x)],
+                amplitude_across_m: (periods_per_line >= MIN_PERIODS_PER_LINE_ACROSS)
+                    .then_some(amplitude_m[usize::from(along_x)]),
+                periods_per_line,
+                raster_locked: is_raster_locked(frequency_hz, line_period_s, span_s),
                 power,
-                false_alarm_probability: false_alarm_probability(power, searched),
+                // The tail is judged on the grid's own powers, among all grid points.
+                false_alarm_probability: false_alarm_probability(power, searched).max(
+                    tail_false_alarm_probability(&spectrum, spectrum[k], spectrum.len())
+                        .unwrap_or(0.0),
+                ),
                 searched,
                 pass_agreement: pass_agreement(slices, frequency_hz, raw_power),
             }
@@ -423,12 +464,28 @@ fn strongest_vibration(
     tried.into_iter().nth(found)
 }
 
+/// Frequency resolutions (1 / the slices' time span) within which a frequency counts as
+/// a harmonic of the line-pair frequency.
+const RASTER_LOCK_RESOLUTIONS: f64 = 2.0;
+
+/// Whether `f` (Hz) is a harmonic of the line-pair frequency `1 / (2 line_period_s)`,
+/// within [`RASTER_LOCK_RESOLUTIONS`] of the resolution of a `span_s`-second record.
+fn is_raster_locked(f: f64, line_period_s: f64, span_s: f64) -> bool {
+    let pair_f = 0.5 / line_period_s;
+    let harmonic = (f / pair_f).round();
+    harmonic >= 1.0 && (f - harmonic * pair_f).abs() * span_s < RASTER_LOCK_RESOLUTIONS
+}
+
 impl SliceVibration {
-    /// Significant ([`SIGNIFICANT_FALSE_ALARM`]) and seen alike by trace and retrace
-    /// ([`MIN_PASS_AGREEMENT`]). With one pass a periodic pattern cannot be told from one
-    /// tied to the lattice, so nothing is found (see [`SliceVibration::is_significant`]).
+    /// Significant ([`SIGNIFICANT_FALSE_ALARM`]), seen alike by trace and retrace
+    /// ([`MIN_PASS_AGREEMENT`]) and not locked to the raster
+    /// ([`SliceVibration::raster_locked`]). With one pass a periodic pattern cannot be told
+    /// from one tied to the lattice, so nothing is found (see
+    /// [`SliceVibration::is_significant`]).
     pub fn is_found(&self) -> bool {
-        self.is_significant() && self.pass_agreement.is_some_and(|a| a >= MIN_PASS_AGREEMENT)
+        self.is_significant()
+            && !self.raster_locked
+            && self.pass_agreement.is_some_and(|a| a >= MIN_PASS_AGREEMENT)
     }
 
     /// Above the noise: false-alarm probability below [`SIGNIFICANT_FALSE_ALARM`].
@@ -499,16 +556,28 @@ impl SubFeatureView {
                  positions average it out, so the corrected positions do not show it",
                 v.frequency_hz,
                 v.amplitude_along_m * 1e12,
-                if self.across_measured {
-                    format!(
-                        "and about {:.0} pm across them",
-                        v.amplitude_across_m * 1e12
-                    )
-                } else {
-                    "them (across them not measured: the slices scatter too much across the \
-                     lines)"
-                        .to_string()
+                match v.amplitude_across_m.filter(|_| self.across_measured) {
+                    Some(across) => format!("and about {:.0} pm across them", across * 1e12),
+                    None if v.periods_per_line < MIN_PERIODS_PER_LINE_ACROSS => format!(
+                        "them (across them not measured: {:.2} periods per scan line, so each \
+                         line moves across as a whole, which its slices cannot tell from the \
+                         line's level)",
+                        v.periods_per_line
+                    ),
+                    None => "them (across them not measured: the slices scatter too much \
+                             across the lines)"
+                        .to_string(),
                 },
+                v.false_alarm_probability,
+                self.slices
+            ),
+            (Some(v), false) if v.is_significant() && v.raster_locked => format!(
+                "below one feature: a periodic line displacement at {:.2} Hz, {:.1} pm along the \
+                 lines (false-alarm p {:.1e}; {} slices, {spread}), at a harmonic of the \
+                 line-pair frequency: it cannot be told from a pattern fixed along the lines, \
+                 so it is not named a vibration",
+                v.frequency_hz,
+                v.amplitude_along_m * 1e12,
                 v.false_alarm_probability,
                 self.slices
             ),
@@ -542,16 +611,19 @@ impl SubFeatureView {
 
 impl crate::DiagnosisReport {
     /// Adds the image view below one feature. A vibration found there is one of the named
-    /// effects: a verdict of `no_gap` becomes `explained`, and the verdict's words lead
-    /// with it (the position gap numbers are unchanged: the positions do not see it).
+    /// effects: a verdict of `no_gap` becomes `explained` and names the vibration first
+    /// (what the positions added there stayed within the floor), and the verdict's words
+    /// lead with it (the position gap numbers are unchanged: the positions do not see it).
     pub fn with_sub_feature_view(mut self, view: SubFeatureView) -> Self {
         if view.vibration_found {
             let v = &mut self.verdict_details;
+            let vibration = crate::Candidate::Vibration;
             if v.kind == crate::VerdictKind::NoGap {
                 v.kind = crate::VerdictKind::Explained;
-            }
-            if !v.effects.contains(&crate::Candidate::Vibration) {
-                v.effects.push(crate::Candidate::Vibration);
+                v.effects.retain(|c| *c != vibration);
+                v.effects.insert(0, vibration);
+            } else if !v.effects.contains(&vibration) {
+                v.effects.push(vibration);
             }
             v.summary = format!("{}. {}", capitalised(&view.describe()), v.summary);
             self.verdict = v.kind;
@@ -567,4 +639,20 @@ fn capitalised(text: &str) -> String {
         .next()
         .map(|c| c.to_uppercase().chain(chars).collect())
         .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn harmonics_of_the_line_pair_frequency_are_locked_to_the_raster() {
+        // 0.12 s lines: line pairs at 4.1667 Hz; a 92 s record resolves 0.011 Hz.
+        let (line, span) = (0.12, 92.0);
+        assert!(is_raster_locked(4.1667, line, span));
+        assert!(is_raster_locked(3.0 * 4.1667 + 0.01, line, span));
+        assert!(!is_raster_locked(4.1667 + 0.05, line, span));
+        assert!(!is_raster_locked(0.9, line, span));
+        assert!(!is_raster_locked(37.0, line, span));
+    }
 }

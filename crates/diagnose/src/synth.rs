@@ -16,8 +16,8 @@
 //! map folds along the slow axis, the simulator's feature location does not converge and
 //! features are lost (a limitation of the continuous-time inversion, not of the diagnosis).
 
-use dhct_features::{Feature, FeatureOptions, FitStatus, find_features_in_pair};
-use dhct_scan::{ScanDirection, ScanGeometry, ScanPass};
+use dhct_features::{Feature, FeatureOptions, FeatureSet, FitStatus, find_features_in_pair};
+use dhct_scan::{ScanDirection, ScanGeometry, ScanPair, ScanPass};
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, HysteresisLaw,
     LineDrift, LogCreep, ScanCoupling, SlowScanHysteresis, StrainBubble, TelegraphTip,
@@ -911,6 +911,36 @@ fn true_sites(
 /// The full chain: rendered images, then feature finding with the pipeline's default line
 /// levelling (`"lattice"`, as `PipelineOptions::for_lattice` sets it).
 pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, DiagnoseError> {
+    let (pair, sets, _) = render_and_find(config)?;
+    Ok(scan_of(&pair, sets))
+}
+
+/// A rendered scan: its features and the image view below one feature.
+#[derive(Debug, Clone)]
+pub struct RenderedScan {
+    /// The features found in the rendered images.
+    pub scan: SimulatedScan,
+    /// The sub-feature view of the images, as `dhct diagnose` computes it.
+    pub sub_feature: Option<crate::SubFeatureView>,
+}
+
+/// [`simulate_images`] with the sub-feature view of the rendered images
+/// ([`crate::sub_feature_view_of_pair`]), so that a validation sees what `dhct diagnose`
+/// reports.
+pub fn simulate_rendered(config: &SimulationConfig) -> Result<RenderedScan, DiagnoseError> {
+    let (pair, sets, options) = render_and_find(config)?;
+    let sub_feature =
+        crate::sub_feature_view_of_pair(&pair, &sets.iter().collect::<Vec<_>>(), &options, None);
+    Ok(RenderedScan {
+        scan: scan_of(&pair, sets),
+        sub_feature,
+    })
+}
+
+/// Renders `config`'s images and finds their features.
+fn render_and_find(
+    config: &SimulationConfig,
+) -> Result<(ScanPair, Vec<FeatureSet>, FeatureOptions), DiagnoseError> {
     let output = Simulation::from_config(config)?.run()?;
     let lattice = config.surface.lattice.build()?;
     let options = FeatureOptions {
@@ -918,6 +948,11 @@ pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, Diagn
         ..FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
     };
     let sets = find_features_in_pair(&output.pair, &options)?;
+    Ok((output.pair, sets, options))
+}
+
+/// The pair's features as a [`SimulatedScan`].
+fn scan_of(pair: &ScanPair, sets: Vec<FeatureSet>) -> SimulatedScan {
     let mut trace = Vec::new();
     let mut retrace = Vec::new();
     for set in sets {
@@ -926,11 +961,11 @@ pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, Diagn
             ScanPass::Retrace => retrace = set.features,
         }
     }
-    Ok(SimulatedScan {
-        geometry: output.pair.geometry().clone(),
+    SimulatedScan {
+        geometry: pair.geometry().clone(),
         trace,
         retrace,
-    })
+    }
 }
 
 #[cfg(test)]

@@ -100,8 +100,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::synth::{
-    ForeignEffect, PositionNoise, ValidationCase, ValidationSet, simulate_images,
-    simulate_positions_with,
+    ForeignEffect, PositionNoise, ValidationCase, ValidationSet, simulate_positions_with,
+    simulate_rendered,
 };
 use crate::verdict::VerdictKind;
 use crate::{Candidate, DiagnoseOptions, diagnose};
@@ -534,20 +534,25 @@ fn run_case(
     options: &ValidationOptions,
     seed: u64,
 ) -> CaseResult {
+    // The image path also reads the images below one feature, as `dhct diagnose` does.
     let scan = if images {
-        simulate_images(&case.config)
+        simulate_rendered(&case.config).map(|r| (r.scan, r.sub_feature))
     } else {
         let noise = PositionNoise::of_set(case.set, options.noise_m);
-        simulate_positions_with(&case.config, &noise, seed)
+        simulate_positions_with(&case.config, &noise, seed).map(|scan| (scan, None))
     };
-    let result = scan.and_then(|scan| {
+    let result = scan.and_then(|(scan, view)| {
         let lattice = case.config.surface.lattice.build()?;
-        diagnose(
+        let report = diagnose(
             &scan.inputs(),
             &scan.geometry,
             lattice.as_ref(),
             &options.diagnose,
-        )
+        )?;
+        Ok(match view {
+            Some(view) => report.with_sub_feature_view(view),
+            None => report,
+        })
     });
     // The floor the effect's visibility is measured against: the localisation noise
     // simulated on the position path, the floor the diagnosis found on the image path.
@@ -591,7 +596,7 @@ fn run_case(
     };
     match result {
         Ok(report) => {
-            out.identified = report.identified();
+            out.identified = report.verdict_details.effects.clone();
             out.verdict = Some(report.verdict);
             out.remaining = report
                 .verdict_details

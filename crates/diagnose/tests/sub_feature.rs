@@ -3,9 +3,13 @@
 //! pairs, 4.4 vibration periods apart) but shears every feature line by line; the slices
 //! find it. The same scan without the vibration must not get one.
 
-use dhct_diagnose::{PassImage, SubFeatureView, sub_feature_view};
+use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_rendered};
+use dhct_diagnose::{
+    Candidate, DiagnoseOptions, DiagnosisReport, PassImage, SubFeatureView, diagnose,
+    sub_feature_view,
+};
 use dhct_features::{FeatureOptions, find_features_in_pair, signed_flattened};
-use dhct_simulate::{Simulation, SimulationConfig};
+use dhct_simulate::{EffectConfig, Simulation, SimulationConfig};
 
 /// Graphite 512² over 6 nm at 100 nm/s (120 ms per line pair), drift, creep, power-law
 /// hysteresis, white + pink noise and line offsets; `vibration` is appended as is.
@@ -139,4 +143,65 @@ fn without_a_vibration_none_is_reported() {
     println!("{}", quiet.describe());
     assert!(!quiet.vibration_found, "{quiet:?}");
     assert!(quiet.spread_over_noise.iter().all(|s| s.is_finite()));
+}
+
+/// The rendered development scan of `case` with its vibration (if any) at `hz`: the
+/// diagnosis as `dhct diagnose` makes it, positions and the view below one feature.
+fn rendered_diagnosis(mut case: ValidationCase, hz: f64) -> DiagnosisReport {
+    for e in &mut case.config.effects {
+        if let EffectConfig::Vibration(v) = e {
+            v.frequency_hz = hz;
+        }
+    }
+    let rendered = simulate_rendered(&case.config).expect("renders");
+    let lattice = case.config.surface.lattice.build().unwrap();
+    let scan = &rendered.scan;
+    let report = diagnose(
+        &scan.inputs(),
+        &scan.geometry,
+        lattice.as_ref(),
+        &DiagnoseOptions::default(),
+    )
+    .expect("diagnoses");
+    report.with_sub_feature_view(rendered.sub_feature.expect("enough slices"))
+}
+
+/// A 0.9 Hz vibration (3–5 pm) on the image-path development scans: a feature spans about
+/// one period of it, so the positions average it out (the held-out `rendered-2` set's
+/// four misses); every line's slices still move with it.
+#[test]
+fn a_vibration_a_feature_averages_out_is_named_from_the_slices() {
+    let case = ValidationCase::single(
+        Candidate::Vibration,
+        61001,
+        ValidationSet::RenderedDevelopment,
+    );
+    let report = rendered_diagnosis(case, 0.9);
+    let view = report.sub_feature.as_ref().unwrap();
+    println!("{}", view.describe());
+    assert_eq!(
+        report.verdict_details.effects.first(),
+        Some(&Candidate::Vibration)
+    );
+    let v = view.strongest.as_ref().unwrap();
+    assert!((v.frequency_hz - 0.9).abs() < 0.02 * 0.9, "{v:?}");
+    // 0.11 periods per 0.12 s line: each line moves across as a whole, so the amplitude
+    // across is not read.
+    assert!(
+        v.amplitude_across_m.is_none() && !view.across_measured,
+        "{v:?}"
+    );
+}
+
+/// The same scans without an effect: their slices show patterns tied to the lattice, the
+/// pixels and the raster that χ²₄ alone would call significant; none is named.
+#[test]
+fn effect_free_rendered_scans_get_no_vibration_from_the_slices() {
+    for seed in [61003, 61007] {
+        let case = ValidationCase::effect_free(seed, ValidationSet::RenderedDevelopment);
+        let report = rendered_diagnosis(case, 0.0);
+        let view = report.sub_feature.as_ref().unwrap();
+        println!("{seed}: {}", view.describe());
+        assert!(!view.vibration_found, "{view:?}");
+    }
 }
