@@ -5,10 +5,13 @@
 //! cargo run --release -p dhct-diagnose --example validate_set -- rendered-dev
 //! ```
 //! (set names as printed by the full sweep: `tuned`, `held-out`, `foreign-2`,
-//! `rendered-dev`, `rendered`, `rendered-2`, …).
+//! `rendered-dev`, `rendered`, `rendered-2`, `rendered-3`, …).
 
 use dhct_diagnose::synth::ValidationSet;
-use dhct_diagnose::{ValidationOptions, rendered_held_out, second_rendered_held_out, validate};
+use dhct_diagnose::{
+    ValidationOptions, rendered_held_out, second_rendered_held_out, third_rendered_held_out,
+    validate,
+};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let name = std::env::args().nth(1).ok_or("usage: validate_set SET")?;
@@ -25,6 +28,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if set == ValidationSet::SecondRendered {
         options.sets = vec![second_rendered_held_out()];
+    }
+    if set == ValidationSet::ThirdRendered {
+        options.sets = vec![third_rendered_held_out()];
     }
     let report = validate(&options);
     println!("{report}");

@@ -99,6 +99,6 @@ pub use sub_feature::{
 };
 pub use validate::{
     CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,
-    rendered_held_out, second_rendered_held_out, validate,
+    rendered_held_out, second_rendered_held_out, third_rendered_held_out, validate,
 };
 pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};

@@ -130,11 +130,17 @@ pub enum ValidationSet {
     /// [`ValidationSet::RenderedDevelopment`] with its own seeds, magnitudes 0.7–0.8 or
     /// 1.2–1.3 ×, vibration 0.8–1.0 Hz.
     SecondRendered,
+    /// Issue 17's third held-out set on the image path, fixed (2026-11-27) after the second
+    /// was run and the images below one feature joined the image-path validation, before
+    /// its first run: as [`ValidationSet::RenderedDevelopment`] with its own seeds,
+    /// magnitudes 0.75–0.85 or 1.15–1.3 ×, vibration 1.0–1.6 Hz (a band no image-path
+    /// set has).
+    ThirdRendered,
 }
 
 impl ValidationSet {
     /// Every set, in report order.
-    pub const ALL: [ValidationSet; 11] = [
+    pub const ALL: [ValidationSet; 12] = [
         ValidationSet::Tuned,
         ValidationSet::Development,
         ValidationSet::SecondDevelopment,
@@ -146,6 +152,7 @@ impl ValidationSet {
         ValidationSet::RenderedDevelopment,
         ValidationSet::Rendered,
         ValidationSet::SecondRendered,
+        ValidationSet::ThirdRendered,
     ];
 
     /// Short name.
@@ -162,6 +169,7 @@ impl ValidationSet {
             ValidationSet::RenderedDevelopment => "rendered-dev",
             ValidationSet::Rendered => "rendered",
             ValidationSet::SecondRendered => "rendered-2",
+            ValidationSet::ThirdRendered => "rendered-3",
         }
     }
 
@@ -174,6 +182,7 @@ impl ValidationSet {
                 | ValidationSet::SecondForeign
                 | ValidationSet::Rendered
                 | ValidationSet::SecondRendered
+                | ValidationSet::ThirdRendered
         )
     }
 
@@ -185,6 +194,7 @@ impl ValidationSet {
             ValidationSet::RenderedDevelopment
                 | ValidationSet::Rendered
                 | ValidationSet::SecondRendered
+                | ValidationSet::ThirdRendered
         )
     }
 
@@ -197,6 +207,7 @@ impl ValidationSet {
                 | ValidationSet::RenderedDevelopment
                 | ValidationSet::Rendered
                 | ValidationSet::SecondRendered
+                | ValidationSet::ThirdRendered
         )
     }
 
@@ -210,6 +221,7 @@ impl ValidationSet {
                 | ValidationSet::RenderedDevelopment
                 | ValidationSet::Rendered
                 | ValidationSet::SecondRendered
+                | ValidationSet::ThirdRendered
         )
     }
 }
@@ -400,6 +412,7 @@ fn magnitude(rng: &mut ChaCha8Rng, set: ValidationSet) -> f64 {
         ValidationSet::SecondForeign => ((0.7, 0.8), (1.2, 1.3)),
         ValidationSet::Rendered => ((0.75, 0.85), (1.15, 1.25)),
         ValidationSet::SecondRendered => ((0.7, 0.8), (1.2, 1.3)),
+        ValidationSet::ThirdRendered => ((0.75, 0.85), (1.15, 1.3)),
     };
     let (lo, hi) = if rng.random::<bool>() { low } else { high };
     uniform(rng, lo, hi)
@@ -515,6 +528,7 @@ fn add_effect(
                 ValidationSet::RenderedDevelopment => uniform(rng, 0.5, 0.7),
                 ValidationSet::Rendered => uniform(rng, 0.3, 0.45),
                 ValidationSet::SecondRendered => uniform(rng, 0.8, 1.0),
+                ValidationSet::ThirdRendered => uniform(rng, 1.0, 1.6),
             },
             amplitude_m: [m * 4e-12, m * 3e-12],
             phase_rad: [

@@ -199,6 +199,20 @@ pub fn second_rendered_held_out() -> SetSeeds {
     }
 }
 
+/// Issue 17's third held-out set on the image path ([`ValidationSet::ThirdRendered`]),
+/// fixed here (2026-11-27) after [`second_rendered_held_out`] was run and the images below
+/// one feature joined the image-path validation, before its first run; to be run once,
+/// when the method is final. `validate_set rendered-3` runs it.
+pub fn third_rendered_held_out() -> SetSeeds {
+    SetSeeds {
+        set: ValidationSet::ThirdRendered,
+        seeds: vec![91001, 91002, 91003, 91004],
+        null_seeds: (92001..92041).collect(),
+        mixture_offset: 94000,
+        foreign_seeds: (93001..93006).collect(),
+    }
+}
+
 impl Default for ValidationOptions {
     fn default() -> Self {
         ValidationOptions {
