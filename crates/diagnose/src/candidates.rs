@@ -480,6 +480,11 @@ pub(crate) fn within_domain(
 /// Onsets searched per frame by the creep candidates' coarse grid.
 const ONSET_GRID: usize = 24;
 
+/// The coarse grid's step between creep onsets, seconds.
+pub(crate) fn onset_step(ctx: &Context) -> f64 {
+    frame_end(ctx) / ONSET_GRID as f64
+}
+
 /// The largest observation time (at least one line period), seconds.
 fn frame_end(ctx: &Context) -> f64 {
     ctx.observations

@@ -28,8 +28,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::candidates::{
-    Candidate, Context, Proposal, onset_proposal, onset_refinement, proposals, tip_proposal,
-    within_domain,
+    Candidate, Context, Proposal, onset_proposal, onset_refinement, onset_step, proposals,
+    tip_proposal, within_domain,
 };
 use crate::data::Observation;
 use crate::fit::{Fitted, fit_profiled, pinv_sym, weighted};
@@ -406,13 +406,18 @@ impl<'a> Baseline<'a> {
 /// screened coefficients and the number of shapes searched.
 type Screened = (Proposal, f64, Vec<f64>, usize);
 
+/// A proposal and its screened coefficients: where a full refit starts.
+type Start = (Proposal, Vec<f64>);
+
 /// A candidate's score, with what its full refit starts from: the best proposal, its
-/// screened coefficients and its complexity.
+/// screened coefficients and its complexity, and for a creep the best start in another
+/// basin of its onset ([`other_onset`]), refitted as well.
 struct Entry {
     scored: Scored,
     proposal: Option<Proposal>,
     beta: Vec<f64>,
     complexity: Complexity,
+    alternative: Option<Start>,
 }
 
 /// Scores every candidate in `candidates` on top of `current`; sorted best first.
@@ -430,13 +435,16 @@ pub(crate) fn round(
         sigma: current.sigma,
         residuals: &r_slice,
     };
-    let screened: Vec<Screened> = candidates
+    let screened: Vec<(Screened, Option<Start>)> = candidates
         .par_iter()
         .filter_map(|&c| screen_candidate(c, &ctx, &base))
         .collect();
     let mut scored: Vec<Entry> = screened
         .into_iter()
-        .map(|s| screened_entry(s, &base))
+        .map(|(s, alternative)| Entry {
+            alternative,
+            ..screened_entry(s, &base)
+        })
         .collect();
     scored.sort_by(|a, b| {
         a.scored
@@ -447,12 +455,13 @@ pub(crate) fn round(
     // Full refits of the best few.
     let top = options.refit_top.min(scored.len());
     let jtj_pinv = pinv_sym(&(base.j.transpose() * base.j));
-    let refits: Vec<Option<Fitted>> = scored[..top]
+    let refits: Vec<Option<(Fitted, String)>> = scored[..top]
         .par_iter()
         .map(|entry| refit_candidate(&base, entry, &jtj_pinv, options))
         .collect();
     for (entry, refit) in scored.iter_mut().zip(refits) {
-        let Some(f) = refit else { continue };
+        let Some((f, shape)) = refit else { continue };
+        entry.scored.score.shape = shape;
         rescore(&mut entry.scored, f, entry.complexity, &base);
     }
     rank(scored, options)
@@ -460,21 +469,24 @@ pub(crate) fn round(
 
 /// Screens every proposal of candidate `c` and keeps the one that gains the most; a tip
 /// change's best is then refined to the feature times near it, a creep onset around the
-/// best coarse grid point. `None` when the candidate has no proposal.
-fn screen_candidate(c: Candidate, ctx: &Context, base: &Baseline) -> Option<Screened> {
+/// best coarse grid point, and a creep also gets its best start in another basin of the
+/// onset ([`other_onset`]). `None` when the candidate has no proposal.
+fn screen_candidate(
+    c: Candidate,
+    ctx: &Context,
+    base: &Baseline,
+) -> Option<(Screened, Option<Start>)> {
     let current = base.current;
     let mut best: Option<(Proposal, f64, Vec<f64>)> = None;
     let all = proposals(c, ctx);
     let mut searched = all.len();
-    // Screens `p` and keeps it if it gains the most so far.
-    let keep_best = |best: &mut Option<(Proposal, f64, Vec<f64>)>, p: Proposal| {
-        let (gain, beta) = screen(&base.q, &base.r, &p.columns);
-        if best.as_ref().is_none_or(|b| gain > b.1) {
-            *best = Some((p, gain, beta));
-        }
-    };
+    let mut onsets: Vec<(f64, (f64, f64))> = Vec::new();
     for p in all {
-        keep_best(&mut best, p);
+        let (gain, beta) = screen(&base.q, &base.r, &p.columns);
+        if let Some(onset) = p.onset {
+            onsets.push((gain, onset));
+        }
+        keep_if_best(&mut best, p, gain, beta);
     }
     // A tip change is refined to the feature times near the best line start.
     if c == Candidate::TipChange
@@ -488,23 +500,83 @@ fn screen_candidate(c: Candidate, ctx: &Context, base: &Baseline) -> Option<Scre
         searched += times.len();
         for tt in times {
             if let Some(p) = tip_proposal(ctx, tt + 1e-9) {
-                keep_best(&mut best, p);
+                let (gain, beta) = screen(&base.q, &base.r, &p.columns);
+                keep_if_best(&mut best, p, gain, beta);
             }
         }
     }
     // A creep onset is refined around the best coarse grid point.
+    let mut alternative = None;
     if let Some((p, _, _)) = &best
-        && let Some((tau, start)) = p.onset
+        && let Some(first) = p.onset
     {
-        let finer = onset_refinement(c, tau, start, ctx);
-        searched += finer.len();
-        for (tau, start) in finer {
-            if let Some(p) = onset_proposal(c, tau, start, ctx) {
-                keep_best(&mut best, p);
+        searched += refine_onset(c, first, ctx, base, &mut best);
+        if let Some(other) = other_onset(first, &onsets, ctx) {
+            let mut second = None;
+            searched += 1 + refine_onset(c, other, ctx, base, &mut second);
+            if let Some(p) = onset_proposal(c, other.0, other.1, ctx) {
+                let (gain, beta) = screen(&base.q, &base.r, &p.columns);
+                keep_if_best(&mut second, p, gain, beta);
             }
+            alternative = second.map(|(p, _, beta)| (p, beta));
         }
     }
-    best.map(|(p, gain, beta)| (p, gain, beta, searched))
+    best.map(|(p, gain, beta)| ((p, gain, beta, searched), alternative))
+}
+
+/// Keeps `p` (screened `gain`, coefficients `beta`) in `best` if it gains the most so far.
+fn keep_if_best(
+    best: &mut Option<(Proposal, f64, Vec<f64>)>,
+    p: Proposal,
+    gain: f64,
+    beta: Vec<f64>,
+) {
+    if best.as_ref().is_none_or(|b| gain > b.1) {
+        *best = Some((p, gain, beta));
+    }
+}
+
+/// Screens the finer onsets around `onset` (`(time constant, start)`, seconds) of creep
+/// candidate `c` into `best`; returns how many were searched.
+fn refine_onset(
+    c: Candidate,
+    onset: (f64, f64),
+    ctx: &Context,
+    base: &Baseline,
+    best: &mut Option<(Proposal, f64, Vec<f64>)>,
+) -> usize {
+    let finer = onset_refinement(c, onset.0, onset.1, ctx);
+    let searched = finer.len();
+    for (tau, start) in finer {
+        if let Some(p) = onset_proposal(c, tau, start, ctx) {
+            let (gain, beta) = screen(&base.q, &base.r, &p.columns);
+            keep_if_best(best, p, gain, beta);
+        }
+    }
+    searched
+}
+
+/// Coarse onset steps by which a second start must differ from the first.
+const OTHER_ONSET_STEPS: f64 = 2.0;
+
+/// The coarse grid point (of `onsets`: screened gain, `(time constant, start)`) that gains
+/// the most with a start more than [`OTHER_ONSET_STEPS`] coarse steps from `first`'s. The
+/// linearised screening is taken about a base model that has already absorbed part of
+/// the creep, so its best start can lie in the wrong basin (measured: an exponential
+/// creep's screening best 25 s before its true onset, whose refit stayed there with half
+/// the χ² reduction a refit from near the true onset reached); refitting from the best
+/// start elsewhere too leaves the choice to the full fit.
+fn other_onset(
+    first: (f64, f64),
+    onsets: &[(f64, (f64, f64))],
+    ctx: &Context,
+) -> Option<(f64, f64)> {
+    let step = onset_step(ctx);
+    onsets
+        .iter()
+        .filter(|(_, (_, start))| (start - first.1).abs() > OTHER_ONSET_STEPS * step)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, onset)| *onset)
 }
 
 /// The distinct feature times (s) within `line_period` of `t`, in increasing order.
@@ -558,20 +630,50 @@ fn screened_entry((p, gain, beta, searched): Screened, base: &Baseline) -> Entry
         proposal: Some(p),
         beta,
         complexity,
+        alternative: None,
     }
 }
 
-/// The full refit of an entry's proposal from [`refit_start`] (base `t0` profiled); `None`
-/// when it fails or leaves the candidate's domain (it then describes another effect).
+/// The full refit of an entry's proposal, and of its alternative start if it has one:
+/// the better of the two, with the shape of the proposal it started from. `None` when
+/// both fail or leave the candidate's domain.
 fn refit_candidate(
     base: &Baseline,
     entry: &Entry,
     jtj_pinv: &DMatrix<f64>,
     options: &SelectionOptions,
+) -> Option<(Fitted, String)> {
+    let starts = entry
+        .proposal
+        .as_ref()
+        .map(|p| (p, entry.beta.as_slice()))
+        .into_iter()
+        .chain(
+            entry
+                .alternative
+                .as_ref()
+                .map(|(p, beta)| (p, beta.as_slice())),
+        );
+    let chi2 = |f: &Fitted| weighted(&f.residuals, base.current.sigma).norm_squared();
+    starts
+        .filter_map(|(p, beta)| {
+            refit_from(base, p, beta, jtj_pinv, options).map(|f| (f, p.shape.clone()))
+        })
+        .min_by(|a, b| chi2(&a.0).total_cmp(&chi2(&b.0)))
+}
+
+/// The full refit of proposal `p` (screened coefficients `beta`) from [`refit_start`]
+/// (base `t0` profiled); `None` when it fails or leaves the candidate's domain (it then
+/// describes another effect).
+fn refit_from(
+    base: &Baseline,
+    p: &Proposal,
+    beta: &[f64],
+    jtj_pinv: &DMatrix<f64>,
+    options: &SelectionOptions,
 ) -> Option<Fitted> {
     let current = base.current;
-    let p = entry.proposal.as_ref()?;
-    let model = refit_start(current, p, &entry.beta, base.j, jtj_pinv)?;
+    let model = refit_start(current, p, beta, base.j, jtj_pinv)?;
     let r = fit_profiled(
         model,
         current.geometry,

@@ -641,7 +641,14 @@ fn run_case(
                 _ => false,
             },
             CaseKind::Mixture => {
-                let mut a: Vec<Candidate> = out.identified.iter().take(2).copied().collect();
+                // The first two distinct effects named (a candidate may be named more than
+                // once: several tip jumps).
+                let mut a: Vec<Candidate> = Vec::new();
+                for c in &out.identified {
+                    if !a.contains(c) && a.len() < 2 {
+                        a.push(*c);
+                    }
+                }
                 let mut b = case.truth.clone();
                 a.sort();
                 b.sort();
