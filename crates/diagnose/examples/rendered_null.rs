@@ -36,6 +36,14 @@ fn levelling(name: &str) -> Option<LineCorrection> {
 }
 
 /// The value of `key=…` among `args`, or `default`.
+/// The image-path set named by `set=NAME` (default `rendered-dev`).
+fn image_set(args: &[String]) -> ValidationSet {
+    args.iter()
+        .find_map(|a| a.strip_prefix("set="))
+        .and_then(|name| ValidationSet::ALL.into_iter().find(|s| s.name() == name))
+        .unwrap_or(ValidationSet::RenderedDevelopment)
+}
+
 fn keyed(args: &[String], key: &str, default: u64) -> u64 {
     args.iter()
         .find_map(|s| s.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
@@ -132,8 +140,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .into_iter()
                 .filter(|c| effect == Some(c.name()))
                 .collect();
-            let mut case =
-                ValidationCase::with_effects(&effects, seed, ValidationSet::RenderedDevelopment);
+            let mut case = ValidationCase::with_effects(&effects, seed, image_set(&args));
             let vibration_mhz = keyed(&args, "vibration_mhz", 0);
             for e in &mut case.config.effects {
                 if let (dhct_simulate::EffectConfig::Vibration(v), true) = (e, vibration_mhz > 0) {

@@ -94,8 +94,8 @@ pub use report::{
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
 pub use sub_feature::{
-    MIN_PERIODS_PER_LINE_ACROSS, PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration,
-    SubFeatureView, sub_feature_view,
+    MAX_SCATTER_LEFT, MIN_PERIODS_PER_LINE_ACROSS, OUTLIER_READING, PassImage,
+    SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView, sub_feature_view,
 };
 pub use validate::{
     CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,

@@ -205,3 +205,23 @@ fn effect_free_rendered_scans_get_no_vibration_from_the_slices() {
         assert!(!view.vibration_found, "{view:?}");
     }
 }
+
+/// A scan with step edges and a height coupling (rendered-3 #91003, looked at after that
+/// set's one run): beside the steps the slices scatter 7 × their fit noise along the lines,
+/// and a 13 Hz peak among them passed every other test. A vibration must explain why the
+/// slices scatter; this one leaves them at 6 ×, so none is named.
+#[test]
+fn slices_broken_by_step_edges_name_no_vibration() {
+    let case = ValidationCase::single(
+        Candidate::HeightCoupling,
+        91003,
+        ValidationSet::ThirdRendered,
+    );
+    let report = rendered_diagnosis(case, 0.0);
+    let view = report.sub_feature.as_ref().unwrap();
+    println!("{}", view.describe());
+    let v = view.strongest.as_ref().unwrap();
+    assert!(v.scatter_left_along > 3.0, "{v:?}");
+    assert!(!view.vibration_found, "{view:?}");
+    assert!(view.describe().contains("something else moves them"));
+}
