@@ -51,7 +51,7 @@ pub struct DiagnoseOptions {
     /// Compute the binned profiles, spectrum and change points.
     pub locate: bool,
     /// Lower the floor to the trace/retrace spread where the fits' uncertainty exceeds it
-    /// 1.5 times ([`crate::noise`]); off only where that spread is not noise (positions
+    /// 1.5 times ([`NoiseFloor`]); off only where that spread is not noise (positions
     /// simulated without noise).
     pub lower_floor_to_trace_retrace: bool,
 }

@@ -94,11 +94,13 @@ pub use report::{
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};
 pub use sub_feature::{
-    MAX_SCATTER_LEFT, MIN_PERIODS_PER_LINE_ACROSS, OUTLIER_READING, PassImage,
-    SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView, sub_feature_view,
+    ACROSS_SCATTER_LIMIT, MAX_SCATTER_LEFT, MIN_PASS_AGREEMENT, MIN_PERIODS_PER_LINE_ACROSS,
+    OUTLIER_READING, PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView,
+    sub_feature_view,
 };
 pub use validate::{
-    CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions, ValidationReport,
-    rendered_held_out, second_rendered_held_out, third_rendered_held_out, validate,
+    ABSORBED_VISIBILITY, CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions,
+    ValidationReport, rendered_held_out, second_rendered_held_out, third_rendered_held_out,
+    validate,
 };
 pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};
