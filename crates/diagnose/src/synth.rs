@@ -701,6 +701,16 @@ fn feature(
 }
 
 impl SimulatedScan {
+    /// The diagnosis of this scan of `config` (its lattice) with `options`.
+    pub fn diagnosed(
+        &self,
+        config: &SimulationConfig,
+        options: &crate::DiagnoseOptions,
+    ) -> Result<crate::DiagnosisReport, DiagnoseError> {
+        let lattice = config.surface.lattice.build()?;
+        crate::diagnose(&self.inputs(), &self.geometry, lattice.as_ref(), options)
+    }
+
     /// Both passes as inputs of [`crate::diagnose`] (no masks).
     pub fn inputs(&self) -> [dhct_distortion::PassInput<'_>; 2] {
         [

@@ -118,7 +118,7 @@ use crate::synth::{
     simulate_rendered,
 };
 use crate::verdict::VerdictKind;
-use crate::{Candidate, DiagnoseOptions, diagnose};
+use crate::{Candidate, DiagnoseOptions};
 
 /// The seeds of one validation set.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -571,13 +571,7 @@ fn run_case(
         simulate_positions_with(&case.config, &noise, seed).map(|scan| (scan, None))
     };
     let result = scan.and_then(|(scan, view)| {
-        let lattice = case.config.surface.lattice.build()?;
-        let report = diagnose(
-            &scan.inputs(),
-            &scan.geometry,
-            lattice.as_ref(),
-            &options.diagnose,
-        )?;
+        let report = scan.diagnosed(&case.config, &options.diagnose)?;
         Ok(match view {
             Some(view) => report.with_sub_feature_view(view),
             None => report,
@@ -684,7 +678,6 @@ fn noise_free_visibility(case: &ValidationCase, floor_m: [f64; 2]) -> Option<f64
         f.x_sigma_px = floor_m[0] / px;
         f.y_sigma_px = floor_m[1] / py;
     }
-    let lattice = case.config.surface.lattice.build().ok()?;
     let options = DiagnoseOptions {
         candidates: Vec::new(),
         locate: false,
@@ -692,7 +685,7 @@ fn noise_free_visibility(case: &ValidationCase, floor_m: [f64; 2]) -> Option<f64
         lower_floor_to_trace_retrace: false,
         ..DiagnoseOptions::default()
     };
-    let report = diagnose(&scan.inputs(), &scan.geometry, lattice.as_ref(), &options).ok()?;
+    let report = scan.diagnosed(&case.config, &options).ok()?;
     Some(report.shrink.before)
 }
 

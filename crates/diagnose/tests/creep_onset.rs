@@ -6,7 +6,7 @@
 //! candidates are also refitted from their best onset in another basin.
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images};
-use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose};
+use dhct_diagnose::{Candidate, DiagnoseOptions};
 
 #[test]
 fn an_exponential_creep_is_refit_from_its_onset_in_another_basin() {
@@ -16,14 +16,9 @@ fn an_exponential_creep_is_refit_from_its_onset_in_another_basin() {
         ValidationSet::SecondRendered,
     );
     let scan = simulate_images(&case.config).expect("renders");
-    let lattice = case.config.surface.lattice.build().unwrap();
-    let report = diagnose(
-        &scan.inputs(),
-        &scan.geometry,
-        lattice.as_ref(),
-        &DiagnoseOptions::default(),
-    )
-    .expect("diagnoses");
+    let report = scan
+        .diagnosed(&case.config, &DiagnoseOptions::default())
+        .expect("diagnoses");
     println!("{report}");
     assert_eq!(report.top(), Some(Candidate::ExponentialCreep));
     // The fit, and the start it reports, are those of the true onset's basin.

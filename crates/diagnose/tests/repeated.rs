@@ -2,19 +2,13 @@
 //! its own time and jump (issue 17: "several tip jumps"); with one jump only one is added.
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_positions};
-use dhct_diagnose::{Candidate, DiagnoseOptions, DiagnosisReport, VerdictKind, diagnose};
+use dhct_diagnose::{Candidate, DiagnoseOptions, DiagnosisReport, VerdictKind};
 use dhct_simulate::{EffectConfig, SimulationConfig};
 
 fn diagnosed(config: &SimulationConfig) -> DiagnosisReport {
     let scan = simulate_positions(config, 2e-12, 11).expect("simulates");
-    let lattice = config.surface.lattice.build().expect("lattice");
-    diagnose(
-        &scan.inputs(),
-        &scan.geometry,
-        lattice.as_ref(),
-        &DiagnoseOptions::default(),
-    )
-    .expect("diagnoses")
+    scan.diagnosed(config, &DiagnoseOptions::default())
+        .expect("diagnoses")
 }
 
 fn tip_changes(report: &DiagnosisReport) -> usize {

@@ -5,8 +5,7 @@
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_rendered};
 use dhct_diagnose::{
-    Candidate, DiagnoseOptions, DiagnosisReport, PassImage, SubFeatureView, diagnose,
-    sub_feature_view,
+    Candidate, DiagnoseOptions, DiagnosisReport, PassImage, SubFeatureView, sub_feature_view,
 };
 use dhct_features::{FeatureOptions, find_features_in_pair, signed_flattened};
 use dhct_simulate::{EffectConfig, Simulation, SimulationConfig};
@@ -154,15 +153,10 @@ fn rendered_diagnosis(mut case: ValidationCase, hz: f64) -> DiagnosisReport {
         }
     }
     let rendered = simulate_rendered(&case.config).expect("renders");
-    let lattice = case.config.surface.lattice.build().unwrap();
-    let scan = &rendered.scan;
-    let report = diagnose(
-        &scan.inputs(),
-        &scan.geometry,
-        lattice.as_ref(),
-        &DiagnoseOptions::default(),
-    )
-    .expect("diagnoses");
+    let report = rendered
+        .scan
+        .diagnosed(&case.config, &DiagnoseOptions::default())
+        .expect("diagnoses");
     report.with_sub_feature_view(rendered.sub_feature.expect("enough slices"))
 }
 

@@ -5,7 +5,7 @@
 //! drift sits at the floor whichever way the drift runs.
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_positions};
-use dhct_diagnose::{DiagnoseOptions, VerdictKind, diagnose};
+use dhct_diagnose::{DiagnoseOptions, VerdictKind};
 use dhct_simulate::EffectConfig;
 
 /// The base model's RMS residual per axis in units of the floor, and the verdict, for an
@@ -18,14 +18,9 @@ fn at_floor(velocity_y: f64) -> ([f64; 2], VerdictKind) {
         }
     }
     let scan = simulate_positions(&case.config, 2e-12, 3).expect("simulates");
-    let lattice = case.config.surface.lattice.build().expect("lattice");
-    let report = diagnose(
-        &scan.inputs(),
-        &scan.geometry,
-        lattice.as_ref(),
-        &DiagnoseOptions::default(),
-    )
-    .expect("diagnoses");
+    let report = scan
+        .diagnosed(&case.config, &DiagnoseOptions::default())
+        .expect("diagnoses");
     let (rms, floor) = (report.base.gap.rms_m, report.noise.sigma_m);
     ([rms[0] / floor[0], rms[1] / floor[1]], report.verdict)
 }

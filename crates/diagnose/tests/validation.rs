@@ -16,7 +16,7 @@
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images};
 use dhct_diagnose::{
-    Candidate, CaseKind, DiagnoseOptions, SetSeeds, ValidationOptions, VerdictKind, diagnose,
+    Candidate, CaseKind, DiagnoseOptions, SetSeeds, ValidationOptions, VerdictKind,
     rendered_held_out, second_rendered_held_out, validate,
 };
 
@@ -174,14 +174,9 @@ fn full_image_path_identifies_effects() {
     for (candidate, seed) in [(Candidate::TipChange, 3), (Candidate::LineDrift, 4)] {
         let case = ValidationCase::single(candidate, seed, ValidationSet::Tuned);
         let scan = simulate_images(&case.config).expect("simulates");
-        let lattice = case.config.surface.lattice.build().expect("lattice");
-        let report = diagnose(
-            &scan.inputs(),
-            &scan.geometry,
-            lattice.as_ref(),
-            &DiagnoseOptions::default(),
-        )
-        .expect("diagnoses");
+        let report = scan
+            .diagnosed(&case.config, &DiagnoseOptions::default())
+            .expect("diagnoses");
         println!("{}:\n{report}", case.name);
         assert_eq!(report.top(), Some(candidate));
         // On rendered images the gap closes by at least half but not to the 1.2 × floor of
