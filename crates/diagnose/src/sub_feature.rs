@@ -427,9 +427,11 @@ fn remove_shape_mismatch(slices: &mut Vec<Slice>) -> [f64; 2] {
 
 /// A slice's reading further than this many of its (scatter-raised) σ from its offset's
 /// median is left out of the spectrum. A vibration moves every slice by a few σ at most;
-/// a slice beside a step edge or a defect reads tens of σ, and a few of those, at
-/// whatever times they fall, raise false peaks (measured: a 13 Hz, 47 pm "vibration" on a
-/// rendered scan with a step edge, slice scatter 7 × 87 their fit noise).
+/// a slice beside a step edge or a defect can read tens of σ, and a few such readings, at
+/// whatever times they fall, would weigh more in the spectrum than all the others. (Where
+/// many slices are broken, as beside the step edges of a rendered scan that scatter 7 × 87
+/// their fit noise, this is not enough: [`MAX_SCATTER_LEFT`] is what keeps a peak among
+/// them from being named.)
 pub const OUTLIER_READING: f64 = 5.0;
 
 /// Leaves out of the spectrum each reading (one axis of a slice) beyond
