@@ -151,7 +151,8 @@ struct Slice {
     d_px: [f64; 2],
     /// Its 1σ, pixels.
     sigma_px: [f64; 2],
-    /// Bin key: pass and the line's offset from the feature centre.
+    /// Bin key: pass, the line's offset from the feature centre and the centre's phase
+    /// within its pixel along the lines.
     bin: (bool, i64, i64),
     /// Line key: pass and line number.
     line: (bool, i64),

@@ -948,6 +948,22 @@ pub struct RenderedScan {
     pub sub_feature: Option<crate::SubFeatureView>,
 }
 
+impl RenderedScan {
+    /// The diagnosis of this scan of `config` with `options`, as `dhct diagnose` makes
+    /// it: the feature positions, then the view below one feature added.
+    pub fn diagnosed(
+        &self,
+        config: &SimulationConfig,
+        options: &crate::DiagnoseOptions,
+    ) -> Result<crate::DiagnosisReport, DiagnoseError> {
+        let report = self.scan.diagnosed(config, options)?;
+        Ok(match &self.sub_feature {
+            Some(view) => report.with_sub_feature_view(view.clone()),
+            None => report,
+        })
+    }
+}
+
 /// [`simulate_images`] with the sub-feature view of the rendered images
 /// ([`crate::sub_feature_view_of_pair`]), so that a validation sees what `dhct diagnose`
 /// reports.

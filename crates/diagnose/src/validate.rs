@@ -564,19 +564,13 @@ fn run_case(
     seed: u64,
 ) -> CaseResult {
     // The image path also reads the images below one feature, as `dhct diagnose` does.
-    let scan = if images {
-        simulate_rendered(&case.config).map(|r| (r.scan, r.sub_feature))
+    let result = if images {
+        simulate_rendered(&case.config).and_then(|r| r.diagnosed(&case.config, &options.diagnose))
     } else {
         let noise = PositionNoise::of_set(case.set, options.noise_m);
-        simulate_positions_with(&case.config, &noise, seed).map(|scan| (scan, None))
+        simulate_positions_with(&case.config, &noise, seed)
+            .and_then(|scan| scan.diagnosed(&case.config, &options.diagnose))
     };
-    let result = scan.and_then(|(scan, view)| {
-        let report = scan.diagnosed(&case.config, &options.diagnose)?;
-        Ok(match view {
-            Some(view) => report.with_sub_feature_view(view),
-            None => report,
-        })
-    });
     // The floor the effect's visibility is measured against: the localisation noise
     // simulated on the position path, the floor the diagnosis found on the image path.
     let floor_m = match (&result, images) {

@@ -5,9 +5,9 @@
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_rendered};
 use dhct_diagnose::{
-    Candidate, DiagnoseOptions, DiagnosisReport, PassImage, SubFeatureView, sub_feature_view,
+    Candidate, DiagnoseOptions, DiagnosisReport, SubFeatureView, sub_feature_view_of_pair,
 };
-use dhct_features::{FeatureOptions, find_features_in_pair, signed_flattened};
+use dhct_features::{FeatureOptions, find_features_in_pair};
 use dhct_simulate::{EffectConfig, Simulation, SimulationConfig};
 
 /// Graphite 512² over 6 nm at 100 nm/s (120 ms per line pair), drift, creep, power-law
@@ -67,24 +67,8 @@ fn view_of(config: &SimulationConfig, passes: usize) -> SubFeatureView {
     let lattice = config.surface.lattice.build().unwrap();
     let options = FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance());
     let sets = find_features_in_pair(&output.pair, &options).unwrap();
-    let images: Vec<_> = sets
-        .iter()
-        .map(|set| {
-            let raw = &output.pair.image(set.pass).unwrap().z;
-            signed_flattened(raw, &options, None).unwrap()
-        })
-        .collect();
-    let passes: Vec<PassImage> = sets
-        .iter()
-        .zip(&images)
-        .take(passes)
-        .map(|(set, image)| PassImage {
-            pass: set.pass,
-            image: image.view(),
-            features: &set.features,
-        })
-        .collect();
-    sub_feature_view(&passes, output.pair.geometry()).expect("enough slices")
+    let sets: Vec<_> = sets.iter().take(passes).collect();
+    sub_feature_view_of_pair(&output.pair, &sets, &options, None).expect("enough slices")
 }
 
 /// 0.04 × the graphite lattice constant (2.46 Å), metres.
@@ -144,20 +128,19 @@ fn without_a_vibration_none_is_reported() {
     assert!(quiet.spread_over_noise.iter().all(|s| s.is_finite()));
 }
 
-/// The rendered development scan of `case` with its vibration (if any) at `hz`: the
-/// diagnosis as `dhct diagnose` makes it, positions and the view below one feature.
-fn rendered_diagnosis(mut case: ValidationCase, hz: f64) -> DiagnosisReport {
+/// The rendered scan of `case`, its vibration (if it has one) set to `hz`: the diagnosis
+/// as `dhct diagnose` makes it, positions and the view below one feature.
+fn rendered_diagnosis(mut case: ValidationCase, hz: Option<f64>) -> DiagnosisReport {
     for e in &mut case.config.effects {
-        if let EffectConfig::Vibration(v) = e {
+        if let (EffectConfig::Vibration(v), Some(hz)) = (e, hz) {
             v.frequency_hz = hz;
         }
     }
     let rendered = simulate_rendered(&case.config).expect("renders");
-    let report = rendered
-        .scan
+    assert!(rendered.sub_feature.is_some(), "enough slices");
+    rendered
         .diagnosed(&case.config, &DiagnoseOptions::default())
-        .expect("diagnoses");
-    report.with_sub_feature_view(rendered.sub_feature.expect("enough slices"))
+        .expect("diagnoses")
 }
 
 /// A 0.9 Hz vibration (3–5 pm) on the image-path development scans: a feature spans about
@@ -170,7 +153,7 @@ fn a_vibration_a_feature_averages_out_is_named_from_the_slices() {
         61001,
         ValidationSet::RenderedDevelopment,
     );
-    let report = rendered_diagnosis(case, 0.9);
+    let report = rendered_diagnosis(case, Some(0.9));
     let view = report.sub_feature.as_ref().unwrap();
     println!("{}", view.describe());
     assert_eq!(
@@ -193,7 +176,7 @@ fn a_vibration_a_feature_averages_out_is_named_from_the_slices() {
 fn effect_free_rendered_scans_get_no_vibration_from_the_slices() {
     for seed in [61003, 61007] {
         let case = ValidationCase::effect_free(seed, ValidationSet::RenderedDevelopment);
-        let report = rendered_diagnosis(case, 0.0);
+        let report = rendered_diagnosis(case, None);
         let view = report.sub_feature.as_ref().unwrap();
         println!("{seed}: {}", view.describe());
         assert!(!view.vibration_found, "{view:?}");
@@ -211,7 +194,7 @@ fn slices_broken_by_step_edges_name_no_vibration() {
         91003,
         ValidationSet::ThirdRendered,
     );
-    let report = rendered_diagnosis(case, 0.0);
+    let report = rendered_diagnosis(case, None);
     let view = report.sub_feature.as_ref().unwrap();
     println!("{}", view.describe());
     let v = view.strongest.as_ref().unwrap();
