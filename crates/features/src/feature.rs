@@ -5,7 +5,7 @@ use std::io::Write;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
-use crate::FitStatus;
+use crate::{FitStatus, LineLevelling};
 
 /// One fitted feature. Positions are in the controller frame of its image (display
 /// orientation; x = column, y = row; metres = px · pitch).
@@ -210,6 +210,9 @@ pub struct FeatureSet {
     /// model; 1 where the noise is white or it could not be measured).
     #[serde(default = "unit_factors")]
     pub correlated_noise_factor: [f64; 2],
+    /// How the scan lines were levelled before the fits, and on what evidence.
+    #[serde(default)]
+    pub line_levelling: LineLevelling,
     /// Time spent per stage (for benchmarks and reports; not deterministic).
     pub timings: StageTimings,
 }

@@ -20,7 +20,8 @@ use crate::removed_levels::{RemovedLevels, drop_on_steps};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice,
-    LineCorrection, Polarity, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
+    LineCorrection, LineLevelling, Polarity, RejectedCandidate, Rejection, RejectionCounts,
+    StageTimings,
 };
 
 /// Minimum region area (px) counted when taking the median area (DHCT's 10 px).
@@ -265,7 +266,7 @@ fn find_prepared(
         pre.signed = signed;
         (fits, removed)
     } else {
-        let removed = RemovedLevels::none(geometry.fast_axis());
+        let removed = RemovedLevels::none(geometry.fast_axis(), f64::NAN);
         (fit_regions(&kept, &pre.signed, &ncc, &window), removed)
     };
     if options.line_levels_from_fits {
@@ -299,6 +300,10 @@ fn find_prepared(
         f.id = id;
     }
     check_found(&features, pass, candidates, options, &rejected)?;
+    let line_levelling = match options.line_correction {
+        LineCorrection::Lattice => removed.levelling(OFFSET_EVIDENCE),
+        other => LineLevelling::as_requested(other),
+    };
     clock.lap(&mut timings.bookkeeping_s);
     Ok((
         FeatureSet {
@@ -308,6 +313,7 @@ fn find_prepared(
             candidates,
             kernel_sigma_px: prepared.kernel_sigma_px,
             correlated_noise_factor: noise_factor,
+            line_levelling,
             timings,
         },
         ncc,
@@ -619,9 +625,11 @@ fn level_against_lattice(
         // No line offsets beyond what pixel noise gives: levelling would only add noise
         // shared along each line, so the lines stay as they were recorded.
         let fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
-        return (signed, fits, RemovedLevels::none(fast_axis));
+        let removed = RemovedLevels::none(fast_axis, first.offsets_over_noise);
+        return (signed, fits, removed);
     }
     subtract_line_levels(&mut signed, &first.levels, fast_axis);
+    let first_evidence = first.offsets_over_noise;
     let mut levels = first;
     let mut fits = fit_regions(fit.kept, &signed, fit.ncc, fit.window);
     for _ in 0..MAX_LEVEL_ROUNDS {
@@ -647,6 +655,7 @@ fn level_against_lattice(
     let removed = RemovedLevels {
         fast_axis,
         levels: levels.levels,
+        offsets_over_noise: first_evidence,
     };
     (signed, fits, removed)
 }

@@ -43,6 +43,7 @@ mod gaussian_fit;
 mod kernel;
 mod lattice_levels;
 mod line_level;
+mod line_levelling;
 mod line_relevel;
 mod line_steps;
 mod ncc;
@@ -64,6 +65,7 @@ pub use find::{
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
 pub use line_level::{line_taper, tapered_line_level, tapered_line_level_with};
+pub use line_levelling::LineLevelling;
 pub use ncc::{NccPlan, normalised_cross_correlation};
 pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use preprocess::{

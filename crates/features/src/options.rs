@@ -61,6 +61,19 @@ pub enum LineCorrection {
     Linear,
 }
 
+impl LineCorrection {
+    /// The name a config file gives it (`none`, `median`, `tapered`, `lattice`, `linear`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LineCorrection::None => "none",
+            LineCorrection::Median => "median",
+            LineCorrection::Tapered => "tapered",
+            LineCorrection::Lattice => "lattice",
+            LineCorrection::Linear => "linear",
+        }
+    }
+}
+
 /// Which correlation template to use.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "kind", deny_unknown_fields)]

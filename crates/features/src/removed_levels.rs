@@ -6,7 +6,7 @@
 use dhct_scan::Axis;
 
 use crate::line_steps::LineLevel;
-use crate::{Feature, RejectedCandidate, Rejection};
+use crate::{Feature, LineCorrection, LineLevelling, RejectedCandidate, Rejection};
 
 /// The line levels the lattice levelling subtracted (none when the lines were left as
 /// recorded).
@@ -15,14 +15,33 @@ pub(crate) struct RemovedLevels {
     pub fast_axis: Axis,
     /// Each line's level (empty: none subtracted).
     pub levels: Vec<LineLevel>,
+    /// The first levels' [`crate::lattice_levels::LineLevels::offsets_over_noise`], on
+    /// which the lines were levelled or not (NaN: not measured).
+    pub offsets_over_noise: f64,
 }
 
 impl RemovedLevels {
-    /// Nothing subtracted.
-    pub fn none(fast_axis: Axis) -> Self {
+    /// Nothing subtracted, on the evidence `offsets_over_noise` (NaN: not measured).
+    pub fn none(fast_axis: Axis, offsets_over_noise: f64) -> Self {
         RemovedLevels {
             fast_axis,
             levels: Vec::new(),
+            offsets_over_noise,
+        }
+    }
+
+    /// The lattice levelling as reported: whether the lines were levelled, the evidence
+    /// and the `threshold` it was compared with, and how many lines were cut at steps.
+    pub fn levelling(&self, threshold: f64) -> LineLevelling {
+        LineLevelling {
+            requested: LineCorrection::Lattice,
+            levelled: !self.levels.is_empty(),
+            offsets_over_noise: self
+                .offsets_over_noise
+                .is_finite()
+                .then_some(self.offsets_over_noise),
+            evidence_threshold: Some(threshold),
+            lines_cut_at_steps: self.levels.iter().filter(|l| l.steps() > 0).count(),
         }
     }
 

@@ -5,7 +5,9 @@
 //! (which leaves the offsets' and its own row-period imprint's shifts), and along the lines
 //! no worse.
 
-use dhct_features::{FeatureOptions, FeatureSet, LineCorrection, find_features_in_pair};
+use dhct_features::{
+    FeatureOptions, FeatureSet, LineCorrection, LineLevelling, find_features_in_pair,
+};
 use dhct_simulate::{GroundTruth, Simulation, SimulationOutput};
 
 mod common;
@@ -62,16 +64,27 @@ fn line_levels_fitted_with_the_features_remove_the_line_offsets_shifts() {
     }
 }
 
-/// RMS error (px, x and y) of the trace features found in `output` with `line_correction`.
-fn trace_error(output: &SimulationOutput, line_correction: LineCorrection) -> [f64; 2] {
+/// The trace features found in `output` with `line_correction`.
+fn trace_set(output: &SimulationOutput, line_correction: LineCorrection) -> FeatureSet {
     let options = FeatureOptions {
         line_correction,
         ..FeatureOptions::for_neighbour_distance(2.46e-10)
     };
-    let sets = find_features_in_pair(&output.pair, &options).unwrap();
-    let e = rms_error(&sets[0], &output.truth);
+    let mut sets = find_features_in_pair(&output.pair, &options).unwrap();
+    println!("trace: {}", sets[0].line_levelling);
+    sets.swap_remove(0)
+}
+
+/// RMS error (px, x and y) of the trace features found in `output` with `line_correction`.
+fn trace_error(output: &SimulationOutput, line_correction: LineCorrection) -> [f64; 2] {
+    let e = rms_error(&trace_set(output, line_correction), &output.truth);
     println!("{line_correction:?}: rms {:.4} × {:.4} px", e[0], e[1]);
     e
+}
+
+/// The lattice levelling of `output`'s trace, as reported.
+fn lattice_levelling(output: &SimulationOutput) -> LineLevelling {
+    trace_set(output, LineCorrection::Lattice).line_levelling
 }
 
 #[test]
@@ -88,6 +101,14 @@ fn lattice_levels_remove_the_line_offsets_without_the_rows() {
     // 0.092 × 0.128 px with the lattice levels.
     assert!(lattice[1] < 0.7 * median[1], "{lattice:?} vs {median:?}");
     assert!(lattice[0] < 1.05 * median[0], "{lattice:?} vs {median:?}");
+    // The report says the lines were levelled, on what evidence.
+    let levelling = lattice_levelling(&output);
+    let threshold = levelling.evidence_threshold.unwrap();
+    assert!(levelling.levelled, "{levelling:?}");
+    assert!(
+        levelling.offsets_over_noise.unwrap() >= threshold,
+        "{levelling:?}"
+    );
 }
 
 #[test]
@@ -111,6 +132,15 @@ fn lattice_levelling_leaves_lines_without_offsets_as_recorded() {
         assert!(lattice[axis] < 1.05 * none[axis], "{lattice:?} vs {none:?}");
     }
     assert!(median[1] > 1.2 * lattice[1], "{median:?} vs {lattice:?}");
+    // The report says the lines were left as recorded, on what evidence.
+    let levelling = lattice_levelling(&output);
+    let threshold = levelling.evidence_threshold.unwrap();
+    assert!(!levelling.levelled, "{levelling:?}");
+    assert!(
+        levelling.offsets_over_noise.unwrap() < threshold,
+        "{levelling:?}"
+    );
+    assert!(levelling.to_string().starts_with("lines left as recorded"));
 }
 
 #[test]

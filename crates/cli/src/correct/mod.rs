@@ -415,6 +415,9 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
         .collect();
     s.push_str(&calibration_lines(summary));
     let _ = writeln!(s, "features: {}", counts.join(", "));
+    for p in &summary.passes {
+        let _ = writeln!(s, "line levelling, {}: {}", p.pass, p.line_levelling);
+    }
     for p in &summary.parameters {
         let _ = writeln!(
             s,

@@ -3,6 +3,7 @@
 
 use dhct_calibrate::PairCalibration;
 use dhct_distortion::{DistortionModel, ExclusionCounts, Parameter, RdfFit};
+use dhct_features::LineLevelling;
 use dhct_lattice::{Lattice, PlaneGroup};
 use dhct_pipeline::{
     AffineComparison, Analysis, CorrectedImageCheck, CorrectionSource, SkippedRegion, StageTimings,
@@ -46,6 +47,8 @@ pub struct PassCounts {
     /// Factor per axis `[x, y]` by which the features' fitted 1σ were raised because the
     /// pixel noise is correlated (1 for white noise).
     pub correlated_noise_factor: [f64; 2],
+    /// How the scan lines were levelled before the fits, and on what evidence.
+    pub line_levelling: LineLevelling,
     /// Why the other features were not selected for the model fit.
     pub exclusions: ExclusionCounts,
     /// Whether the neighbours were found again in the frame corrected by a first fit (a
@@ -244,6 +247,7 @@ fn pass_counts(analysis: &Analysis, p: &dhct_pipeline::PassOutput) -> PassCounts
         local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
         indexed: p.indices.iter().flatten().count(),
         correlated_noise_factor: p.features.correlated_noise_factor,
+        line_levelling: p.features.line_levelling.clone(),
         exclusions: dhct
             .map(|d| d.used_selection().exclusions)
             .unwrap_or_default(),
