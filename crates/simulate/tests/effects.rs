@@ -11,7 +11,8 @@ use common::{
 use dhct_scan::ScanPass;
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, LineDrift,
-    LogCreep, ScanCoupling, SlowScanHysteresis, ThermalDrift, TipChange, Vibration,
+    LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, ThermalDrift, TipChange,
+    Vibration,
 };
 use dhct_simulate::{AcquisitionContext, Effect, EffectConfig, HysteresisLaw, Region, StepEdge};
 
@@ -408,6 +409,50 @@ fn slow_hysteresis_stretches_the_first_lines() {
 }
 
 #[test]
+fn piezo_nonlinearity_depends_on_the_commanded_position_alone() {
+    let (q, c) = ([30e-12, -20e-12], [-40e-12, 25e-12]);
+    let effect = PiezoNonlinearity {
+        quadratic_m: q,
+        cubic_m: c,
+    };
+    let output = run(&with_effects(vec![EffectConfig::PiezoNonlinearity(
+        effect.clone(),
+    )]));
+    let g = output.pair.geometry();
+    let (w, h) = (
+        (g.columns() as f64 - 1.0) * g.pitch_x(),
+        (g.rows() as f64 - 1.0) * g.pitch_y(),
+    );
+    let curve = |q: f64, c: f64, u: f64| q * (u * u - 1.0 / 3.0) + c * (u * u * u - 0.6 * u);
+    let mut checked = 0;
+    for f in output.truth.imaged_features(ScanPass::Trace) {
+        for a in [&f.trace, &f.retrace].into_iter().filter(|a| a.in_image) {
+            let [x, y] = a.controller_position_m;
+            let (xi, eta) = (2.0 * x / w - 1.0, 2.0 * y / h - 1.0);
+            // The same closed form in trace and retrace: no time, no direction.
+            assert!(close(a.displacement_m[0], curve(q[0], c[0], xi), 1e-15));
+            assert!(close(a.displacement_m[1], curve(q[1], c[1], eta), 1e-15));
+            checked += 1;
+        }
+    }
+    assert!(checked > 100, "{checked}");
+    // Mean- and slope-free over a uniform scan; at the edges 2q/3 + 2c/5 (and 2q/3 − 2c/5).
+    let n = 10_001;
+    let samples: Vec<f64> = (0..n)
+        .map(|k| -1.0 + 2.0 * k as f64 / (n - 1) as f64)
+        .collect();
+    let mean: f64 = samples.iter().map(|&u| curve(1.0, 1.0, u)).sum::<f64>() / n as f64;
+    let slope: f64 = samples.iter().map(|&u| u * curve(1.0, 1.0, u)).sum::<f64>() / n as f64;
+    assert!(mean.abs() < 1e-3 && slope.abs() < 1e-3, "{mean} {slope}");
+    let largest = effect.largest_displacement_m();
+    assert!(close(
+        largest[0],
+        (2.0 * q[0] / 3.0).abs() + (2.0 * c[0] / 5.0).abs(),
+        1e-13
+    ));
+}
+
+#[test]
 fn scan_coupling_shears_columns_and_tilts_lines() {
     let (t_sf, t_fs) = (0.05, -0.03);
     let output = run(&with_effects(vec![EffectConfig::ScanCoupling(
@@ -641,8 +686,12 @@ fn with_parameters_round_trips_every_effect() {
             height_offset_m: 1e-11,
             contrast: 1.5,
         }),
+        Box::new(PiezoNonlinearity {
+            quadratic_m: [1e-11, -2e-11],
+            cubic_m: [3e-11, 4e-11],
+        }),
     ];
-    assert_eq!(effects.len(), 11, "one per effect type");
+    assert_eq!(effects.len(), 12, "one per effect type");
     for effect in effects {
         let parameters = effect.parameters();
         assert_eq!(

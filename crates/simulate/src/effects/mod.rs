@@ -19,6 +19,7 @@ mod creep;
 mod drift;
 mod hysteresis;
 mod out_of_library;
+mod piezo;
 mod tip_change;
 mod vibration;
 
@@ -35,6 +36,7 @@ pub use creep::{ExponentialCreep, LogCreep};
 pub use drift::{LineDrift, ThermalDrift};
 pub use hysteresis::{AsymmetricHysteresis, FastScanHysteresis, HysteresisLaw, SlowScanHysteresis};
 pub use out_of_library::{StrainBubble, TelegraphTip};
+pub use piezo::PiezoNonlinearity;
 pub use tip_change::TipChange;
 pub use vibration::Vibration;
 
@@ -158,6 +160,8 @@ pub enum EffectConfig {
     Vibration(Vibration),
     /// 7: sudden lateral jump, with optional height and contrast change.
     TipChange(TipChange),
+    /// The scanner's displacement not proportional to its drive (per axis, in position).
+    PiezoNonlinearity(PiezoNonlinearity),
     /// A tip switching irregularly between two apexes (outside the diagnosis library).
     TelegraphTip(TelegraphTip),
     /// A local radial strain bubble (outside the diagnosis library).
@@ -183,6 +187,7 @@ impl EffectConfig {
             EffectConfig::HeightCoupling(e) => e,
             EffectConfig::Vibration(e) => e,
             EffectConfig::TipChange(e) => e,
+            EffectConfig::PiezoNonlinearity(e) => e,
             EffectConfig::TelegraphTip(e) => e,
             EffectConfig::StrainBubble(e) => e,
         }
@@ -204,6 +209,7 @@ impl EffectConfig {
             EffectConfig::TipChange(e) => e.validate(field),
             EffectConfig::TelegraphTip(e) => e.validate(field),
             EffectConfig::StrainBubble(e) => e.validate(field),
+            EffectConfig::PiezoNonlinearity(e) => e.validate(field),
         }
     }
 
@@ -224,6 +230,7 @@ impl EffectConfig {
             EffectConfig::TipChange(e) => Box::new(e.clone()),
             EffectConfig::TelegraphTip(e) => Box::new(e.clone()),
             EffectConfig::StrainBubble(e) => Box::new(e.clone()),
+            EffectConfig::PiezoNonlinearity(e) => Box::new(e.clone()),
         })
     }
 
