@@ -9,11 +9,11 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use dhct_diagnose::{
     Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ValidationOptions,
-    VerdictKind, diagnose_with_model, sub_feature_view_of_pair, validate,
+    VerdictKind, diagnose_with_model, validate, with_pair_views,
 };
 use dhct_distortion::PassInput;
-use dhct_features::{FeatureOptions, FeatureSet};
-use dhct_scan::{ScanGeometry, ScanPair};
+use dhct_features::FeatureSet;
+use dhct_scan::ScanGeometry;
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
@@ -63,28 +63,13 @@ pub fn diagnosis_of(corrected: &crate::correct::Corrected) -> Result<DiagnosisRe
     )
     .context("diagnosis")?;
     let feature_sets: Vec<&FeatureSet> = passes.iter().map(|p| &p.features).collect();
-    Ok(with_sub_feature_view(
+    Ok(with_pair_views(
         report,
         &corrected.pair,
         &feature_sets,
         &corrected.options.features,
         corrected.mask.as_ref(),
     ))
-}
-
-/// Adds the image view below one feature (slice displacements) to `report`; `sets` are the
-/// features found in the pair's images with `options`.
-pub fn with_sub_feature_view(
-    report: DiagnosisReport,
-    pair: &ScanPair,
-    sets: &[&FeatureSet],
-    options: &FeatureOptions,
-    mask: Option<&Array2<bool>>,
-) -> DiagnosisReport {
-    match sub_feature_view_of_pair(pair, sets, options, mask) {
-        Some(view) => report.with_sub_feature_view(view),
-        None => report,
-    }
 }
 
 fn bin_plot(title: &str, x_label: &str, bins: &[Bin], noise: [f64; 2]) -> Plot {

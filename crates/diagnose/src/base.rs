@@ -1,8 +1,11 @@
 //! The base model chosen by the data: the fast-scan hysteresis law (none, the authors'
-//! power law, the paper's quartic, a cubic, an exponential) is selected per image by the
-//! Bayesian information criterion of the position-level fit, before any candidate effect
-//! is screened. A law the base model cannot follow otherwise leaves a residual mirrored
-//! between trace and retrace that the candidates then "explain".
+//! power law, the paper's quartic, a cubic, an exponential) and then, with that law, the
+//! form of the creep from frame start (none, DHCT's logarithmic `C·ln(1 + t/t0)`, an
+//! exponential relaxation `A·(1 − e^(−t/τ))`) are selected per image by the Bayesian
+//! information criterion of the position-level fit, before any candidate effect is
+//! screened. A law the base model cannot follow otherwise leaves a residual mirrored
+//! between trace and retrace that the candidates then "explain"; a creep of another form
+//! leaves a slow residual that they take for a creep event or higher-order drift.
 //!
 //! Each law starts from the DHCT fit's scale curve `S(τ)` (the law fitted to it over one
 //! line, `τ` in seconds since line start), then the whole base model (drift, creep with its
@@ -11,15 +14,16 @@
 //! (Gaussian residuals of unknown variance: a floor that is somewhat off does not decide
 //! the law).
 
-use dhct_scan::{HysteresisLaw, ScanGeometry};
+use dhct_features::{FeatureSet, LineLevelling};
+use dhct_scan::{HysteresisLaw, ScanGeometry, ScanPass};
 use dhct_simulate::EffectConfig;
-use dhct_simulate::effects::FastScanHysteresis;
+use dhct_simulate::effects::{ExponentialCreep, FastScanHysteresis};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
 use crate::data::Observation;
-use crate::fit::{Fitted, fit_profiled};
+use crate::fit::{BASE_CREEP, Fitted, fit_profiled};
 use crate::model::{GlobalModel, Term, sim_term};
 
 /// A law with its free-parameter mask (`None`: no hysteresis term).
@@ -39,7 +43,8 @@ pub struct LawScore {
     pub chi2: f64,
     /// `n·ln(χ²/n) + k·ln n` (lower is better).
     pub bic: f64,
-    /// BIC minus the chosen law's (0 for the chosen one).
+    /// BIC minus the chosen alternative's (0 for the chosen one; negative for one that
+    /// fits better by less than the decisive difference).
     pub delta_bic: f64,
     /// Whether it is the base model's law.
     pub chosen: bool,
@@ -52,6 +57,62 @@ pub struct BaseChoice {
     pub hysteresis_law: String,
     /// Every law tried, best first (laws whose fit failed are left out).
     pub hysteresis: Vec<LawScore>,
+    /// The chosen form of the creep from frame start (`none`, `log`, `exponential`).
+    pub creep_form: String,
+    /// Every creep form tried with the chosen law, best first (its `law` field names the
+    /// form; forms whose fit failed are left out).
+    pub creep: Vec<LawScore>,
+    /// When the creep form the positions chose before any effect is not DHCT's log creep:
+    /// the BIC of the whole model with that form (its base and the effects its selection
+    /// named, each with the price it was accepted at) minus the whole model's with the log
+    /// form (whose selection is run as well). An effect the base leaves unmodelled can make
+    /// another form fit the base better; the log form is kept unless this is below
+    /// `−6`.
+    #[serde(default)]
+    pub creep_form_whole_model_delta_bic: Option<f64>,
+    /// How each image's scan lines were levelled before its features were fitted, on the
+    /// evidence of its line levels (empty when the diagnosis was given positions, not
+    /// images).
+    #[serde(default)]
+    pub line_levelling: Vec<PassLevelling>,
+}
+
+impl BaseChoice {
+    /// Marks DHCT's log creep as the chosen form (the whole models' comparison kept it).
+    pub(crate) fn keep_log_creep(&mut self) {
+        self.creep_form = "log".into();
+        let log = self
+            .creep
+            .iter()
+            .find(|c| c.law == "log")
+            .map(|c| c.delta_bic);
+        for c in &mut self.creep {
+            c.chosen = c.law == "log";
+            c.delta_bic -= log.unwrap_or(0.0);
+        }
+    }
+}
+
+/// How one image's scan lines were levelled before its features were fitted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PassLevelling {
+    /// Trace or retrace.
+    pub pass: ScanPass,
+    /// The levelling and its evidence.
+    #[serde(flatten)]
+    pub levelling: LineLevelling,
+}
+
+impl PassLevelling {
+    /// Each of `sets`' levelling.
+    pub fn of_sets(sets: &[&FeatureSet]) -> Vec<PassLevelling> {
+        sets.iter()
+            .map(|s| PassLevelling {
+                pass: s.pass,
+                levelling: s.line_levelling.clone(),
+            })
+            .collect()
+    }
 }
 
 /// Polynomial `S − 1 = Σ_{k<degree+1} c_k u^k` fitted to `curve` (`u`, `S`) by least squares.
@@ -155,9 +216,132 @@ fn with_law(base: &GlobalModel, law: LawStart) -> Option<GlobalModel> {
     Some(model)
 }
 
-/// Fits the base model with every law and returns the best by BIC, with the scores.
-/// `fitted` is the DHCT fit's law (its scale curve seeds the others).
-pub(crate) fn choose_hysteresis(
+/// The base model with the creep from frame start in form `form` instead of DHCT's
+/// logarithmic creep (term [`BASE_CREEP`], its `t0` or `τ` profiled by the fit): `none`
+/// leaves it out, `exponential` starts at the log creep's displacement over the frame and
+/// `τ = t0`.
+fn with_creep_form(log: &GlobalModel, form: &str, frame_s: f64) -> Option<GlobalModel> {
+    let mut model = log.clone();
+    let slot = model.terms.iter().position(|t| t.label == BASE_CREEP)?;
+    let term = model.terms.remove(slot);
+    if form == "none" {
+        return Some(model);
+    }
+    let [cx, cy, t0, _] = term.effect.parameters()[..] else {
+        return None;
+    };
+    let reach = (1.0 + frame_s / t0).ln();
+    let effect = sim_term(&EffectConfig::ExponentialCreep(ExponentialCreep {
+        amplitude_m: [cx * reach, cy * reach],
+        time_constant_s: t0,
+        start_s: 0.0,
+    }))?;
+    model.terms.insert(
+        slot,
+        Term::new(effect, vec![true, true, false, false], BASE_CREEP),
+    );
+    Some(model)
+}
+
+/// A fitted alternative of the base model with its χ² and BIC.
+struct Scored {
+    name: &'static str,
+    fitted: Fitted,
+    chi2: f64,
+    bic: f64,
+}
+
+/// χ² of `fitted`'s residuals at the noise floor `sigma` (metres per axis) and its
+/// `BIC = n·ln(χ²/n) + k·ln n` (`n` coordinates, `k` free parameters).
+pub(crate) fn chi2_and_bic(fitted: &Fitted, sigma: [f64; 2]) -> (f64, f64) {
+    let n = (2 * fitted.residuals.len()) as f64;
+    let chi2: f64 = fitted
+        .residuals
+        .iter()
+        .map(|r| (r[0] / sigma[0]).powi(2) + (r[1] / sigma[1]).powi(2))
+        .sum();
+    let bic = n * (chi2.max(1e-300) / n).ln() + fitted.model.free_count() as f64 * n.ln();
+    (chi2, bic)
+}
+
+impl Scored {
+    /// `fitted` scored at the noise floor `sigma` (`None` if its BIC is not finite).
+    fn of(name: &'static str, fitted: Fitted, sigma: [f64; 2]) -> Option<Scored> {
+        let (chi2, bic) = chi2_and_bic(&fitted, sigma);
+        bic.is_finite().then_some(Scored {
+            name,
+            fitted,
+            chi2,
+            bic,
+        })
+    }
+}
+
+/// BIC difference below which another alternative does not displace the preferred one
+/// (6: "strong" evidence on Kass & Raftery's scale). DHCT's logarithmic creep and an
+/// exponential relaxation of a creep that has not settled within the frame differ by
+/// less than this on scans with either (ΔBIC 0.6–1.7 on `base_config` seeds 1–4).
+pub(crate) const DECISIVE_BIC: f64 = 6.0;
+
+/// The name of the chosen alternative among `scores`.
+fn chosen_name(scores: &[LawScore]) -> String {
+    scores
+        .iter()
+        .find(|s| s.chosen)
+        .map_or_else(String::new, |s| s.law.clone())
+}
+
+/// Fits every alternative (`None`: it could not be built; failed fits are left out) and
+/// returns the chosen fit with every alternative's score, lowest BIC first. The chosen one
+/// has the lowest BIC, unless `preferred` is within [`DECISIVE_BIC`] of it. `what` names
+/// the alternatives in the error when none could be fitted.
+fn best_by_bic(
+    alternatives: Vec<(&'static str, Option<Result<Fitted, DiagnoseError>>)>,
+    sigma: [f64; 2],
+    what: &str,
+    preferred: Option<&str>,
+) -> Result<(Fitted, Vec<LawScore>), DiagnoseError> {
+    let mut results: Vec<Scored> = Vec::new();
+    let mut last_error = None;
+    for (name, fitted) in alternatives {
+        match fitted {
+            Some(Ok(f)) => results.extend(Scored::of(name, f, sigma)),
+            Some(Err(e)) => last_error = Some(e),
+            None => {}
+        }
+    }
+    results.sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    let Some(best_bic) = results.first().map(|r| r.bic) else {
+        return Err(last_error.unwrap_or(DiagnoseError::FitFailed {
+            model: "base model".into(),
+            reason: format!("no {what} could be fitted"),
+        }));
+    };
+    let chosen = results
+        .iter()
+        .position(|r| Some(r.name) == preferred && r.bic - best_bic < DECISIVE_BIC)
+        .unwrap_or(0);
+    let chosen_bic = results[chosen].bic;
+    let scores = results
+        .iter()
+        .enumerate()
+        .map(|(k, r)| LawScore {
+            law: r.name.to_string(),
+            parameters: r.fitted.model.free_count(),
+            chi2: r.chi2,
+            bic: r.bic,
+            delta_bic: r.bic - chosen_bic,
+            chosen: k == chosen,
+        })
+        .collect();
+    Ok((results.swap_remove(chosen).fitted, scores))
+}
+
+/// Fits the base model with every hysteresis law and keeps the best by BIC, then fits
+/// that with every form of the creep from frame start and keeps the best of those;
+/// returns that fit with the scores, and the fit with DHCT's log creep if another form
+/// was chosen. `fitted` is the DHCT fit's law (its scale curve seeds the others).
+pub(crate) fn choose_base(
     base: &GlobalModel,
     fitted: &HysteresisLaw,
     geometry: &ScanGeometry,
@@ -165,62 +349,39 @@ pub(crate) fn choose_hysteresis(
     sigma: [f64; 2],
     iterations: usize,
     t0_bounds: (f64, f64),
-) -> Result<(Fitted, BaseChoice), DiagnoseError> {
+) -> Result<(Fitted, BaseChoice, Option<Fitted>), DiagnoseError> {
+    let fit_one =
+        |m: GlobalModel| fit_profiled(m, geometry, observations, sigma, iterations, t0_bounds);
     let line = geometry.line_scan_time();
-    let mut tried: Vec<(&'static str, LawStart)> = vec![("none", None)];
-    tried.extend(
+    let mut laws = vec![("none", with_law(base, None).map(fit_one))];
+    laws.extend(
         starts(fitted, line)
             .into_iter()
-            .map(|(name, law, free)| (name, Some((law, free)))),
+            .map(|(name, law, free)| (name, with_law(base, Some((law, free))).map(fit_one))),
     );
-    let n = (2 * observations.len()) as f64;
-    let mut results: Vec<(&'static str, Fitted, f64, f64)> = Vec::new();
-    let mut last_error = None;
-    for (name, law) in tried {
-        let Some(model) = with_law(base, law) else {
-            continue;
-        };
-        match fit_profiled(model, geometry, observations, sigma, iterations, t0_bounds) {
-            Ok(f) => {
-                let chi2: f64 = f
-                    .residuals
-                    .iter()
-                    .map(|r| (r[0] / sigma[0]).powi(2) + (r[1] / sigma[1]).powi(2))
-                    .sum();
-                let bic = n * (chi2.max(1e-300) / n).ln() + f.model.free_count() as f64 * n.ln();
-                if bic.is_finite() {
-                    results.push((name, f, chi2, bic));
-                }
-            }
-            Err(e) => last_error = Some(e),
-        }
-    }
-    results.sort_by(|a, b| a.3.total_cmp(&b.3));
-    let Some(best_bic) = results.first().map(|r| r.3) else {
-        return Err(last_error.unwrap_or(DiagnoseError::FitFailed {
-            model: "base model".into(),
-            reason: "no hysteresis law could be fitted".into(),
-        }));
-    };
-    let scores = results
-        .iter()
-        .enumerate()
-        .map(|(k, (name, f, chi2, bic))| LawScore {
-            law: name.to_string(),
-            parameters: f.model.free_count(),
-            chi2: *chi2,
-            bic: *bic,
-            delta_bic: bic - best_bic,
-            chosen: k == 0,
-        })
-        .collect();
-    let (name, best, _, _) = results.swap_remove(0);
+    let (with_log, hysteresis) = best_by_bic(laws, sigma, "hysteresis law", None)?;
+    let hysteresis_law = chosen_name(&hysteresis);
+    let frame = geometry.frame_duration();
+    let other_form = |form: &str| with_creep_form(&with_log.model, form, frame).map(fit_one);
+    let log_fit = with_log.clone();
+    let forms = vec![
+        ("none", other_form("none")),
+        ("exponential", other_form("exponential")),
+        ("log", Some(Ok(with_log))),
+    ];
+    let (best, creep) = best_by_bic(forms, sigma, "creep form", Some("log"))?;
+    let log_form = (chosen_name(&creep) != "log").then_some(log_fit);
     Ok((
         best,
         BaseChoice {
-            hysteresis_law: name.to_string(),
-            hysteresis: scores,
+            hysteresis_law,
+            hysteresis,
+            creep_form: chosen_name(&creep),
+            creep,
+            creep_form_whole_model_delta_bic: None,
+            line_levelling: Vec::new(),
         },
+        log_form,
     ))
 }
 

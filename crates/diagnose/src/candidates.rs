@@ -8,7 +8,7 @@ use dhct_scan::ScanGeometry;
 use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, HeightCoupling, HysteresisLaw, LineDrift, LogCreep,
-    ScanCoupling, SlowScanHysteresis, TipChange, Vibration,
+    PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, TipChange, Vibration,
 };
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -45,11 +45,16 @@ pub enum Candidate {
     HigherOrderDrift,
     /// A smooth time-independent field quadratic in position (local strain / warped lattice).
     LocalStrain,
+    /// The scanner's displacement not proportional to its drive (`piezo-nonlinearity`),
+    /// the same in trace and retrace: of its curves in each axis's commanded position only
+    /// the quadratic one along the fast axis is fitted (the cubic one along x is a
+    /// symmetric hysteresis law's, and along y position is slow-scan time: drift).
+    PiezoNonlinearity,
 }
 
 impl Candidate {
     /// Every candidate.
-    pub const ALL: [Candidate; 11] = [
+    pub const ALL: [Candidate; 12] = [
         Candidate::LineDrift,
         Candidate::ExponentialCreep,
         Candidate::SecondCreep,
@@ -61,6 +66,7 @@ impl Candidate {
         Candidate::ScanCoupling,
         Candidate::HigherOrderDrift,
         Candidate::LocalStrain,
+        Candidate::PiezoNonlinearity,
     ];
 
     /// Whether the effect is confined to part of the frame (after an onset, decaying or
@@ -101,6 +107,7 @@ impl Candidate {
             Candidate::ScanCoupling => "scan-coupling",
             Candidate::HigherOrderDrift => "higher-order-drift",
             Candidate::LocalStrain => "local-strain",
+            Candidate::PiezoNonlinearity => "piezo-nonlinearity",
         }
     }
 
@@ -117,6 +124,7 @@ impl Candidate {
             EffectConfig::TipChange(_) => Candidate::TipChange,
             EffectConfig::HeightCoupling(_) => Candidate::HeightCoupling,
             EffectConfig::ScanCoupling(_) => Candidate::ScanCoupling,
+            EffectConfig::PiezoNonlinearity(_) => Candidate::PiezoNonlinearity,
             _ => return None,
         })
     }
@@ -307,6 +315,7 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
             });
             vec![zero_term_proposal(candidate, ctx, e, vec![true; 6])]
         }
+        Candidate::PiezoNonlinearity => vec![piezo_nonlinearity_proposal(ctx)],
     };
     found.into_iter().flatten().collect()
 }
@@ -328,6 +337,23 @@ fn zero_term_proposal(
         None,
         0,
     )
+}
+
+/// A fast-axis piezo non-linearity with only its quadratic part `q_x` free: within one
+/// trace/retrace pair the rest cannot be told from the base model. The cubic part along x
+/// is odd in position, which a symmetric fast-scan hysteresis law mirrors between trace and
+/// retrace exactly as it is (a cubic or quartic law takes it whole: the fit then wanders
+/// along the valley, e.g. to 2.5 mm for a true 33 pm); along y the commanded position
+/// follows the slow-scan time, so that part is drift.
+fn piezo_nonlinearity_proposal(ctx: &Context) -> Option<Proposal> {
+    let candidate = Candidate::PiezoNonlinearity;
+    let effect = sim_term(&EffectConfig::PiezoNonlinearity(PiezoNonlinearity {
+        quadratic_m: [0.0; 2],
+        cubic_m: [0.0; 2],
+    }))?;
+    let free = vec![true, false, false, false];
+    let term = Term::new(effect, free.clone(), candidate.name());
+    term_proposal(candidate, String::new(), ctx, term, free, None, 0)
 }
 
 /// Trace and retrace each with their own copy of the current fast-scan hysteresis law

@@ -9,19 +9,21 @@ use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
-use crate::base::{BaseChoice, choose_hysteresis};
+use crate::base::{BaseChoice, DECISIVE_BIC, chi2_and_bic, choose_base};
 use crate::candidates::{Candidate, creep_t0_bounds};
 use crate::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
 use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
+use crate::heights::HeightView;
 use crate::location::locate;
 use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
 use crate::noise::{NoiseFloor, estimate, robust_sigma};
 use crate::report::{
-    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
+    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
+    NEAR_TIE_FRACTION, Shrink,
 };
 use crate::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
 use crate::timing_gain::whitened;
-use crate::verdict::decide;
+use crate::verdict::{VerdictKind, decide};
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -120,7 +122,7 @@ fn summary(f: &Fitted, sigma: [f64; 2]) -> ModelSummary {
 struct BaseFit {
     /// The base model (hysteresis law chosen by BIC) fitted to every indexed feature.
     first: Fitted,
-    /// The hysteresis law chosen, with every law's BIC.
+    /// The hysteresis law and creep form chosen, with every alternative's BIC.
     base_choice: BaseChoice,
     /// Per indexed feature, whether it was kept (not an outlier of `first`).
     keep: Vec<bool>,
@@ -128,6 +130,8 @@ struct BaseFit {
     observations: Vec<Observation>,
     /// The base model fitted in full to the features kept at the final noise floor.
     base: Fitted,
+    /// The same with DHCT's log creep, when the data chose another creep form.
+    log_base: Option<Fitted>,
     /// The final noise floor.
     noise: NoiseFloor,
     /// Range of the base creep's `t0`, seconds.
@@ -201,12 +205,8 @@ fn diagnose_from(
         source,
         options.max_deviation_fraction,
     )?;
-    let fitted = fit_base(&prepared, geometry, options)?;
-    let (observations, base, sigma) = (&fitted.observations, &fitted.base, fitted.noise.sigma_m);
-    let base_summary = summary(base, sigma);
-    let location = options
-        .locate
-        .then(|| locate(observations, &base.residuals, sigma, geometry));
+    let mut fitted = fit_base(&prepared, geometry, options)?;
+    let (observations, sigma) = (&fitted.observations, fitted.noise.sigma_m);
     let folds = Folds::new(
         observations,
         geometry,
@@ -214,7 +214,7 @@ fn diagnose_from(
         options.cv_blocks,
         options.cv_folds,
     );
-    let context = Current {
+    let context = |base| Current {
         fitted: base,
         geometry,
         observations,
@@ -223,12 +223,27 @@ fn diagnose_from(
         nn_distance_m: lattice.nearest_neighbour_distance(),
         t0_bounds: fitted.t0_bounds,
     };
-    let (current, greedy) = select_effects(&context, options)?;
+    let (mut current, mut greedy) = select_effects(&context(&fitted.base), options)?;
+    let mut base = &fitted.base;
+    if let Some(log_base) = &fitted.log_base {
+        let (log_current, log_greedy) = select_effects(&context(log_base), options)?;
+        let delta =
+            whole_model_bic(base, &greedy, sigma) - whole_model_bic(log_base, &log_greedy, sigma);
+        fitted.base_choice.creep_form_whole_model_delta_bic = Some(delta);
+        if delta > -DECISIVE_BIC {
+            fitted.base_choice.keep_log_creep();
+            (base, current, greedy) = (log_base, log_current, log_greedy);
+        }
+    }
+    let base_summary = summary(base, sigma);
+    let location = options
+        .locate
+        .then(|| locate(observations, &base.residuals, sigma, geometry));
     let final_summary = summary(&current, sigma);
     let final_location = options
         .locate
         .then(|| locate(observations, &current.residuals, sigma, geometry));
-    let verdict = decide(
+    let mut verdict = decide(
         base_summary.gap.gap_to_noise,
         final_summary.gap.gap_to_noise,
         greedy.added.iter().map(|a| a.candidate).collect(),
@@ -236,6 +251,14 @@ fn diagnose_from(
         observations.len(),
         fitted.noise.source,
     );
+    if verdict.kind != VerdictKind::NoGap {
+        let ties: Vec<(Candidate, Vec<Candidate>)> = greedy
+            .added
+            .iter()
+            .map(|a| (a.candidate, a.about_as_good.clone()))
+            .collect();
+        verdict.note_near_ties(&ties);
+    }
     let residuals = feature_residuals(&prepared, &fitted, &current);
     let all = &prepared.observations;
     Ok(DiagnosisReport {
@@ -261,6 +284,7 @@ fn diagnose_from(
         final_model: final_summary,
         final_location,
         sub_feature: None,
+        heights: HeightView::of(&prepared.observations),
         noise: fitted.noise,
         residuals,
     })
@@ -311,6 +335,24 @@ fn start_model(prepared: &Prepared, fit_lattice_scale: bool) -> GlobalModel {
     }
 }
 
+/// The BIC of the greedy selection's whole model: `base`'s at the floor `sigma`, plus
+/// each added effect's ΔBIC as scored when it was accepted (with the price of its shape
+/// search).
+fn whole_model_bic(base: &Fitted, greedy: &Greedy, sigma: [f64; 2]) -> f64 {
+    let added: f64 = greedy
+        .rounds
+        .iter()
+        .filter_map(|r| {
+            let accepted = r.accepted?;
+            r.scores
+                .iter()
+                .find(|s| s.candidate == accepted && s.passes)
+                .map(|s| s.delta_bic)
+        })
+        .sum();
+    chi2_and_bic(base, sigma).1 + added
+}
+
 /// The position-level base fit: the hysteresis law chosen by BIC (at the noise floor of
 /// the DHCT gap), outliers of that fit dropped, then the base model fitted again to the
 /// rest and refitted in full at the noise floor of its residuals.
@@ -327,8 +369,9 @@ fn fit_base(
     let lower = options.lower_floor_to_trace_retrace;
     let mut sigma = estimate(all, &prepared.dhct_gap, geometry, lower).sigma_m;
     let t0_bounds = creep_t0_bounds(geometry, all);
-    // The hysteresis law chosen by the data (BIC), part of the base model from here on.
-    let (first, base_choice) = choose_hysteresis(
+    // The hysteresis law and creep form chosen by the data (BIC), part of the base model
+    // from here on.
+    let (first, base_choice, log_form) = choose_base(
         &start,
         &prepared.dhct_model.hysteresis,
         geometry,
@@ -375,12 +418,25 @@ fn fit_base(
         iterations,
         t0_bounds,
     )?;
+    // A failed fit of the log form leaves the chosen form unchallenged.
+    let log_base = log_form.and_then(|log| {
+        refit(
+            log.model,
+            geometry,
+            &observations,
+            noise.sigma_m,
+            iterations,
+            t0_bounds,
+        )
+        .ok()
+    });
     Ok(BaseFit {
         first,
         base_choice,
         keep,
         observations,
         base,
+        log_base,
         noise,
         t0_bounds,
     })
@@ -462,7 +518,9 @@ fn select_effects(
                 .fitted
                 .clone()
                 .unwrap_or_else(|| unreachable!("filtered on Some"));
-            greedy.added.push(added_effect(w, &f, &current, sigma));
+            let mut added = added_effect(w, &f, &current, sigma);
+            added.about_as_good = about_as_good(w, &scored);
+            greedy.added.push(added);
             current = refit(
                 f.model,
                 context.geometry,
@@ -484,6 +542,20 @@ fn select_effects(
         }
     }
     Ok((current, greedy))
+}
+
+/// The other refitted, passing candidates of `scored` whose χ² reduction comes within
+/// [`NEAR_TIE_FRACTION`] of the accepted `w`'s.
+fn about_as_good(w: &Scored, scored: &[Scored]) -> Vec<Candidate> {
+    let mut out: Vec<Candidate> = scored
+        .iter()
+        .filter(|s| s.score.passes && s.fitted.is_some())
+        .filter(|s| s.score.candidate != w.score.candidate)
+        .filter(|s| s.score.delta_chi2 >= (1.0 - NEAR_TIE_FRACTION) * w.score.delta_chi2)
+        .map(|s| s.score.candidate)
+        .collect();
+    out.dedup();
+    out
 }
 
 /// The effect `w` added to `current`, as fitted in `f` (its parameters, and the gap after
@@ -513,6 +585,7 @@ fn added_effect(w: &Scored, f: &Fitted, current: &Fitted, sigma: [f64; 2]) -> Ad
         shape: w.score.shape.clone(),
         parameters,
         gap_after: GapSummary::of(&f.residuals, sigma, f.model.free_count()),
+        about_as_good: Vec::new(),
     }
 }
 

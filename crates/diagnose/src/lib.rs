@@ -65,6 +65,7 @@ mod data;
 mod diagnose;
 mod error;
 mod fit;
+mod heights;
 mod location;
 mod model;
 mod noise;
@@ -79,17 +80,19 @@ mod timing_gain;
 mod validate;
 mod verdict;
 
-pub use base::{BaseChoice, LawScore};
+pub use base::{BaseChoice, LawScore, PassLevelling};
 pub use candidates::Candidate;
 pub use data::{MIN_FEATURES, Observation};
 pub use diagnose::{DiagnoseOptions, diagnose, diagnose_with_model};
 pub use error::DiagnoseError;
 pub use fit::FittedParameter;
+pub use heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
 pub use location::{Bin, ChangePoint, GapLocation};
 pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
-pub use pair_images::sub_feature_view_of_pair;
+pub use pair_images::{sub_feature_view_of_pair, with_pair_views};
 pub use report::{
-    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary, Shrink,
+    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
+    NEAR_TIE_FRACTION, Shrink,
 };
 pub use select::{CandidateScore, CvScheme, SelectionOptions};
 pub use spectrum::{SpectralPeak, Spectrum};

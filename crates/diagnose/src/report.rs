@@ -5,7 +5,7 @@ use std::fmt;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
-use crate::base::BaseChoice;
+use crate::base::{BaseChoice, DECISIVE_BIC};
 use crate::candidates::Candidate;
 use crate::fit::FittedParameter;
 use crate::location::GapLocation;
@@ -86,7 +86,29 @@ pub struct AddedEffect {
     pub parameters: Vec<FittedParameter>,
     /// Gap after adding it (and everything before it).
     pub gap_after: GapSummary,
+    /// Other candidates of its round, refitted and passing, whose χ² reduction comes
+    /// within [`NEAR_TIE_FRACTION`] of its own: they explain the positions about as well,
+    /// so the data do not tell them apart from it.
+    #[serde(default)]
+    pub about_as_good: Vec<Candidate>,
 }
+
+/// Candidate names joined by commas.
+fn names(candidates: &[Candidate]) -> String {
+    candidates
+        .iter()
+        .map(|c| c.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// How close (as a fraction of the accepted effect's χ² reduction) another candidate's
+/// reduction must come to be reported as explaining the positions about as well. A few per
+/// cent of the effect is what the base model's own misfit (a hysteresis law or creep form
+/// that is close but not the scan's) shifts between similar candidates: on the validation
+/// scans, the exponential and second creep events differ by 0.5–5 % and either can win,
+/// and an x-only piezo non-linearity against an asymmetric hysteresis by 0.5–1.5 %.
+pub const NEAR_TIE_FRACTION: f64 = 0.05;
 
 /// How far the gap shrinks (gap/noise ratios).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -171,6 +193,10 @@ pub struct DiagnosisReport {
     /// given ([`DiagnosisReport::with_sub_feature_view`]).
     #[serde(default)]
     pub sub_feature: Option<crate::SubFeatureView>,
+    /// What only the height tells (terraces, feature heights and their changes): none of
+    /// it moves a feature, so none of it is a scan distortion.
+    #[serde(default)]
+    pub heights: Option<crate::HeightView>,
 }
 
 impl DiagnosisReport {
@@ -246,10 +272,19 @@ impl DiagnosisReport {
             n.localisation.describe(),
             n.successive_differences.describe(),
             n.trace_retrace.describe(),
-        )
+        )?;
+        if let Some(h) = &self.heights {
+            writeln!(
+                f,
+                "heights (z only: they move no feature, so they are no scan distortion): {}",
+                h.describe()
+            )?;
+        }
+        Ok(())
     }
 
-    /// The DHCT sim's gap, the base hysteresis law chosen and the base fit's gap.
+    /// The DHCT sim's gap, the base hysteresis law and creep form chosen, each image's line
+    /// levelling and the base fit's gap.
     fn write_base(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
@@ -267,6 +302,39 @@ impl DiagnosisReport {
                 .collect::<Vec<_>>()
                 .join(", ")
         )?;
+        writeln!(
+            f,
+            "base creep form (BIC):     {} ({})",
+            self.base_choice.creep_form,
+            self.base_choice
+                .creep
+                .iter()
+                .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
+        if let Some(d) = self.base_choice.creep_form_whole_model_delta_bic {
+            let other = self
+                .base_choice
+                .creep
+                .iter()
+                .filter(|c| c.law != "log")
+                .min_by(|a, b| a.bic.total_cmp(&b.bic))
+                .map_or("other", |c| c.law.as_str());
+            writeln!(
+                f,
+                "  with the effects each form's selection named, the whole model with the {other} \
+                 form has ΔBIC {d:.1} against the log form's ({})",
+                if d > -DECISIVE_BIC {
+                    "not decisive: the log form is kept"
+                } else {
+                    "decisive: it is kept"
+                }
+            )?;
+        }
+        for p in &self.base_choice.line_levelling {
+            writeln!(f, "line levelling, {}: {}", p.pass, p.levelling)?;
+        }
         writeln!(
             f,
             "base position-level fit:        {}",
@@ -313,6 +381,14 @@ impl DiagnosisReport {
                 a.shape,
                 gap_line(&a.gap_after)
             )?;
+            if !a.about_as_good.is_empty() {
+                writeln!(
+                    f,
+                    "    about as good (χ² reduction within {:.0} %, not told apart): {}",
+                    100.0 * NEAR_TIE_FRACTION,
+                    names(&a.about_as_good)
+                )?;
+            }
             for p in &a.parameters {
                 match p.sigma {
                     Some(s) => writeln!(f, "    {} = {:.4e} ± {:.1e}", p.name, p.value, s)?,

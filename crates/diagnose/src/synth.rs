@@ -20,8 +20,8 @@ use dhct_features::{Feature, FeatureOptions, FeatureSet, FitStatus, find_feature
 use dhct_scan::{ScanDirection, ScanGeometry, ScanPair, ScanPass};
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, HysteresisLaw,
-    LineDrift, LogCreep, ScanCoupling, SlowScanHysteresis, StrainBubble, TelegraphTip,
-    ThermalDrift, TipChange, Vibration,
+    LineDrift, LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, StrainBubble,
+    TelegraphTip, ThermalDrift, TipChange, Vibration,
 };
 use dhct_simulate::raster::Displacer;
 use dhct_simulate::surface::Terrace;
@@ -563,6 +563,11 @@ fn add_effect(
             slow_to_fast: sign(rng) * m * 0.01,
             fast_to_slow: sign(rng) * m * 0.01,
         }),
+        // About 0.5 % of the 6 nm frame at its edges, quadratic and cubic in each axis.
+        Candidate::PiezoNonlinearity => EffectConfig::PiezoNonlinearity(PiezoNonlinearity {
+            quadratic_m: [sign(rng) * m * 30e-12, sign(rng) * m * 20e-12],
+            cubic_m: [sign(rng) * m * 40e-12, sign(rng) * m * 25e-12],
+        }),
         Candidate::HigherOrderDrift | Candidate::LocalStrain => return false,
     };
     config.effects.push(effect);
@@ -946,6 +951,8 @@ pub struct RenderedScan {
     pub scan: SimulatedScan,
     /// The sub-feature view of the images, as `dhct diagnose` computes it.
     pub sub_feature: Option<crate::SubFeatureView>,
+    /// How each image's lines were levelled before its features were fitted.
+    pub line_levelling: Vec<crate::PassLevelling>,
 }
 
 impl RenderedScan {
@@ -956,7 +963,8 @@ impl RenderedScan {
         config: &SimulationConfig,
         options: &crate::DiagnoseOptions,
     ) -> Result<crate::DiagnosisReport, DiagnoseError> {
-        let report = self.scan.diagnosed(config, options)?;
+        let mut report = self.scan.diagnosed(config, options)?;
+        report.base_choice.line_levelling = self.line_levelling.clone();
         Ok(match &self.sub_feature {
             Some(view) => report.with_sub_feature_view(view.clone()),
             None => report,
@@ -969,11 +977,13 @@ impl RenderedScan {
 /// reports.
 pub fn simulate_rendered(config: &SimulationConfig) -> Result<RenderedScan, DiagnoseError> {
     let (pair, sets, options) = render_and_find(config)?;
-    let sub_feature =
-        crate::sub_feature_view_of_pair(&pair, &sets.iter().collect::<Vec<_>>(), &options, None);
+    let set_refs: Vec<&FeatureSet> = sets.iter().collect();
+    let sub_feature = crate::sub_feature_view_of_pair(&pair, &set_refs, &options, None);
+    let line_levelling = crate::PassLevelling::of_sets(&set_refs);
     Ok(RenderedScan {
         scan: scan_of(&pair, sets),
         sub_feature,
+        line_levelling,
     })
 }
 

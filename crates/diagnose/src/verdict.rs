@@ -198,6 +198,23 @@ pub(crate) fn decide(
     verdict
 }
 
+impl Verdict {
+    /// Adds to the summary, for each named effect that others explain about as well
+    /// (`about_as_good`, per effect in the order named), that the data do not tell them
+    /// apart.
+    pub(crate) fn note_near_ties(&mut self, about_as_good: &[(Candidate, Vec<Candidate>)]) {
+        for (named, others) in about_as_good.iter().filter(|(_, o)| !o.is_empty()) {
+            let others: Vec<&str> = others.iter().map(|c| c.name()).collect();
+            self.summary.push_str(&format!(
+                " {} explains the positions about as well as {named} (χ² reduction within \
+                 {:.0} %): the data do not tell them apart.",
+                others.join(" or "),
+                100.0 * crate::NEAR_TIE_FRACTION
+            ));
+        }
+    }
+}
+
 fn names(effects: &[Candidate]) -> String {
     effects
         .iter()
