@@ -259,7 +259,7 @@ fn diagnose_from(
             .collect();
         verdict.note_near_ties(&ties);
     }
-    let residuals = feature_residuals(&prepared, &fitted, &current);
+    let residuals = feature_residuals(&prepared, &fitted, base, &current);
     let all = &prepared.observations;
     Ok(DiagnosisReport {
         verdict: verdict.kind,
@@ -594,10 +594,11 @@ fn added_effect(w: &Scored, f: &Fitted, current: &Fitted, sigma: [f64; 2]) -> Ad
 fn feature_residuals(
     prepared: &Prepared,
     fitted: &BaseFit,
+    base: &Fitted,
     current: &Fitted,
 ) -> Vec<FeatureResidual> {
     let all = &prepared.observations;
-    let (keep, first, base) = (&fitted.keep, &fitted.first, &fitted.base);
+    let (keep, first) = (&fitted.keep, &fitted.first);
     let mut residuals = Vec::with_capacity(all.len());
     let mut used = 0;
     for (i, o) in all.iter().enumerate() {

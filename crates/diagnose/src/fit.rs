@@ -252,7 +252,7 @@ pub(crate) fn fit_profiled(
         .filter_map(|(g, r)| r.as_ref().map(|(c, _)| (*g, *c)))
         .collect();
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let Some(mut best) = fits
+    let Some(best) = fits
         .into_iter()
         .filter_map(|(_, r)| r)
         .min_by(|a, b| a.0.total_cmp(&b.0))
@@ -260,49 +260,7 @@ pub(crate) fn fit_profiled(
         // Every grid point failed: report the plain fit's error.
         return fit(model, geometry, observations, sigma, max_iterations);
     };
-    // Parabola through the best grid point and its neighbours, then narrower ones about
-    // its vertex: an exponential creep's τ must be right to within a per cent (a 4 % error
-    // of a 0.4 nm relaxation leaves several pm), which one parabola over the grid's
-    // factor-2.5 steps does not reach.
-    if let Some(i) = points.iter().position(|p| p.1 == best.0)
-        && i > 0
-        && i + 1 < points.len()
-        && let Some(vertex) = parabola_vertex([points[i - 1], points[i], points[i + 1]])
-    {
-        let mut centre = points[i].0;
-        if let Some(r) = run(vertex)
-            && r.0 < best.0
-        {
-            (best, centre) = (r, vertex);
-        }
-        let mut half_width = 0.125 * (points[i + 1].0 - points[i - 1].0);
-        for _ in 0..PROFILE_REFINEMENTS {
-            let before = best.0;
-            let xs = [centre - half_width, centre + half_width];
-            let sides: Vec<Option<(f64, Fitted)>> = xs.par_iter().map(|&g| run(g)).collect();
-            let (Some(lo), Some(hi)) = (&sides[0], &sides[1]) else {
-                break;
-            };
-            let vertex = parabola_vertex([(xs[0], lo.0), (centre, best.0), (xs[1], hi.0)]);
-            for (x, side) in xs.into_iter().zip(sides) {
-                if let Some(r) = side
-                    && r.0 < best.0
-                {
-                    (best, centre) = (r, x);
-                }
-            }
-            if let Some(v) = vertex
-                && let Some(r) = run(v)
-                && r.0 < best.0
-            {
-                (best, centre) = (r, v);
-            }
-            if before - best.0 < PROFILE_CONVERGED_CHI2 {
-                break;
-            }
-            half_width *= 0.25;
-        }
-    }
+    let best = refined_minimum(&run, &points, best);
     if !same_free(&held, &model) {
         let mut m = best.1.model;
         for (term, original) in m.terms.iter_mut().zip(&model.terms) {
@@ -311,6 +269,65 @@ pub(crate) fn fit_profiled(
         return fit(m, geometry, observations, sigma, max_iterations);
     }
     Ok(best.1)
+}
+
+/// A profiled fit `(χ², fit)`, or `None` where it failed.
+type ProfilePoint = Option<(f64, Fitted)>;
+
+/// The profile's minimum refined from the best grid point `best` (`points`: the grid's
+/// `(ln t0, χ²)`, sorted): a parabola through it and its neighbours, then narrower ones
+/// about the vertex until χ² improves by less than [`PROFILE_CONVERGED_CHI2`]. An
+/// exponential creep's τ must be right to within a per cent (a 4 % error of a 0.4 nm
+/// relaxation leaves several pm), which one parabola over the grid's factor-2.5 steps does
+/// not reach. `run(ln t0)` fits at one point.
+fn refined_minimum(
+    run: &(impl Fn(f64) -> ProfilePoint + Sync),
+    points: &[(f64, f64)],
+    mut best: (f64, Fitted),
+) -> (f64, Fitted) {
+    let Some(i) = points.iter().position(|p| p.1 == best.0) else {
+        return best;
+    };
+    if i == 0 || i + 1 >= points.len() {
+        return best;
+    }
+    let Some(vertex) = parabola_vertex([points[i - 1], points[i], points[i + 1]]) else {
+        return best;
+    };
+    let mut centre = points[i].0;
+    if let Some(r) = run(vertex)
+        && r.0 < best.0
+    {
+        (best, centre) = (r, vertex);
+    }
+    let mut half_width = 0.125 * (points[i + 1].0 - points[i - 1].0);
+    for _ in 0..PROFILE_REFINEMENTS {
+        let before = best.0;
+        let xs = [centre - half_width, centre + half_width];
+        let sides: Vec<ProfilePoint> = xs.par_iter().map(|&g| run(g)).collect();
+        let (Some(lo), Some(hi)) = (&sides[0], &sides[1]) else {
+            break;
+        };
+        let vertex = parabola_vertex([(xs[0], lo.0), (centre, best.0), (xs[1], hi.0)]);
+        for (x, side) in xs.into_iter().zip(sides) {
+            if let Some(r) = side
+                && r.0 < best.0
+            {
+                (best, centre) = (r, x);
+            }
+        }
+        if let Some(v) = vertex
+            && let Some(r) = run(v)
+            && r.0 < best.0
+        {
+            (best, centre) = (r, v);
+        }
+        if before - best.0 < PROFILE_CONVERGED_CHI2 {
+            break;
+        }
+        half_width *= 0.25;
+    }
+    best
 }
 
 /// Narrower parabolas tried about the profile's first vertex, at most.

@@ -325,7 +325,9 @@ impl DiagnosisReport {
                 f,
                 "  with the effects each form's selection named, the whole model with the {other} \
                  form has ΔBIC {d:.1} against the log form's ({})",
-                if d > -DECISIVE_BIC {
+                if d >= 0.0 {
+                    "the log form's is better: it is kept"
+                } else if d > -DECISIVE_BIC {
                     "not decisive: the log form is kept"
                 } else {
                     "decisive: it is kept"
