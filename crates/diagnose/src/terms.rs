@@ -55,13 +55,7 @@ impl ModelTerm for QuadraticField {
         "local-strain"
     }
     fn displacement(&self, at: &AcquisitionContext) -> Vector2<f64> {
-        let g = at.geometry;
-        let (w, h) = (
-            (g.columns() as f64 - 1.0).max(1.0) * g.pitch_x(),
-            (g.rows() as f64 - 1.0).max(1.0) * g.pitch_y(),
-        );
-        let xi = 2.0 * at.controller.x / w - 1.0;
-        let eta = 2.0 * at.controller.y / h - 1.0;
+        let [xi, eta] = at.normalised_position();
         let phi = [xi * xi, xi * eta, eta * eta];
         let c = &self.coefficients_m;
         Vector2::new(

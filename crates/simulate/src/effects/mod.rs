@@ -81,6 +81,20 @@ impl<'a> AcquisitionContext<'a> {
             surface_height,
         }
     }
+
+    /// The controller position normalised to `[−1, 1]` across the image, `[ξ, η]`: −1 at
+    /// the first pixel centre of each axis, +1 at the last.
+    pub fn normalised_position(&self) -> [f64; 2] {
+        let g = self.geometry;
+        let (w, h) = (
+            (g.columns() as f64 - 1.0).max(1.0) * g.pitch_x(),
+            (g.rows() as f64 - 1.0).max(1.0) * g.pitch_y(),
+        );
+        [
+            2.0 * self.controller.x / w - 1.0,
+            2.0 * self.controller.y / h - 1.0,
+        ]
+    }
 }
 
 /// A mechanism that displaces the tip relative to the sample during acquisition.

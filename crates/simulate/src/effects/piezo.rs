@@ -61,13 +61,7 @@ impl Effect for PiezoNonlinearity {
     }
 
     fn displacement(&self, at: &AcquisitionContext) -> Vector2<f64> {
-        let g = at.geometry;
-        let (w, h) = (
-            (g.columns() as f64 - 1.0).max(1.0) * g.pitch_x(),
-            (g.rows() as f64 - 1.0).max(1.0) * g.pitch_y(),
-        );
-        let xi = 2.0 * at.controller.x / w - 1.0;
-        let eta = 2.0 * at.controller.y / h - 1.0;
+        let [xi, eta] = at.normalised_position();
         Vector2::new(
             shape(self.quadratic_m[0], self.cubic_m[0], xi),
             shape(self.quadratic_m[1], self.cubic_m[1], eta),
