@@ -252,12 +252,7 @@ fn diagnose_from(
         fitted.noise.source,
     );
     if verdict.kind != VerdictKind::NoGap {
-        let ties: Vec<(Candidate, Vec<Candidate>)> = greedy
-            .added
-            .iter()
-            .map(|a| (a.candidate, a.about_as_good.clone()))
-            .collect();
-        verdict.note_near_ties(&ties);
+        verdict.note_near_ties(&greedy.added);
     }
     let residuals = feature_residuals(&prepared, &fitted, base, &current);
     let all = &prepared.observations;

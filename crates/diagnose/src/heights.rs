@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::Observation;
 
 /// Fewest features for the view.
-const MIN_FEATURES: usize = 20;
+const MIN_FEATURES_FOR_HEIGHTS: usize = 20;
 
 /// Significance (difference of the means over its standard error) from which a change of
 /// the feature heights in time is reported. Splits are searched over most of the frame, so
@@ -62,7 +62,7 @@ impl HeightView {
             .filter(|o| o.apparent_height.is_finite() && o.time_s.is_finite())
             .map(|o| (o.time_s, o.apparent_height))
             .collect();
-        if in_time.len() < MIN_FEATURES {
+        if in_time.len() < MIN_FEATURES_FOR_HEIGHTS {
             return None;
         }
         in_time.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -5,13 +5,13 @@ use std::fmt;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
-use crate::base::{BaseChoice, DECISIVE_BIC};
+use crate::base::{BaseChoice, DECISIVE_BIC, LawScore};
 use crate::candidates::Candidate;
 use crate::fit::FittedParameter;
 use crate::location::GapLocation;
 use crate::noise::NoiseFloor;
 use crate::select::CandidateScore;
-use crate::verdict::{Verdict, VerdictKind};
+use crate::verdict::{Verdict, VerdictKind, names};
 
 /// Size of a gap relative to the noise floor.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -93,11 +93,11 @@ pub struct AddedEffect {
     pub about_as_good: Vec<Candidate>,
 }
 
-/// Candidate names joined by commas.
-fn names(candidates: &[Candidate]) -> String {
-    candidates
+/// Each alternative with its BIC against the chosen one, e.g. `power ΔBIC 0.0, cubic ΔBIC 6.2`.
+fn bic_scores(scores: &[LawScore]) -> String {
+    scores
         .iter()
-        .map(|c| c.name())
+        .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -295,23 +295,13 @@ impl DiagnosisReport {
             f,
             "base hysteresis law (BIC): {} ({})",
             self.base_choice.hysteresis_law,
-            self.base_choice
-                .hysteresis
-                .iter()
-                .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
-                .collect::<Vec<_>>()
-                .join(", ")
+            bic_scores(&self.base_choice.hysteresis)
         )?;
         writeln!(
             f,
             "base creep form (BIC):     {} ({})",
             self.base_choice.creep_form,
-            self.base_choice
-                .creep
-                .iter()
-                .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
-                .collect::<Vec<_>>()
-                .join(", ")
+            bic_scores(&self.base_choice.creep)
         )?;
         if let Some(d) = self.base_choice.creep_form_whole_model_delta_bic {
             let other = self

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::candidates::Candidate;
 use crate::location::{Bin, GapLocation};
 use crate::noise::FloorSource;
+use crate::report::AddedEffect;
 
 /// A gap at most this many times the noise floor counts as closed.
 pub const GAP_THRESHOLD: f64 = 1.2;
@@ -199,23 +200,24 @@ pub(crate) fn decide(
 }
 
 impl Verdict {
-    /// Adds to the summary, for each named effect that others explain about as well
-    /// (`about_as_good`, per effect in the order named), that the data do not tell them
-    /// apart.
-    pub(crate) fn note_near_ties(&mut self, about_as_good: &[(Candidate, Vec<Candidate>)]) {
-        for (named, others) in about_as_good.iter().filter(|(_, o)| !o.is_empty()) {
-            let others: Vec<&str> = others.iter().map(|c| c.name()).collect();
+    /// Adds to the summary, for each effect in `added` that others explain about as well
+    /// (its `about_as_good`), that the data do not tell them apart.
+    pub(crate) fn note_near_ties(&mut self, added: &[AddedEffect]) {
+        for a in added.iter().filter(|a| !a.about_as_good.is_empty()) {
+            let others: Vec<&str> = a.about_as_good.iter().map(|c| c.name()).collect();
             self.summary.push_str(&format!(
-                " {} explains the positions about as well as {named} (χ² reduction within \
+                " {} explains the positions about as well as {} (χ² reduction within \
                  {:.0} %): the data do not tell them apart.",
                 others.join(" or "),
+                a.candidate,
                 100.0 * crate::NEAR_TIE_FRACTION
             ));
         }
     }
 }
 
-fn names(effects: &[Candidate]) -> String {
+/// Candidate names joined by commas.
+pub(crate) fn names(effects: &[Candidate]) -> String {
     effects
         .iter()
         .map(|c| c.to_string())
