@@ -7,6 +7,7 @@
 //! - [`linalg`]: covariance from normal equations when some parameters are not determined.
 //! - [`crlb`]: the Cramér–Rao bound on a 2-D Gaussian's centre.
 //! - [`moments`]: plain moments of point sets.
+//! - [`special`]: the error function and the normal upper tail.
 //! - [`series`]: `ln(1 + u)` for small `u` in hot loops (the correction of every pixel).
 //!
 //! Why our own LM and not `argmin` or `levenberg-marquardt`: the feature fit needs bound
@@ -36,3 +37,4 @@ pub mod lm;
 pub mod moments;
 pub mod robust;
 pub mod series;
+pub mod special;

@@ -94,23 +94,13 @@ mod tests {
 
     /// Inverse of the standard normal CDF by bisection (test helper).
     fn normal_quantile(p: f64) -> f64 {
-        let cdf = |x: f64| 0.5 * (1.0 + erf(x / std::f64::consts::SQRT_2));
+        let cdf = |x: f64| 1.0 - crate::special::normal_upper_tail(x);
         let (mut lo, mut hi) = (-10.0, 10.0);
         for _ in 0..100 {
             let mid = 0.5 * (lo + hi);
             if cdf(mid) < p { lo = mid } else { hi = mid }
         }
         0.5 * (lo + hi)
-    }
-
-    /// Abramowitz–Stegun 7.1.26 (|error| < 1.5e-7).
-    fn erf(x: f64) -> f64 {
-        let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-        let poly = t
-            * (0.254_829_592
-                + t * (-0.284_496_736
-                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-        (1.0 - poly * (-x * x).exp()).copysign(x)
     }
 
     proptest! {

@@ -132,23 +132,12 @@ impl Terrace {
 /// 0 outside, 1 inside, an erf ramp of width `sigma` across the boundary.
 fn edge_profile(signed_distance: f64, sigma: f64) -> f64 {
     if sigma > 0.0 {
-        0.5 * (1.0 + erf(signed_distance / (SQRT_2 * sigma)))
+        0.5 * (1.0 + dhct_numerics::special::erf(signed_distance / (SQRT_2 * sigma)))
     } else if signed_distance >= 0.0 {
         1.0
     } else {
         0.0
     }
-}
-
-/// The error function (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
-fn erf(x: f64) -> f64 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let value = 1.0 - poly * (-x * x).exp();
-    value.copysign(x)
 }
 
 /// One Gaussian, ready to evaluate: `factor · exp(−½ (d−o)ᵀ Q (d−o))`.
@@ -750,13 +739,6 @@ fn adatom_positions(surface: &SurfaceConfig, seed: u64, nominal: SampleArea) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn erf_matches_known_values() {
-        assert!((erf(0.0)).abs() < 1e-7);
-        assert!((erf(1.0) - 0.842_700_79).abs() < 2e-7);
-        assert!((erf(-2.0) + 0.995_322_27).abs() < 2e-7);
-    }
 
     #[test]
     fn tip_broadening_keeps_the_volume() {
