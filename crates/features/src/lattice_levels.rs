@@ -215,6 +215,16 @@ impl<'a> LatticeModel<'a> {
     }
 }
 
+/// The lattice's own picture of `z`: the atom as `z` shows it (its mean by offset from
+/// the nearest of `centres`, on a half-pixel grid) placed at every centre (`(x, y)` px;
+/// `nn_px` the neighbour distance in px). Put the centres where a model predicts them and
+/// this is that model rendered with the measured atom shape. NaN where no centre is within
+/// 0.75 neighbour distances.
+pub fn lattice_model_image(z: ArrayView2<f64>, centres: &[[f64; 2]], nn_px: f64) -> Array2<f64> {
+    let model = LatticeModel::measure(z, centres, nn_px);
+    Array2::from_shape_fn(z.dim(), |(r, c)| model.at(r, c))
+}
+
 /// `z` minus the lattice model built from `centres` (`(x, y)` px; `nn_px` the neighbour
 /// distance in px): what the lattice's own picture does not explain (pixel noise, line
 /// offsets, defects). NaN where no centre is in reach or `z` is missing.
@@ -223,8 +233,9 @@ pub(crate) fn lattice_residual(
     centres: &[[f64; 2]],
     nn_px: f64,
 ) -> Array2<f64> {
-    let model = LatticeModel::measure(z, centres, nn_px);
-    Array2::from_shape_fn(z.dim(), |(r, c)| z[[r, c]] - model.at(r, c))
+    let mut residual = lattice_model_image(z, centres, nn_px);
+    residual.zip_mut_with(&z, |m, v| *m = v - *m);
+    residual
 }
 
 /// The lines' levels and how far they vary beyond what pixel noise alone would give.

@@ -64,6 +64,7 @@ pub use find::{
 };
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
+pub use lattice_levels::lattice_model_image;
 pub use line_level::{line_taper, tapered_line_level, tapered_line_level_with};
 pub use line_levelling::LineLevelling;
 pub use ncc::{NccPlan, normalised_cross_correlation};
