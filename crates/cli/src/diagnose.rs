@@ -8,8 +8,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ValidationOptions,
-    VerdictKind, diagnose_with_model, validate, with_pair_views,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ResidualImage,
+    ValidationOptions, VerdictKind, diagnose_with_model, pair_views, validate,
 };
 use dhct_distortion::PassInput;
 use dhct_features::FeatureSet;
@@ -42,9 +42,11 @@ pub fn write_stdout(text: &str) -> Result<()> {
 
 /// The diagnosis of a `dhct correct` run: on its features, options and mask, starting from
 /// the correction the run made (its drift model, or the affine map it chose) without
-/// refitting it, with the image view below one feature (what `correct --diagnose` and
-/// `dhct diagnose` write as diagnosis.json).
-pub fn diagnosis_of(corrected: &crate::correct::Corrected) -> Result<DiagnosisReport> {
+/// refitting it, with what only the images show (what `correct --diagnose` and `dhct
+/// diagnose` write as diagnosis.json), and the residual images.
+pub fn diagnosis_of(
+    corrected: &crate::correct::Corrected,
+) -> Result<(DiagnosisReport, Vec<ResidualImage>)> {
     let passes = &corrected.analysis.passes;
     let inputs: Vec<PassInput> = passes
         .iter()
@@ -63,7 +65,7 @@ pub fn diagnosis_of(corrected: &crate::correct::Corrected) -> Result<DiagnosisRe
     )
     .context("diagnosis")?;
     let feature_sets: Vec<&FeatureSet> = passes.iter().map(|p| &p.features).collect();
-    Ok(with_pair_views(
+    Ok(pair_views(
         report,
         &corrected.pair,
         &feature_sets,
@@ -254,6 +256,98 @@ fn residual_map_figure(report: &DiagnosisReport, geometry: &ScanGeometry) -> Fig
     )
 }
 
+/// One pass's residual image, grey over ±4 × its pixel noise.
+fn residual_image_figure(r: &ResidualImage, geometry: &ScanGeometry) -> Figure {
+    let scale = upscale_for(geometry.rows(), geometry.columns(), 512);
+    let noise = r.summary.pixel_noise;
+    let span = if noise.is_finite() && noise > 0.0 {
+        4.0 * noise
+    } else {
+        1.0
+    };
+    let canvas = Canvas::from_image(
+        r.residual.view(),
+        Colormap::Greys,
+        Some((-span, span)),
+        scale,
+    );
+    Figure::picture(
+        &format!("diagnosis_residual_image_{}", r.pass),
+        &format!("The image minus the rendered model ({})", r.pass),
+        format!(
+            "The {} image minus the final model (the atom as the image shows it, placed where the \
+             base fit and the named effects predict every feature), each line's median removed; \
+             grey from −4 to +4 × the pixel noise. {}.",
+            r.pass,
+            r.summary.describe()
+        ),
+        &canvas,
+        PictureStyle {
+            metres_per_px: metres_per_picture_px(geometry, scale),
+            colour: Some(ColourBar {
+                colormap: Colormap::Greys,
+                low: -span,
+                high: span,
+                unit: r.summary.z_unit.clone(),
+                label: "image − model".into(),
+            }),
+            max_side: None,
+        },
+    )
+}
+
+/// The residual images' rms over their pixel noise against the fast phase.
+fn residual_phase_figure(residuals: &[ResidualImage]) -> Figure {
+    let bins = dhct_diagnose::FAST_PHASE_BINS as f64;
+    let mut plot = Plot::new(
+        "Image residual vs fast phase",
+        "fast phase τ/T (time since line start / line scan time)",
+        "rms / pixel noise",
+    );
+    for (r, colour) in residuals.iter().zip([BLUE, ORANGE]) {
+        let points = r
+            .summary
+            .by_fast_phase
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| Some(((k as f64 + 0.5) / bins, (*v)?)))
+            .collect();
+        plot = plot.with(Series::new(r.pass.to_string(), points, Style::Line, colour));
+    }
+    Figure::plot(
+        "diagnosis_residual_fast_phase",
+        "Image residual against the fast phase",
+        "RMS of the image minus the rendered model over the pixel noise (1 = the model explains \
+         every pixel), binned by the time since line start."
+            .into(),
+        &plot,
+    )
+}
+
+/// Each residual image as a float TIFF with the scan's pixel size
+/// (`residual_trace.tiff`, `residual_retrace.tiff`).
+pub fn write_residual_images(
+    dir: &Path,
+    residuals: &[ResidualImage],
+    geometry: &ScanGeometry,
+) -> Result<()> {
+    for r in residuals {
+        let channel = dhct_scan::ImageChannel::new(
+            "image minus the rendered model",
+            r.summary.z_unit.clone(),
+            r.residual.clone(),
+        );
+        let mut bytes = Vec::new();
+        dhct_sm4_io::tiff_file::write_f32_with_pixel_size(
+            &channel,
+            [geometry.pitch_x(), geometry.pitch_y()],
+            &mut bytes,
+        )?;
+        write_bytes(&dir.join(format!("residual_{}.tiff", r.pass)), &bytes)?;
+    }
+    Ok(())
+}
+
 /// The verdict and where the remaining gap lies.
 fn verdict_html(html: &mut Html, report: &DiagnosisReport) {
     let v = &report.verdict_details;
@@ -427,8 +521,12 @@ fn hot_spots_html(html: &mut Html, report: &DiagnosisReport) {
     .table(&["bin", "features", "rms x", "rms y", "excess z"], &rows);
 }
 
-/// The figures and the HTML section of a diagnosis.
-pub fn diagnosis_section(report: &DiagnosisReport, geometry: &ScanGeometry) -> (Html, Vec<Figure>) {
+/// The figures and the HTML section of a diagnosis with its residual images.
+pub fn diagnosis_section(
+    report: &DiagnosisReport,
+    residuals: &[ResidualImage],
+    geometry: &ScanGeometry,
+) -> (Html, Vec<Figure>) {
     let mut figures = report
         .location
         .as_ref()
@@ -436,12 +534,25 @@ pub fn diagnosis_section(report: &DiagnosisReport, geometry: &ScanGeometry) -> (
         .unwrap_or_default();
     figures.push(residual_time_figure(report));
     figures.push(residual_map_figure(report, geometry));
+    figures.extend(residuals.iter().map(|r| residual_image_figure(r, geometry)));
+    if !residuals.is_empty() {
+        figures.push(residual_phase_figure(residuals));
+    }
     let mut html = Html::new();
     html.element("h2", "Sim-to-real gap diagnosis");
     verdict_html(&mut html, report);
     noise_and_gap_html(&mut html, report);
     candidates_html(&mut html, report);
     hot_spots_html(&mut html, report);
+    for p in &report.image_residual {
+        html.element(
+            "p",
+            &format!(
+                "Image minus the final model rendered with the measured atom, {}.",
+                p.describe()
+            ),
+        );
+    }
     figure_grid(&mut html, &figures);
     (html, figures)
 }
@@ -463,9 +574,10 @@ pub fn run_file(
     let corrected = analyse_file(input, retrace, config, &|_| {})?;
     let geometry = corrected.pair.geometry();
     let lattice = &corrected.lattice;
-    let report = diagnosis_of(&corrected)?;
+    let (report, residuals) = diagnosis_of(&corrected)?;
     write_bytes(&output.join("diagnosis.json"), report.to_json().as_bytes())?;
-    let (section, figures) = diagnosis_section(&report, geometry);
+    write_residual_images(output, &residuals, geometry)?;
+    let (section, figures) = diagnosis_section(&report, &residuals, geometry);
     write_figure_files(output, &figures)?;
     let mut body = Html::new();
     body.element("h1", "DHCT sim-to-real gap")

@@ -410,8 +410,20 @@ fn correct_with_diagnosis_adds_the_gap_section() {
         "Gap against frame time",
         "Spectrum of the residuals",
         "Where the gap lies (map)",
+        "The image minus the rendered model (trace)",
+        "Image residual against the fast phase",
     ] {
         assert!(html.contains(needle), "report lacks {needle}");
     }
     assert!(out.path().join("diagnosis_map.png").is_file());
+    // The residual images as data: float TIFFs, and their summaries in the JSON.
+    for pass in ["trace", "retrace"] {
+        assert!(out.path().join(format!("residual_{pass}.tiff")).is_file());
+    }
+    let passes = diagnosis["image_residual"].as_array().unwrap();
+    assert_eq!(passes.len(), 2);
+    for p in passes {
+        let rms = p["rms_over_noise"].as_f64().unwrap();
+        assert!(rms > 0.8 && rms < 1.5, "residual rms / pixel noise {rms}");
+    }
 }

@@ -280,6 +280,7 @@ fn diagnose_from(
         final_location,
         sub_feature: None,
         heights: HeightView::of(&prepared.observations),
+        image_residual: Vec::new(),
         noise: fitted.noise,
         residuals,
     })

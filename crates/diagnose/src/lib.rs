@@ -59,6 +59,7 @@
 //! assert_eq!(report.top(), Some(dhct_diagnose::Candidate::TipChange));
 //! ```
 
+mod along_line;
 mod base;
 mod candidates;
 mod data;
@@ -66,6 +67,7 @@ mod diagnose;
 mod error;
 mod fit;
 mod heights;
+mod image_residual;
 mod location;
 mod model;
 mod noise;
@@ -80,6 +82,10 @@ mod timing_gain;
 mod validate;
 mod verdict;
 
+pub use along_line::{
+    ALONG_LINE_FALSE_ALARM, AlongLinePeak, LATTICE_LINE_RATIO, LatticeSideband, MIN_SHARED_EXCESS,
+    PHASE_MARGIN, PassPhases,
+};
 pub use base::{BaseChoice, LawScore, PassLevelling};
 pub use candidates::Candidate;
 pub use data::{MIN_FEATURES, Observation};
@@ -87,9 +93,13 @@ pub use diagnose::{DiagnoseOptions, diagnose, diagnose_with_model};
 pub use error::DiagnoseError;
 pub use fit::FittedParameter;
 pub use heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
+pub use image_residual::{
+    EXCESS_LINE_FACTOR, EXCESS_LINE_SPREADS, FAST_PHASE_BINS, LINE_TILT_EVIDENCE, LineWindow,
+    PassResidual, ResidualImage,
+};
 pub use location::{Bin, ChangePoint, GapLocation};
 pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
-pub use pair_images::{sub_feature_view_of_pair, with_pair_views};
+pub use pair_images::{pair_views, sub_feature_view_of_pair, with_pair_views};
 pub use report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
     NEAR_TIE_FRACTION, Shrink,

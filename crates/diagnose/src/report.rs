@@ -197,6 +197,10 @@ pub struct DiagnosisReport {
     /// it moves a feature, so none of it is a scan distortion.
     #[serde(default)]
     pub heights: Option<crate::HeightView>,
+    /// The final model rendered forward and compared with each image, pixel by pixel
+    /// (empty when the images were not given; [`crate::pair_views`]).
+    #[serde(default)]
+    pub image_residual: Vec<crate::PassResidual>,
 }
 
 impl DiagnosisReport {
@@ -278,6 +282,13 @@ impl DiagnosisReport {
                 f,
                 "heights (z only: they move no feature, so they are no scan distortion): {}",
                 h.describe()
+            )?;
+        }
+        for p in &self.image_residual {
+            writeln!(
+                f,
+                "image minus the final model rendered with the measured atom, {}",
+                p.describe()
             )?;
         }
         Ok(())

@@ -944,46 +944,49 @@ pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, Diagn
     Ok(scan_of(&pair, sets))
 }
 
-/// A rendered scan: its features and the image view below one feature.
+/// A rendered scan: its images, its features and how they were found.
 #[derive(Debug, Clone)]
 pub struct RenderedScan {
     /// The features found in the rendered images.
     pub scan: SimulatedScan,
-    /// The sub-feature view of the images, as `dhct diagnose` computes it.
-    pub sub_feature: Option<crate::SubFeatureView>,
-    /// How each image's lines were levelled before its features were fitted.
-    pub line_levelling: Vec<crate::PassLevelling>,
+    /// The rendered images.
+    pub pair: ScanPair,
+    /// The features of each image.
+    pub sets: Vec<FeatureSet>,
+    /// The options they were found with.
+    pub options: FeatureOptions,
 }
 
 impl RenderedScan {
     /// The diagnosis of this scan of `config` with `options`, as `dhct diagnose` makes
-    /// it: the feature positions, then the view below one feature added.
+    /// it: the feature positions, then what only the images show
+    /// ([`crate::with_pair_views`]).
     pub fn diagnosed(
         &self,
         config: &SimulationConfig,
         options: &crate::DiagnoseOptions,
     ) -> Result<crate::DiagnosisReport, DiagnoseError> {
-        let mut report = self.scan.diagnosed(config, options)?;
-        report.base_choice.line_levelling = self.line_levelling.clone();
-        Ok(match &self.sub_feature {
-            Some(view) => report.with_sub_feature_view(view.clone()),
-            None => report,
-        })
+        let report = self.scan.diagnosed(config, options)?;
+        let sets: Vec<&FeatureSet> = self.sets.iter().collect();
+        Ok(crate::with_pair_views(
+            report,
+            &self.pair,
+            &sets,
+            &self.options,
+            None,
+        ))
     }
 }
 
-/// [`simulate_images`] with the sub-feature view of the rendered images
-/// ([`crate::sub_feature_view_of_pair`]), so that a validation sees what `dhct diagnose`
-/// reports.
+/// [`simulate_images`], keeping the images, so that a validation sees what `dhct
+/// diagnose` reports ([`RenderedScan::diagnosed`]).
 pub fn simulate_rendered(config: &SimulationConfig) -> Result<RenderedScan, DiagnoseError> {
     let (pair, sets, options) = render_and_find(config)?;
-    let set_refs: Vec<&FeatureSet> = sets.iter().collect();
-    let sub_feature = crate::sub_feature_view_of_pair(&pair, &set_refs, &options, None);
-    let line_levelling = crate::PassLevelling::of_sets(&set_refs);
     Ok(RenderedScan {
-        scan: scan_of(&pair, sets),
-        sub_feature,
-        line_levelling,
+        scan: scan_of(&pair, sets.clone()),
+        pair,
+        sets,
+        options,
     })
 }
 

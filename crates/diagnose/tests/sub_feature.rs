@@ -136,11 +136,12 @@ fn rendered_diagnosis(mut case: ValidationCase, hz: Option<f64>) -> DiagnosisRep
             v.frequency_hz = hz;
         }
     }
-    let rendered = simulate_rendered(&case.config).expect("renders");
-    assert!(rendered.sub_feature.is_some(), "enough slices");
-    rendered
+    let report = simulate_rendered(&case.config)
+        .expect("renders")
         .diagnosed(&case.config, &DiagnoseOptions::default())
-        .expect("diagnoses")
+        .expect("diagnoses");
+    assert!(report.sub_feature.is_some(), "enough slices");
+    report
 }
 
 /// A 0.9 Hz vibration (3–5 pm) on the image-path development scans: a feature spans about

@@ -360,7 +360,7 @@ impl Correction {
         let c = &self.inner;
         let report = py.detach(|| dhct_cli::diagnose::diagnosis_of(c));
         report
-            .map(|r| r.to_json())
+            .map(|(r, _)| r.to_json())
             .map_err(|e| to_py::<AnalysisError>(&e))
     }
 

@@ -319,9 +319,11 @@ fn write_resolved_config(dir: &Path, corrected: &Corrected, colormap: Colormap) 
 /// section.
 fn write_diagnosis(dir: &Path, corrected: &Corrected) -> Result<crate::report::page::Html> {
     let geometry = corrected.pair.geometry();
-    let diagnosis = crate::diagnose::diagnosis_of(corrected)?;
+    let (diagnosis, residuals) = crate::diagnose::diagnosis_of(corrected)?;
     write_bytes(&dir.join("diagnosis.json"), diagnosis.to_json().as_bytes())?;
-    let (section, diagnosis_figures) = crate::diagnose::diagnosis_section(&diagnosis, geometry);
+    crate::diagnose::write_residual_images(dir, &residuals, geometry)?;
+    let (section, diagnosis_figures) =
+        crate::diagnose::diagnosis_section(&diagnosis, &residuals, geometry);
     write_figure_files(dir, &diagnosis_figures)?;
     Ok(section)
 }
