@@ -32,6 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::FeatureResidual;
 use crate::along_line::{AlongLinePeak, along_line_peak, pass_phases, power_over_level_near};
+use crate::line_departures::{line_shifts, line_tilt_evidence};
 
 /// Bins of the fast phase τ/T.
 pub const FAST_PHASE_BINS: usize = 16;
@@ -46,6 +47,9 @@ pub const EXCESS_LINE_FACTOR: f64 = 1.5;
 /// The [`PassResidual::line_tilt_evidence`] above which the lines are said to tilt one by
 /// one (the line levels' own evidence threshold, [`dhct_features::LineLevelling`]).
 pub const LINE_TILT_EVIDENCE: f64 = 4.0;
+
+/// The [`PassResidual::line_shifts_over_noise`] above which the lines are said to jitter.
+pub const LINE_JITTER_EVIDENCE: f64 = 4.0;
 
 /// Most excess-line windows listed.
 const MAX_WINDOWS: usize = 8;
@@ -92,6 +96,17 @@ pub struct PassResidual {
     /// levels. `None` with too few lines.
     #[serde(default)]
     pub line_tilt_evidence: Option<f64>,
+    /// How much the lines' shifts along themselves (each line's residual against the
+    /// model's gradient) differ from one line to the next over what the pixel noise gives:
+    /// about 1 without line jitter; above [`LINE_JITTER_EVIDENCE`] the lines jitter. What
+    /// consecutive lines share (the features' own position errors, slow motion) is left out.
+    /// `None` with too few lines.
+    #[serde(default)]
+    pub line_shifts_over_noise: Option<f64>,
+    /// The rms of those shifts beyond the noise, metres along the lines (0 when there is
+    /// none beyond it).
+    #[serde(default)]
+    pub line_jitter_m: Option<f64>,
     /// The strongest peak of the along-line spectrum, when it has one.
     pub along_line: Option<AlongLinePeak>,
 }
@@ -147,6 +162,16 @@ impl PassResidual {
                      line's slope)"
                 } else {
                     ""
+                }
+            ));
+        }
+        if let (Some(over), Some(jitter)) = (self.line_shifts_over_noise, self.line_jitter_m) {
+            s.push_str(&format!(
+                "; line shifts vary {over:.1} × what the pixel noise gives{}",
+                if over > LINE_JITTER_EVIDENCE {
+                    format!(" (the lines jitter: {} rms)", z_value(jitter, "m"))
+                } else {
+                    String::new()
                 }
             ));
         }
@@ -292,6 +317,9 @@ fn pass_residual(
     let rms_over_noise = rms(residual.as_slice().unwrap_or(&[])) / pixel_noise;
     let (excess_lines, excess_windows) = excess_windows(&lines, &line_rms, geometry);
     let model_lines = lines_of(model, pass, geometry);
+    let residual_lines: Vec<&[f64]> = lines.iter().map(|l| l.values.as_slice()).collect();
+    let model_lines: Vec<&[f64]> = model_lines.iter().map(|l| l.values.as_slice()).collect();
+    let shifts = line_shifts(&residual_lines, &model_lines, pixel_noise);
     let summary = PassResidual {
         pass,
         z_unit: String::new(),
@@ -301,18 +329,10 @@ fn pass_residual(
         excess_lines,
         lines: lines.len(),
         excess_windows,
-        line_tilt_evidence: line_tilt_evidence(&lines),
-        along_line: along_line_peak(
-            &lines
-                .iter()
-                .map(|l| l.values.as_slice())
-                .collect::<Vec<_>>(),
-            &model_lines
-                .iter()
-                .map(|l| l.values.as_slice())
-                .collect::<Vec<_>>(),
-            geometry.pixel_period(),
-        ),
+        line_tilt_evidence: line_tilt_evidence(&residual_lines),
+        line_shifts_over_noise: shifts.map(|s| s.0),
+        line_jitter_m: shifts.map(|s| s.1 * geometry.fast_pitch()),
+        along_line: along_line_peak(&residual_lines, &model_lines, geometry.pixel_period()),
     };
     Some(ResidualImage {
         pass,
@@ -375,63 +395,6 @@ fn by_fast_phase(lines: &[Line], noise: f64) -> Vec<Option<f64>> {
             Some(rms(&values) / noise).filter(|v| v.is_finite())
         })
         .collect()
-}
-
-/// The robust variance of the lines' slopes over that of their next two shapes (the
-/// orthonormal quadratic and cubic parts of each line over its finite pixels): white noise
-/// gives every part the same variance, noise that rises to low frequencies (1/f) a little
-/// more to the slope, a tilt of each line only the slope. `None` with fewer than 16 lines of
-/// at least 16 finite pixels.
-fn line_tilt_evidence(lines: &[Line]) -> Option<f64> {
-    let parts: Vec<[f64; 3]> = lines
-        .iter()
-        .filter_map(|line| {
-            let points: Vec<(f64, f64)> = line
-                .values
-                .iter()
-                .enumerate()
-                .filter(|(_, v)| v.is_finite())
-                .map(|(i, v)| (i as f64, *v))
-                .collect();
-            (points.len() >= 16).then(|| orthonormal_parts(&points))
-        })
-        .collect();
-    if parts.len() < 16 {
-        return None;
-    }
-    let variance = |k: usize| {
-        let values: Vec<f64> = parts.iter().map(|p| p[k]).collect();
-        dhct_numerics::robust::mad_sigma(&values).map(|s| s * s)
-    };
-    let reference = 0.5 * (variance(1)? + variance(2)?);
-    Some(variance(0)? / reference).filter(|r| r.is_finite())
-}
-
-/// The coefficients of `points` `(i, v)` on the orthonormal linear, quadratic and cubic
-/// polynomials over their `i` (Gram–Schmidt against the constant and each other): each has
-/// the pixel noise's variance under white noise.
-fn orthonormal_parts(points: &[(f64, f64)]) -> [f64; 3] {
-    let count = points.len() as f64;
-    let centre = points.iter().map(|p| p.0).sum::<f64>() / count;
-    let half = points
-        .iter()
-        .map(|p| (p.0 - centre).abs())
-        .fold(1.0, f64::max);
-    let u: Vec<f64> = points.iter().map(|p| (p.0 - centre) / half).collect();
-    let mut basis: Vec<Vec<f64>> = vec![vec![1.0 / count.sqrt(); points.len()]];
-    let mut parts = [0.0; 3];
-    for (k, part) in parts.iter_mut().enumerate() {
-        let mut b: Vec<f64> = u.iter().map(|x| x.powi(k as i32 + 1)).collect();
-        for e in &basis {
-            let dot: f64 = b.iter().zip(e).map(|(a, c)| a * c).sum();
-            b.iter_mut().zip(e).for_each(|(a, c)| *a -= dot * c);
-        }
-        let norm = b.iter().map(|a| a * a).sum::<f64>().sqrt();
-        b.iter_mut().for_each(|a| *a /= norm);
-        *part = b.iter().zip(points).map(|(a, p)| a * p.1).sum();
-        basis.push(b);
-    }
-    parts
 }
 
 /// Lines in excess and their longest runs (consecutive lines).

@@ -68,6 +68,7 @@ mod error;
 mod fit;
 mod heights;
 mod image_residual;
+mod line_departures;
 mod location;
 mod model;
 mod noise;
@@ -94,8 +95,8 @@ pub use error::DiagnoseError;
 pub use fit::FittedParameter;
 pub use heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
 pub use image_residual::{
-    EXCESS_LINE_FACTOR, EXCESS_LINE_SPREADS, FAST_PHASE_BINS, LINE_TILT_EVIDENCE, LineWindow,
-    PassResidual, ResidualImage,
+    EXCESS_LINE_FACTOR, EXCESS_LINE_SPREADS, FAST_PHASE_BINS, LINE_JITTER_EVIDENCE,
+    LINE_TILT_EVIDENCE, LineWindow, PassResidual, ResidualImage,
 };
 pub use location::{Bin, ChangePoint, GapLocation};
 pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};

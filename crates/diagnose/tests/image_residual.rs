@@ -1,57 +1,19 @@
 //! The final model rendered forward and compared with the image, pixel by pixel (issue 17,
 //! item 4): what the residual image shows that no feature position does.
 
-use dhct_diagnose::{DiagnoseOptions, LINE_TILT_EVIDENCE, PassResidual, diagnose, pair_views};
+use dhct_diagnose::{
+    DiagnoseOptions, LINE_JITTER_EVIDENCE, LINE_TILT_EVIDENCE, PassResidual, diagnose, pair_views,
+};
 use dhct_distortion::PassInput;
 use dhct_features::{FeatureOptions, FeatureSet, find_features_in_pair};
 use dhct_scan::{ScanPair, ScanPass};
 use dhct_simulate::{Simulation, SimulationConfig};
 
-/// Graphite 512² over 6 nm at 100 nm/s (120 ms per line pair), drift, creep, power-law
-/// hysteresis, white + pink noise and line offsets; `extra` is appended as is.
+mod common;
+
+/// The shared 512² graphite scan (`common::graphite_512`) with `extra` effects.
 fn config(extra: &str) -> SimulationConfig {
-    let text = format!(
-        r#"
-name = "image-residual"
-seed = 41
-[scan]
-columns = 512
-rows = 512
-width_m = 6e-9
-height_m = 6e-9
-fast_speed_m_per_s = 1e-7
-turnaround_s = 0.0
-trace_fast = "right"
-slow = "down"
-[surface.lattice]
-kind = "graphite"
-[surface.feature]
-height_m = 4e-11
-sigma_m = [6e-11, 6e-11]
-[noise]
-white_sigma_m = 3e-12
-pink_sigma_m = 2e-12
-line_offset_sigma_m = 5e-12
-[output]
-formats = []
-[[effects]]
-kind = "thermal-drift"
-velocity_m_per_s = [3e-12, -2e-12]
-acceleration_m_per_s2 = [-1e-15, 5e-16]
-[[effects]]
-kind = "creep"
-coefficient_m = [2e-10, 5e-10]
-t0_s = 60.0
-[[effects]]
-kind = "fast-hysteresis"
-[effects.law]
-kind = "power"
-k = 0.93
-n = -0.035
-{extra}
-"#
-    );
-    toml::from_str(&text).expect("the test config parses")
+    common::graphite_512("image-residual", 41, extra)
 }
 
 /// `pair` with a height signal `amplitude_m · sin(2π f t)` added at every pixel's
@@ -160,6 +122,10 @@ fn a_height_signal_below_the_noise_is_found_in_the_image() {
         assert_eq!(p.excess_lines, 0, "{p:?}");
         assert!(!p.along_line.as_ref().unwrap().is_found(), "{p:?}");
         assert!(p.line_tilt_evidence.unwrap() < LINE_TILT_EVIDENCE, "{p:?}");
+        assert!(
+            p.line_shifts_over_noise.unwrap() < LINE_JITTER_EVIDENCE,
+            "{p:?}"
+        );
     }
     // Lines tilted one by one by 5 pm rms end to end (the size of the line offsets).
     let (tilted, _) = views(&clean, &with_line_tilts(pair.clone(), 5e-12));
@@ -190,6 +156,24 @@ fn a_lateral_vibration_is_not_called_a_height_signal() {
     for p in &passes {
         println!("{}", p.describe());
         assert!(!p.along_line.as_ref().unwrap().is_found(), "{p:?}");
+    }
+}
+
+/// Every line moved along itself by its own offset, 4 pm rms (a third of a pixel; the
+/// simulator's `line-jitter`): each line's residual against the model's gradient reads
+/// the offsets, beyond what the pixel noise gives.
+#[test]
+fn line_jitter_shows_as_line_shifts_beyond_the_noise() {
+    let jitter = config("[[effects]]\nkind = \"line-jitter\"\nrms_m = [4e-12, 0.0]\nseed = 5");
+    let (passes, _) = views(&jitter, &rendered(&jitter));
+    for p in &passes {
+        println!("{}", p.describe());
+        assert!(
+            p.line_shifts_over_noise.unwrap() > LINE_JITTER_EVIDENCE,
+            "{p:?}"
+        );
+        let rms = p.line_jitter_m.unwrap();
+        assert!((rms / 4e-12 - 1.0).abs() < 0.3, "{rms:e}");
     }
 }
 

@@ -10,51 +10,11 @@ use dhct_diagnose::{
 use dhct_features::{FeatureOptions, find_features_in_pair};
 use dhct_simulate::{EffectConfig, Simulation, SimulationConfig};
 
-/// Graphite 512² over 6 nm at 100 nm/s (120 ms per line pair), drift, creep, power-law
-/// hysteresis, white + pink noise and line offsets; `vibration` is appended as is.
+mod common;
+
+/// The shared 512² graphite scan (`common::graphite_512`) with `vibration` appended.
 fn config(vibration: &str) -> SimulationConfig {
-    let text = format!(
-        r#"
-name = "sub-feature"
-seed = 37
-[scan]
-columns = 512
-rows = 512
-width_m = 6e-9
-height_m = 6e-9
-fast_speed_m_per_s = 1e-7
-turnaround_s = 0.0
-trace_fast = "right"
-slow = "down"
-[surface.lattice]
-kind = "graphite"
-[surface.feature]
-height_m = 4e-11
-sigma_m = [6e-11, 6e-11]
-[noise]
-white_sigma_m = 3e-12
-pink_sigma_m = 2e-12
-line_offset_sigma_m = 5e-12
-[output]
-formats = []
-[[effects]]
-kind = "thermal-drift"
-velocity_m_per_s = [3e-12, -2e-12]
-acceleration_m_per_s2 = [-1e-15, 5e-16]
-[[effects]]
-kind = "creep"
-coefficient_m = [2e-10, 5e-10]
-t0_s = 60.0
-[[effects]]
-kind = "fast-hysteresis"
-[effects.law]
-kind = "power"
-k = 0.93
-n = -0.035
-{vibration}
-"#
-    );
-    toml::from_str(&text).expect("the test config parses")
+    common::graphite_512("sub-feature", 37, vibration)
 }
 
 fn view(config: &SimulationConfig) -> SubFeatureView {

@@ -11,8 +11,8 @@ use common::{
 use dhct_scan::ScanPass;
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, LineDrift,
-    LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, ThermalDrift, TipChange,
-    Vibration,
+    LineJitter, LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, ThermalDrift,
+    TipChange, Vibration,
 };
 use dhct_simulate::{AcquisitionContext, Effect, EffectConfig, HysteresisLaw, Region, StepEdge};
 
@@ -453,6 +453,36 @@ fn piezo_nonlinearity_depends_on_the_commanded_position_alone() {
 }
 
 #[test]
+fn line_jitter_moves_each_line_as_a_whole_by_its_own_offset() {
+    let jitter = LineJitter {
+        rms_m: [4e-12, 1e-12],
+        seed: 3,
+    };
+    let config = with_effects(vec![EffectConfig::LineJitter(jitter.clone())]);
+    let geometry = run(&config).pair.geometry().clone();
+    let at = |pass, x: f64, y: f64| {
+        jitter.displacement(&AcquisitionContext::at_pixel(&geometry, pass, x, y, 0.0))
+    };
+    let mut offsets = Vec::new();
+    for line in 0..geometry.rows() {
+        let y = line as f64;
+        let trace = at(ScanPass::Trace, 0.0, y);
+        // The same offset all along a line; the retrace of the same line has its own.
+        assert_eq!(trace, at(ScanPass::Trace, 77.0, y));
+        assert_eq!(trace, at(ScanPass::Trace, 127.0, y));
+        let retrace = at(ScanPass::Retrace, 5.0, y);
+        assert_eq!(retrace, at(ScanPass::Retrace, 120.0, y));
+        assert_ne!(trace, retrace);
+        offsets.extend([trace, retrace]);
+    }
+    let rms =
+        |k: usize| (offsets.iter().map(|d| d[k] * d[k]).sum::<f64>() / offsets.len() as f64).sqrt();
+    // 256 acquired lines (128 trace, 128 retrace): the sample rms within 15 % of the stated one.
+    assert!(close(rms(0), 4e-12, 0.6e-12), "{}", rms(0));
+    assert!(close(rms(1), 1e-12, 0.15e-12), "{}", rms(1));
+}
+
+#[test]
 fn scan_coupling_shears_columns_and_tilts_lines() {
     let (t_sf, t_fs) = (0.05, -0.03);
     let output = run(&with_effects(vec![EffectConfig::ScanCoupling(
@@ -675,6 +705,10 @@ fn with_parameters_round_trips_every_effect() {
         Box::new(HeightCoupling {
             lateral_per_height: [0.01, 0.02],
         }),
+        Box::new(LineJitter {
+            rms_m: [1e-12, 2e-12],
+            seed: 9,
+        }),
         Box::new(Vibration {
             frequency_hz: 50.0,
             amplitude_m: [1e-12, 2e-12],
@@ -691,7 +725,11 @@ fn with_parameters_round_trips_every_effect() {
             cubic_m: [3e-11, 4e-11],
         }),
     ];
-    assert_eq!(effects.len(), 12, "one per effect type");
+    assert_eq!(
+        effects.len(),
+        13,
+        "one per effect type (telegraph tip and strain bubble aside)"
+    );
     for effect in effects {
         let parameters = effect.parameters();
         assert_eq!(

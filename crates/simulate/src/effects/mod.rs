@@ -35,7 +35,7 @@ pub use coupling::{HeightCoupling, ScanCoupling};
 pub use creep::{ExponentialCreep, LogCreep};
 pub use drift::{LineDrift, ThermalDrift};
 pub use hysteresis::{AsymmetricHysteresis, FastScanHysteresis, HysteresisLaw, SlowScanHysteresis};
-pub use out_of_library::{StrainBubble, TelegraphTip};
+pub use out_of_library::{LineJitter, StrainBubble, TelegraphTip};
 pub use piezo::PiezoNonlinearity;
 pub use tip_change::TipChange;
 pub use vibration::Vibration;
@@ -180,6 +180,8 @@ pub enum EffectConfig {
     TelegraphTip(TelegraphTip),
     /// A local radial strain bubble (outside the diagnosis library).
     StrainBubble(StrainBubble),
+    /// Every scan line displaced by its own random offset (outside the diagnosis library).
+    LineJitter(LineJitter),
 }
 
 impl EffectConfig {
@@ -204,6 +206,7 @@ impl EffectConfig {
             EffectConfig::PiezoNonlinearity(e) => e,
             EffectConfig::TelegraphTip(e) => e,
             EffectConfig::StrainBubble(e) => e,
+            EffectConfig::LineJitter(e) => e,
         }
     }
 
@@ -223,6 +226,7 @@ impl EffectConfig {
             EffectConfig::TipChange(e) => e.validate(field),
             EffectConfig::TelegraphTip(e) => e.validate(field),
             EffectConfig::StrainBubble(e) => e.validate(field),
+            EffectConfig::LineJitter(e) => e.validate(field),
             EffectConfig::PiezoNonlinearity(e) => e.validate(field),
         }
     }
@@ -244,6 +248,7 @@ impl EffectConfig {
             EffectConfig::TipChange(e) => Box::new(e.clone()),
             EffectConfig::TelegraphTip(e) => Box::new(e.clone()),
             EffectConfig::StrainBubble(e) => Box::new(e.clone()),
+            EffectConfig::LineJitter(e) => Box::new(e.clone()),
             EffectConfig::PiezoNonlinearity(e) => Box::new(e.clone()),
         })
     }
