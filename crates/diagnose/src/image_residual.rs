@@ -6,18 +6,18 @@
 //! centre, so whatever shape the atoms have) placed where the final model (the base fit
 //! and the named effects) predicts every indexed feature. The *residual image* is the
 //! measured image minus the model, each line's median taken out (line levels are the
-//! feature finder's business, [`dhct_features::LineLevelling`]). Three views of it:
+//! feature finder's business, [`dhct_features::LineLevelling`]). What it shows:
 //!
 //! - **by fast phase**: its rms over the pixel noise in bins of the time since line start
 //!   τ/T: where along the lines the model misses;
 //! - **line by line**: each line's rms over the pixel noise against its acquisition time;
 //!   runs of lines far above the rest (a tip switching between apexes, telegraph noise, a
-//!   glitch) are listed as time windows;
-//! - **along the lines**: the lines' mean power spectrum (Hann window) in Hz. A peak that
-//!   stands out of its neighbourhood where the lattice itself has little power is a height
-//!   signal faster than a feature (electrical pickup, a vibration in z) that no position
-//!   sees. Peaks where the model image is stronger than the residual are the lattice's own
-//!   frequencies (a model that is not exact there), not reported as found.
+//!   glitch) are listed as time windows; lines tilted or shifted one by one (line jitter)
+//!   are read in [`crate::line_departures`];
+//! - **along the lines**: the lines' mean power spectrum in Hz ([`crate::along_line`]),
+//!   where a height signal faster than a feature (electrical pickup, a vibration in z),
+//!   which no position sees, is told from the lattice's own lines, from a lateral
+//!   vibration's sidebands and from a pattern on the sample.
 //!
 //! The pixel noise is the image's high-frequency content: the MAD scale of successive
 //! residual differences along the lines over √2, which no slow effect can hide in.
@@ -31,8 +31,9 @@ use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
 use crate::FeatureResidual;
-use crate::along_line::{AlongLinePeak, along_line_peak, pass_phases, power_over_level_near};
+use crate::along_line::{AlongLinePeak, along_line_peak, power_over_level_near};
 use crate::line_departures::{line_shifts, line_tilt_evidence};
+use crate::pass_phases::pass_phases;
 
 /// Bins of the fast phase τ/T.
 pub const FAST_PHASE_BINS: usize = 16;

@@ -73,6 +73,7 @@ mod location;
 mod model;
 mod noise;
 mod pair_images;
+mod pass_phases;
 mod report;
 mod select;
 mod spectrum;
@@ -85,7 +86,6 @@ mod verdict;
 
 pub use along_line::{
     ALONG_LINE_FALSE_ALARM, AlongLinePeak, LATTICE_LINE_RATIO, LatticeSideband, MIN_SHARED_EXCESS,
-    PHASE_MARGIN, PassPhases,
 };
 pub use base::{BaseChoice, LawScore, PassLevelling};
 pub use candidates::Candidate;
@@ -101,6 +101,7 @@ pub use image_residual::{
 pub use location::{Bin, ChangePoint, GapLocation};
 pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
 pub use pair_images::{pair_views, sub_feature_view_of_pair, with_pair_views};
+pub use pass_phases::{MIN_PHASE_AGREEMENT, MIN_STEADINESS, PHASE_MARGIN, PassPhases};
 pub use report::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
     NEAR_TIE_FRACTION, Shrink,
