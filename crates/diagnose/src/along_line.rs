@@ -150,9 +150,9 @@ impl AlongLinePeak {
     }
 
     /// Whether this is a height signal in time: significant, on no lattice line, no
-    /// sideband, and seen by trace and retrace with unrelated phases (below
-    /// [`MAX_FIXED_ON_SAMPLE`]; with one pass it cannot be told from a pattern fixed on the
-    /// sample, so it is not).
+    /// sideband, stepping from line to line as a signal in time does
+    /// ([`PassPhases::is_in_time`]; with one pass it cannot be told from a pattern fixed on
+    /// the sample, so it is not), and seen by both passes.
     pub fn is_found(&self) -> bool {
         !self.lattice_locked
             && self.sideband_of.is_none()
