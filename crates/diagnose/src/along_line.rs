@@ -179,7 +179,10 @@ impl AlongLinePeak {
 }
 
 /// The lines' mean power spectrum.
-struct LinesSpectrum {
+#[derive(Debug, Clone)]
+pub(crate) struct LinesSpectrum {
+    /// The lines' length `n`, pixels.
+    length: usize,
     /// Mean power of bin `k`, `0..=n/2`.
     power: Vec<f64>,
     /// Half-width of a sinusoid's main lobe, bins (2 for whole lines; wider when the runs
@@ -193,7 +196,7 @@ impl LinesSpectrum {
     /// windowed over the run, zero-padded to `n` and scaled by `(n/m)²` (`m` the run's
     /// length), so that a sinusoid gives the same peak power however long the run. `None`
     /// without such lines.
-    fn of(lines: &[&[f64]]) -> Option<LinesSpectrum> {
+    pub(crate) fn of(lines: &[&[f64]]) -> Option<LinesSpectrum> {
         let n = lines.first()?.len();
         if n < 64 {
             return None;
@@ -215,6 +218,7 @@ impl LinesSpectrum {
         let median_run = finite_median(runs.iter().copied())?;
         let used = runs.len() as f64;
         Some(LinesSpectrum {
+            length: n,
             power: sum.iter().map(|s| s / used).collect(),
             lobe: ((2.0 * n as f64 / median_run).round() as usize).max(2),
         })
@@ -283,20 +287,20 @@ pub(crate) fn longest_finite_run(values: &[f64]) -> std::ops::Range<usize> {
     best
 }
 
-/// The strongest peak of the residual `lines`' mean power spectrum over its level, judged
-/// against the `model_lines`' spectrum (the same lines of the rendered model;
-/// `pixel_period` seconds per pixel). `None` when the lines are too short or too few.
+/// The strongest peak of the residual lines' mean power spectrum `residual` over its
+/// level, judged against the `model_lines`' spectrum (the same lines of the rendered
+/// model; `pixel_period` seconds per pixel). `None` when the lines are too short or too
+/// few.
 pub(crate) fn along_line_peak(
-    lines: &[&[f64]],
+    residual: &LinesSpectrum,
     model_lines: &[&[f64]],
     pixel_period: f64,
 ) -> Option<AlongLinePeak> {
-    let residual = LinesSpectrum::of(lines)?;
     let model = LinesSpectrum {
         lobe: residual.lobe,
         ..LinesSpectrum::of(model_lines)?
     };
-    let n = lines[0].len();
+    let n = residual.length;
     let hz = |bin: f64| bin / (n as f64 * pixel_period);
     let residual_ratio = residual.ratios();
     let model_ratio = model.ratios();
@@ -329,7 +333,7 @@ pub(crate) fn along_line_peak(
     Some(AlongLinePeak {
         frequency_hz: hz(refined_bin(&residual.power, k)),
         power_over_level: peak,
-        amplitude: sinusoid_amplitude(&residual, k, n),
+        amplitude: sinusoid_amplitude(residual, k, n),
         lattice_locked,
         sideband_of,
         false_alarm_probability: (1.0 - (1.0 - single).powf(searched.len() as f64)).clamp(0.0, 1.0),
@@ -365,10 +369,9 @@ pub(crate) fn windowed_spectrum(
     Some(output.into_iter().map(|c| c * scale).collect())
 }
 
-/// The power over its level of the `lines`' mean spectrum within one bin of `k` (the
+/// The power over its level of the lines' mean `spectrum` within one bin of `k` (the
 /// highest), or `None` when it has none there.
-pub(crate) fn power_over_level_near(lines: &[&[f64]], k: usize) -> Option<f64> {
-    let spectrum = LinesSpectrum::of(lines)?;
+pub(crate) fn power_over_level_near(spectrum: &LinesSpectrum, k: usize) -> Option<f64> {
     let ratios = spectrum.ratios();
     (k.saturating_sub(1)..=(k + 1).min(ratios.len() - 1))
         .map(|j| ratios[j])
@@ -446,6 +449,7 @@ mod tests {
     #[test]
     fn a_falling_spectrum_does_not_rise_above_its_level() {
         let spectrum = LinesSpectrum {
+            length: 398,
             power: (0..200).map(|k| 1.0 / (1.0 + k as f64).powi(2)).collect(),
             lobe: 2,
         };

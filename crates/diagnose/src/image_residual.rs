@@ -31,7 +31,7 @@ use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
 use crate::FeatureResidual;
-use crate::along_line::{AlongLinePeak, along_line_peak, power_over_level_near};
+use crate::along_line::{AlongLinePeak, LinesSpectrum, along_line_peak, power_over_level_near};
 use crate::line_departures::{line_shifts, line_tilt_evidence};
 use crate::pass_phases::pass_phases;
 
@@ -65,6 +65,8 @@ pub struct ResidualImage {
     pub residual: Array2<f64>,
     /// Its summary.
     pub summary: PassResidual,
+    /// Its lines' mean power spectrum (the other pass reads the peak's bin from it).
+    spectrum: Option<LinesSpectrum>,
 }
 
 /// What the residual image of one pass shows.
@@ -239,10 +241,13 @@ fn compare_passes(a: &mut ResidualImage, b: &mut ResidualImage, geometry: &ScanG
         ScanPass::Trace => (&views_a, &views_b),
         ScanPass::Retrace => (&views_b, &views_a),
     };
-    for (image, other) in [(&mut *a, &views_b), (&mut *b, &views_a)] {
+    let (spectrum_a, spectrum_b) = (a.spectrum.clone(), b.spectrum.clone());
+    for (image, other) in [(&mut *a, spectrum_b), (&mut *b, spectrum_a)] {
         if let Some(peak) = image.summary.along_line.as_mut() {
             peak.phases = pass_phases(trace, retrace, peak.bin[0]);
-            peak.other_pass_power_over_level = power_over_level_near(other, peak.bin[0]);
+            peak.other_pass_power_over_level = other
+                .as_ref()
+                .and_then(|spectrum| power_over_level_near(spectrum, peak.bin[0]));
         }
     }
 }
@@ -311,16 +316,17 @@ fn pass_residual(
 ) -> Option<ResidualImage> {
     let mut residual = model.clone();
     residual.zip_mut_with(&image, |m, z| *m = z - *m);
-    remove_line_medians(&mut residual, pass, geometry);
+    remove_line_medians(&mut residual, geometry);
     let lines = lines_of(&residual, pass, geometry);
     let pixel_noise = Some(pixel_noise(&lines)).filter(|s| s.is_finite() && *s > 0.0)?;
     let line_rms: Vec<f64> = lines.iter().map(|l| rms(&l.values) / pixel_noise).collect();
-    let rms_over_noise = rms(residual.as_slice().unwrap_or(&[])) / pixel_noise;
+    let rms_over_noise = rms(&residual) / pixel_noise;
     let (excess_lines, excess_windows) = excess_windows(&lines, &line_rms, geometry);
     let model_lines = lines_of(model, pass, geometry);
     let residual_lines: Vec<&[f64]> = lines.iter().map(|l| l.values.as_slice()).collect();
     let model_lines: Vec<&[f64]> = model_lines.iter().map(|l| l.values.as_slice()).collect();
     let shifts = line_shifts(&residual_lines, &model_lines, pixel_noise);
+    let spectrum = LinesSpectrum::of(&residual_lines);
     let summary = PassResidual {
         pass,
         z_unit: String::new(),
@@ -333,34 +339,36 @@ fn pass_residual(
         line_tilt_evidence: line_tilt_evidence(&residual_lines),
         line_shifts_over_noise: shifts.map(|s| s.0),
         line_jitter_m: shifts.map(|s| s.1 * geometry.fast_pitch()),
-        along_line: along_line_peak(&residual_lines, &model_lines, geometry.pixel_period()),
+        along_line: spectrum
+            .as_ref()
+            .and_then(|spectrum| along_line_peak(spectrum, &model_lines, geometry.pixel_period())),
     };
     Some(ResidualImage {
         pass,
         residual,
         summary,
+        spectrum,
     })
 }
 
-/// Takes each line's median out of `residual`.
-fn remove_line_medians(residual: &mut Array2<f64>, pass: ScanPass, geometry: &ScanGeometry) {
-    for slow in 0..geometry.slow_len() {
-        let pixels: Vec<(usize, usize)> = (0..geometry.fast_len())
-            .map(|fast| {
-                let (x, y) = geometry.position_of(pass, fast as f64, slow as f64);
-                (y as usize, x as usize)
-            })
-            .collect();
-        if let Some(level) = finite_median(pixels.iter().map(|&p| residual[p])) {
-            pixels.iter().for_each(|&p| residual[p] -= level);
+/// Takes each scan line's median out of `residual` (a line's pixels are a row when the
+/// fast axis is horizontal, else a column, whichever the pass's direction).
+fn remove_line_medians(residual: &mut Array2<f64>, geometry: &ScanGeometry) {
+    let along = match geometry.fast_axis() {
+        dhct_scan::Axis::Horizontal => ndarray::Axis(1),
+        dhct_scan::Axis::Vertical => ndarray::Axis(0),
+    };
+    for mut line in residual.lanes_mut(along) {
+        if let Some(level) = finite_median(line.iter().copied()) {
+            line.iter_mut().for_each(|v| *v -= level);
         }
     }
 }
 
 /// RMS of the finite values (NaN if none).
-fn rms(values: &[f64]) -> f64 {
+fn rms<'a>(values: impl IntoIterator<Item = &'a f64>) -> f64 {
     let (sum, n) = values
-        .iter()
+        .into_iter()
         .filter(|v| v.is_finite())
         .fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
     if n == 0 {

@@ -947,8 +947,6 @@ pub fn simulate_images(config: &SimulationConfig) -> Result<SimulatedScan, Diagn
 /// A rendered scan: its images, its features and how they were found.
 #[derive(Debug, Clone)]
 pub struct RenderedScan {
-    /// The features found in the rendered images.
-    pub scan: SimulatedScan,
     /// The rendered images.
     pub pair: ScanPair,
     /// The features of each image.
@@ -966,7 +964,7 @@ impl RenderedScan {
         config: &SimulationConfig,
         options: &crate::DiagnoseOptions,
     ) -> Result<crate::DiagnosisReport, DiagnoseError> {
-        let report = self.scan.diagnosed(config, options)?;
+        let report = scan_of(&self.pair, self.sets.clone()).diagnosed(config, options)?;
         let sets: Vec<&FeatureSet> = self.sets.iter().collect();
         Ok(crate::with_pair_views(
             report,
@@ -983,7 +981,6 @@ impl RenderedScan {
 pub fn simulate_rendered(config: &SimulationConfig) -> Result<RenderedScan, DiagnoseError> {
     let (pair, sets, options) = render_and_find(config)?;
     Ok(RenderedScan {
-        scan: scan_of(&pair, sets.clone()),
         pair,
         sets,
         options,
