@@ -175,7 +175,7 @@ fn position_sigma(peak: &Peak) -> f64 {
 
 /// Weighted least squares `k_i ≈ B·h_i` over the indexed peaks; the covariance is scaled by
 /// the reduced χ² when that exceeds 1 (peaks smeared by a non-uniform distortion).
-fn refine(
+pub(crate) fn refine(
     basis: &Matrix2<f64>,
     peaks: &[Peak],
     indices: &[Option<[i64; 2]>],

@@ -1,9 +1,13 @@
-//! Whether the lattice and constant given can be what the image shows.
+//! Whether the lattice and constant given can be what the image shows: the named lattice
+//! is fitted within the physical bounds ([`crate::named_fit`]); the inputs are refused
+//! only when no map inside them explains the image's strong peaks.
 
+use dhct_lattice::Lattice;
 use dhct_scan::Axis;
 use serde::{Deserialize, Serialize};
 
-use crate::{CalibrationError, LatticeMatch, LatticeMeasurement};
+use crate::named_fit::MapBounds;
+use crate::{CalibrationError, LatticeMatch, LatticeMeasurement, match_lattice};
 
 /// How strictly the inputs are checked against the image.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -16,17 +20,22 @@ pub struct CheckOptions {
     /// whose constant is known (nothing typed) is typically given 0.75 (a
     /// factor 1.75: a head off by 40 % either way).
     pub pitch_tolerance: f64,
-    /// Stop when the image's symmetry contradicts the lattice's (e.g. a square lattice on
-    /// a hexagonal image). Off only for users who know better.
+    /// Stop when the named lattice explains too little of the image's spectrum (less
+    /// than [`crate::MIN_EXPLAINED_FRACTION`] of the strong peaks' amplitude), or when a
+    /// strongly stretched match also has equivalent reflections of very unequal power.
+    /// Off only for users who know better.
     pub check_lattice_type: bool,
     /// Largest anisotropy (ratio of principal stretches) a match may need. A hexagonal
     /// lattice becomes a square one at √3, so the default 1.7 keeps the two apart; a drift
     /// of 40 % of the slow-scan speed needs 1.67.
     pub max_anisotropy: f64,
+    /// Largest shear of the slow axis a match may need, degrees (a fast drift of
+    /// tan 25° ≈ 47 % of the slow-scan speed). Default 25.
+    pub max_shear_deg: f64,
     /// Largest power ratio between reflections that the lattice's symmetry makes
-    /// equivalent (judged only where the strongest stands out of the background). Real
-    /// images reach ~10 (tip shape, drift smearing the peaks); a square lattice read as
-    /// hexagonal gives 10–1000 for features of σ = a/5 … a/3.
+    /// equivalent when the match also needs a stretch above [`STRETCHED_MATCH`] (a square
+    /// lattice read on a drift-stretched hexagonal image gives 10–1000). Unequal power alone
+    /// (a tip, drift, line jumps: 10–60× in real images) is reported, never refused.
     pub max_shell_spread: f64,
 }
 
@@ -36,7 +45,8 @@ impl Default for CheckOptions {
             pitch_tolerance: 0.15,
             check_lattice_type: true,
             max_anisotropy: 1.7,
-            max_shell_spread: 30.0,
+            max_shear_deg: 25.0,
+            max_shell_spread: 10.0,
         }
     }
 }
@@ -55,6 +65,7 @@ impl CheckOptions {
         };
         in_range("pitch_tolerance", self.pitch_tolerance, 0.0, 100.0)?;
         in_range("max_anisotropy", self.max_anisotropy, 1.0, 100.0)?;
+        in_range("max_shear_deg", self.max_shear_deg, 0.0, 80.0)?;
         in_range("max_shell_spread", self.max_shell_spread, 1.0, 1e12)
     }
 }
@@ -63,91 +74,171 @@ impl CheckOptions {
 /// up to about the slow-scan speed stretches or squeezes it like a wrong pixel size.
 pub const SLOW_AXIS_SLACK: f64 = 2.0;
 
-/// A match with a moderate stretch and a moderate spread is still a contradiction when
-/// both point the same way.
-const COMBINED_ANISOTROPY: f64 = 1.4;
-const COMBINED_SPREAD: f64 = 3.0;
+/// A match needing more stretch than this is a contradiction when equivalent reflections
+/// also differ more than [`CheckOptions::max_shell_spread`] in power: a hexagonal image
+/// read as square (or the reverse) needs √3 ≈ 1.73, or from about 1.55 when drift has
+/// already stretched it the right way.
+pub const STRETCHED_MATCH: f64 = 1.55;
 
-/// Checks `matched` (from `measurement`) against the options: the lattice's symmetry,
-/// then its size along the fast axis (`fast_axis`), where the pixel size is what it says
-/// unless the file is wrong; the slow axis gets [`SLOW_AXIS_SLACK`].
+impl CheckOptions {
+    /// The bounds of the map from the lattice to the image that these options accept.
+    pub fn bounds(&self, fast_axis: Axis) -> MapBounds {
+        let limit = 1.0 + self.pitch_tolerance;
+        let slow = SLOW_AXIS_SLACK * limit;
+        MapBounds {
+            max_anisotropy: self.max_anisotropy,
+            max_shear_deg: self.max_shear_deg,
+            fast_axis,
+            fast_scale: [1.0 / limit, limit],
+            slow_scale: [1.0 / slow, slow],
+        }
+    }
+}
+
+/// Fits `lattice` to the measured peaks within the options' bounds and checks the match:
+/// the map must explain the image's strong peaks. When none inside the bounds does, the
+/// error says why: a map outside the pixel-size tolerance would ([`CalibrationError::WrongScale`]),
+/// or no plausible map does, naming the peaks left unexplained
+/// ([`CalibrationError::WrongLatticeType`]).
 pub fn check_inputs(
+    measurement: &LatticeMeasurement,
+    lattice: &dyn Lattice,
+    fast_axis: Axis,
+    options: &CheckOptions,
+) -> Result<LatticeMatch, CalibrationError> {
+    let bounds = options.bounds(fast_axis);
+    let within = match_lattice(measurement, lattice, &bounds);
+    if let Some(matched) = &within
+        && (!options.check_lattice_type
+            || (matched.explains_image && type_contradiction(matched, options).is_none()))
+    {
+        return Ok(matched.clone());
+    }
+    let any_scale = match_lattice(measurement, lattice, &bounds.any_scale());
+    if let Some(wide) = &any_scale
+        && wide.explains_image
+        && type_contradiction(wide, options).is_none()
+    {
+        return Err(wrong_scale(measurement, wide, fast_axis, options));
+    }
+    let best = within.or(any_scale);
+    let evidence = match &best {
+        None => format!(
+            "no stretch up to {:.2}× with a shear up to {:.0}° puts its reflections on two \
+             independent peaks of the image",
+            options.max_anisotropy, options.max_shear_deg
+        ),
+        Some(m) => match type_contradiction(m, options) {
+            Some(evidence) => evidence,
+            None => unexplained_evidence(m),
+        },
+    };
+    Err(CalibrationError::WrongLatticeType {
+        shows: measurement.lattice.describe(),
+        lattice: lattice.name().to_string(),
+        evidence,
+        measured: Box::new(measurement.lattice.clone()),
+        best: best.map(Box::new),
+    })
+}
+
+/// Why a match explains too little: its explained fraction and the strong peaks it
+/// leaves, with their periods and fractional indices.
+fn unexplained_evidence(matched: &LatticeMatch) -> String {
+    let peaks: Vec<String> = matched
+        .unexplained
+        .iter()
+        .take(6)
+        .map(|p| {
+            format!(
+                "{} period at {:.0}° ({:.0} % of the strongest power; index ({:.2}, {:.2}))",
+                crate::length(p.period_m),
+                p.frequency_per_m[1]
+                    .atan2(p.frequency_per_m[0])
+                    .to_degrees(),
+                100.0 * p.relative_power,
+                p.fractional_index[0],
+                p.fractional_index[1]
+            )
+        })
+        .collect();
+    let missing = if matched.primary_coverage < crate::MIN_PRIMARY_COVERAGE {
+        format!(
+            "; only {:.0} % of the reflections it predicts strongest are in the image",
+            100.0 * matched.primary_coverage
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "its best map (a {:.2}× stretch) explains {:.0} % of the strong Fourier peaks' \
+         amplitude{missing}; left unexplained: {}",
+        matched.calibration.anisotropy,
+        100.0 * matched.explained_fraction,
+        if peaks.is_empty() {
+            "no strong peak".to_string()
+        } else {
+            peaks.join("; ")
+        }
+    )
+}
+
+/// A strongly stretched match whose equivalent reflections also differ strongly in
+/// power: the image's symmetry contradicts the lattice's.
+fn type_contradiction(matched: &LatticeMatch, options: &CheckOptions) -> Option<String> {
+    let calibration = &matched.calibration;
+    if calibration.anisotropy <= STRETCHED_MATCH {
+        return None;
+    }
+    let shell = matched
+        .shells
+        .iter()
+        .filter(|s| s.significant)
+        .max_by(|a, b| a.spread.total_cmp(&b.spread))?;
+    (shell.spread > options.max_shell_spread).then(|| {
+        format!(
+            "the match needs a {:.2}× stretch, and reflections that are equivalent in the {} \
+             lattice ({}) differ {:.0}× in power in the image (signal-to-background {})",
+            calibration.anisotropy,
+            matched.lattice,
+            indices(&shell.indices),
+            shell.spread,
+            shell
+                .snr
+                .iter()
+                .map(|s| format!("{s:.0}"))
+                .collect::<Vec<_>>()
+                .join(" : "),
+        )
+    })
+}
+
+/// The error for a lattice that explains the image only with a pixel size off by more
+/// than the tolerance.
+fn wrong_scale(
     measurement: &LatticeMeasurement,
     matched: &LatticeMatch,
     fast_axis: Axis,
     options: &CheckOptions,
-) -> Result<(), CalibrationError> {
-    let shows = measurement.lattice.describe();
+) -> CalibrationError {
     let calibration = &matched.calibration;
-    if options.check_lattice_type {
-        let worst = matched
-            .shells
-            .iter()
-            .filter(|s| s.significant)
-            .max_by(|a, b| a.spread.total_cmp(&b.spread));
-        let spread = worst.map_or(1.0, |s| s.spread);
-        let evidence = if calibration.anisotropy > options.max_anisotropy {
-            Some(format!(
-                "the image would have to be stretched {:.2}× more along one direction than \
-                 along the other",
-                calibration.anisotropy
-            ))
-        } else if spread > options.max_shell_spread
-            || (spread > COMBINED_SPREAD && calibration.anisotropy > COMBINED_ANISOTROPY)
-        {
-            let shell = worst.expect("a spread above 1 comes from a shell");
-            Some(format!(
-                "reflections that are equivalent in the {} lattice ({}) differ {:.0}× in \
-                 power in the image (signal-to-background {}), and the match needs a \
-                 {:.2}× stretch",
-                matched.lattice,
-                indices(&shell.indices),
-                spread,
-                shell
-                    .snr
-                    .iter()
-                    .map(|s| format!("{s:.0}"))
-                    .collect::<Vec<_>>()
-                    .join(" : "),
-                calibration.anisotropy
-            ))
-        } else {
-            None
-        };
-        if let Some(evidence) = evidence {
-            return Err(CalibrationError::WrongLatticeType {
-                shows,
-                lattice: matched.lattice.clone(),
-                evidence,
-                measured: Box::new(measurement.lattice.clone()),
-                best: Box::new(matched.clone()),
-            });
-        }
-    }
-    // The fast axis carries the pixel size: a slow drift stretches the slow axis as much
-    // as a wrong pixel size would (one frame cannot tell them apart), so the slow axis only
-    // has to stay within what a drift up to the slow-scan speed can do.
     let (fast, slow) = match fast_axis {
         Axis::Horizontal => (calibration.scale[0], calibration.scale[1]),
         Axis::Vertical => (calibration.scale[1], calibration.scale[0]),
     };
     let limit = 1.0 + options.pitch_tolerance;
-    let slow_limit = SLOW_AXIS_SLACK * limit;
     let within = |k: f64, limit: f64| k <= limit && k >= 1.0 / limit;
-    if !(within(fast, limit) && within(slow, slow_limit)) {
-        let factor = if within(fast, limit) { slow } else { fast };
-        let nn = matched.nn_in_file_m / calibration.mean_scale;
-        return Err(CalibrationError::WrongScale {
-            shows,
-            lattice: matched.lattice.clone(),
-            given_nn_m: nn,
-            measured_nn_m: nn * factor,
-            measured_nn_sigma_m: nn * calibration.scale_sigma[0].max(calibration.scale_sigma[1]),
-            factor,
-            tolerance: options.pitch_tolerance,
-        });
+    let factor = if within(fast, limit) { slow } else { fast };
+    let nn = matched.nn_in_file_m / calibration.mean_scale;
+    CalibrationError::WrongScale {
+        shows: measurement.lattice.describe(),
+        lattice: matched.lattice.clone(),
+        given_nn_m: nn,
+        measured_nn_m: nn * factor,
+        measured_nn_sigma_m: nn * calibration.scale_sigma[0].max(calibration.scale_sigma[1]),
+        factor,
+        tolerance: options.pitch_tolerance,
     }
-    Ok(())
 }
 
 fn indices(list: &[[i64; 2]]) -> String {

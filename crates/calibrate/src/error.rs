@@ -45,8 +45,9 @@ pub enum CalibrationError {
         evidence: String,
         /// The measurement.
         measured: Box<ImageLattice>,
-        /// The best match found (for its numbers).
-        best: Box<LatticeMatch>,
+        /// The best match found inside the bounds (or at any pixel size), if any: its
+        /// calibration, the peaks it explains and those it leaves.
+        best: Option<Box<LatticeMatch>>,
     },
     /// The image's lattice is the right kind but of another size than the lattice given,
     /// beyond what a miscalibrated pixel size is allowed to explain.

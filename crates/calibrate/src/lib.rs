@@ -1,14 +1,16 @@
 //! The lattice an STM image shows, measured from the image itself, before any feature is
-//! found: the peaks of its power spectrum give two cell vectors in the file's units (with
-//! uncertainties), for trace and retrace.
+//! found: the peaks of its power spectrum, for trace and retrace.
 //!
-//! Matched to the lattice the user named ([`match_lattice`]), they give the calibration
-//! of the file's frame (x and y scale, shear; [`Calibration`]) — the lattice is the internal
-//! standard, the file's pixel size may be off by tens of percent and differently per axis —
-//! and show when the lattice or its constant cannot be what the image shows
-//! ([`check_inputs`]): a square lattice on a hexagonal image, a constant that would need
-//! the pixel size to be wrong by ×2. The global affine map `K⁻¹` is also the floor that a
-//! full drift model must beat.
+//! The lattice the user named is fitted to the peaks' *positions* ([`match_lattice`]): the
+//! affine map (x and y scale, shear, rotation, within physical bounds) under which its
+//! predicted reflections land on the strong peaks gives the calibration of the file's frame
+//! ([`Calibration`]) — the lattice is the internal standard, the file's pixel size may be
+//! off by tens of percent and differently per axis. Peaks it does not predict (satellites,
+//! a charge-density wave, a moiré) are reported, never made the cell; unequal power of
+//! equivalent reflections is reported. The inputs are refused ([`check_inputs`]) only
+//! when no plausible map explains the strong peaks: a square lattice on a hexagonal image,
+//! a constant that would need the pixel size to be wrong by ×2. The global affine map
+//! `K⁻¹` is also the floor that a full drift model must beat.
 //!
 //! ```
 //! use dhct_calibrate::{CheckOptions, calibrate_pair};
@@ -43,15 +45,19 @@ mod check;
 mod error;
 mod matching;
 mod measure;
+mod named_fit;
 mod spectrum;
 mod structure;
 
-pub use check::{CheckOptions, SLOW_AXIS_SLACK, check_inputs};
+pub use check::{CheckOptions, SLOW_AXIS_SLACK, STRETCHED_MATCH, check_inputs};
 pub use error::CalibrationError;
 pub use matching::{Calibration, LatticeMatch, ShellCheck, match_lattice};
 pub use measure::{
     ImageLattice, LatticeMeasurement, LatticeShape, MAX_MEASURED_SIDE, MIN_BINNED_NN_PX,
     Reflection, binning_factor, length, measure_lattice, measure_lattice_binned,
+};
+pub use named_fit::{
+    MIN_EXPLAINED_FRACTION, MIN_PRIMARY_COVERAGE, MapBounds, STRONG_POWER_FRACTION, UnexplainedPeak,
 };
 pub use spectrum::{Peak, PowerSpectrum};
 
@@ -108,8 +114,7 @@ pub fn calibrate_pair(
     })?;
     let first = first?;
     let fast = geometry.fast_axis();
-    let matched = match_lattice(&first, lattice);
-    check_inputs(&first, &matched, fast, options)?;
+    let matched = check_inputs(&first, lattice, fast, options)?;
     let mut passes = vec![PassCalibration {
         pass: first_pass,
         lattice: first.lattice,
@@ -119,8 +124,7 @@ pub fn calibrate_pair(
         let Ok(measurement) = measurement else {
             continue;
         };
-        let matched = match_lattice(&measurement, lattice);
-        if check_inputs(&measurement, &matched, fast, options).is_ok() {
+        if let Ok(matched) = check_inputs(&measurement, lattice, fast, options) {
             passes.push(PassCalibration {
                 pass,
                 lattice: measurement.lattice,

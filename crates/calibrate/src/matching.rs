@@ -1,6 +1,7 @@
-//! The measured lattice against a known [`Lattice`]: which of the lattice's bases it is,
-//! the calibration that maps one onto the other, and whether reflections that the lattice's
-//! symmetry makes equivalent are equally strong in the image.
+//! The measured peaks against a known [`Lattice`]: the map under which the lattice's
+//! reflections land on them ([`crate::named_fit`]), the calibration that map implies, the
+//! peaks it leaves unexplained, and whether reflections that the lattice's symmetry makes
+//! equivalent are equally strong in the image (reported, not judged here).
 //!
 //! The calibration is the upper-triangular `K` of `A = K·Q`, where `A` maps the lattice's
 //! (sample-frame) basis onto the measured one (file frame) and `Q` is a rotation, the
@@ -15,8 +16,9 @@ use dhct_lattice::Lattice;
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
+use crate::basis::propagate;
 use crate::measure::{LatticeMeasurement, real_basis};
-use crate::structure::predicted_strong;
+use crate::named_fit::{MapBounds, NamedFit, SpectrumWindow, UnexplainedPeak, file_map, fit_named};
 
 /// How the file's frame relates to the sample's, measured against a known lattice.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -144,15 +146,29 @@ pub struct ShellCheck {
 pub struct LatticeMatch {
     /// The lattice's name.
     pub lattice: String,
-    /// `U`: the lattice's basis used is `[a1 a2]·U` (row-major, integer, det ±1).
-    pub basis_change: [[i64; 2]; 2],
-    /// `S`: the image's measured cell is `S` lattice cells (row-major; the identity unless
+    /// `S`: the coarsest cell that indexes the image's peaks (measured without the named
+    /// lattice) is `S` cells of the fitted lattice (row-major, rounded; the identity unless
     /// the image shows a superstructure of the lattice).
     pub supercell: [[i64; 2]; 2],
     /// The calibration.
     pub calibration: Calibration,
+    /// The lattice's translation cell as the image shows it, in file units: vectors
+    /// `[a1, a2]` (`[x, y]` each), metres, file frame.
+    pub cell_in_file_m: [[f64; 2]; 2],
     /// The first reciprocal shells of the lattice and their powers in the image.
     pub shells: Vec<ShellCheck>,
+    /// Fraction of the strong peaks' amplitude (√power) that lattice reflections explain.
+    pub explained_fraction: f64,
+    /// Fraction of the reflections the lattice predicts strongest (those the spectrum can
+    /// show) that are observed peaks.
+    pub primary_coverage: f64,
+    /// Whether the lattice explains the image: two independent strong peaks at the
+    /// reflections it predicts strongest and at least [`crate::MIN_EXPLAINED_FRACTION`] of
+    /// the strong peaks' amplitude.
+    pub explains_image: bool,
+    /// Strong peaks on no lattice reflection (satellites, a superstructure, a moiré),
+    /// strongest first.
+    pub unexplained: Vec<UnexplainedPeak>,
     /// The lattice's nearest-neighbour distance as the image shows it in file units
     /// (the lattice's times the mean scale), metres.
     pub nn_in_file_m: f64,
@@ -160,25 +176,8 @@ pub struct LatticeMatch {
     pub nn_in_file_sigma_m: f64,
 }
 
-/// Every integer 2 × 2 matrix with entries in −2..=2 and determinant ±1.
-fn unimodular() -> Vec<Matrix2<f64>> {
-    let mut all = Vec::new();
-    for a in -2i64..=2 {
-        for b in -2i64..=2 {
-            for c in -2i64..=2 {
-                for d in -2i64..=2 {
-                    if (a * d - b * c).abs() == 1 {
-                        all.push(Matrix2::new(a as f64, b as f64, c as f64, d as f64));
-                    }
-                }
-            }
-        }
-    }
-    all
-}
-
 /// Singular values `(s1 ≥ s2)` of a 2 × 2 matrix.
-fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
+pub(crate) fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
     let ata = a.transpose() * a;
     let (t, d) = (ata.trace(), ata.determinant());
     let root = (0.25 * t * t - d).max(0.0).sqrt();
@@ -187,7 +186,7 @@ fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
 
 /// `A = K·Q` with `K` upper triangular (positive diagonal) and `Q` a rotation; needs
 /// `det A > 0`. Returns `(K, rotation angle of Q in radians)`.
-fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
+pub(crate) fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
     let ky = a[(1, 0)].hypot(a[(1, 1)]);
     let row2 = Vector2::new(a[(1, 0)], a[(1, 1)]) / ky;
     let row1 = Vector2::new(row2.y, -row2.x);
@@ -203,148 +202,73 @@ fn lattice_matrix(lattice: &dyn Lattice) -> Matrix2<f64> {
     Matrix2::from_columns(&[a1, a2])
 }
 
-/// The sublattices of index 2–4 of a 2-D lattice, as Hermite normal forms `[[a, b], [0, d]]`
-/// (`a·d` = index, `0 ≤ b < d`): the ways an image's cell can be a supercell of the
-/// lattice's (e.g. 2 × 2 for a charge-density wave).
-fn supercells() -> Vec<Matrix2<f64>> {
-    let mut all = Vec::new();
-    for index in 2..=4i64 {
-        for a in 1..=index {
-            if index % a != 0 {
-                continue;
-            }
-            let d = index / a;
-            for b in 0..d {
-                all.push(Matrix2::new(a as f64, b as f64, 0.0, d as f64));
-            }
-        }
-    }
-    all
-}
-
-/// The basis `U` of the ideal lattice whose orientation-preserving map onto `cell` is
-/// least anisotropic, and that anisotropy.
-fn best_basis(cell: &Matrix2<f64>, ideal: &Matrix2<f64>) -> (f64, Matrix2<f64>) {
-    let mut best = (f64::INFINITY, Matrix2::identity());
-    for u in unimodular() {
-        let Some(inverse) = (ideal * u).try_inverse() else {
-            continue;
-        };
-        let a = cell * inverse;
-        if a.determinant() <= 0.0 {
-            continue;
-        }
-        let (s1, s2) = singular_values(&a);
-        if s1 / s2 < best.0 - 1e-12 {
-            best = (s1 / s2, u);
-        }
-    }
-    best
-}
-
-/// The index of frequency `g` (file units) in the reciprocal basis of `cell`, if it is
-/// (nearly) an integer one other than zero.
-fn integer_index(cell: &Matrix2<f64>, g: Vector2<f64>) -> Option<[i64; 2]> {
-    let h = cell.transpose() * g;
-    let rounded = h.map(f64::round);
-    if (h - rounded).abs().max() > 0.15 || rounded == Vector2::zeros() {
-        return None;
-    }
-    Some([rounded.x as i64, rounded.y as i64])
-}
-
-/// Whether the image's strongest peak (frequency `g`, file units) is a reflection of the
-/// first shell of the lattice `target` placed on `cell`.
-fn strongest_in_first_shell(cell: &Matrix2<f64>, target: &Matrix2<f64>, g: Vector2<f64>) -> bool {
-    let h = cell.transpose() * g;
-    let rounded = h.map(f64::round);
-    if (h - rounded).abs().max() > 0.15 || rounded == Vector2::zeros() {
-        return false;
-    }
-    let index = [rounded.x as i64, rounded.y as i64];
-    let Some(length) = frequency(target, index).map(|f| f.norm()) else {
-        return false;
+/// Fits `lattice` to the measured peaks within `bounds` ([`crate::named_fit`]): the map
+/// under which its predicted reflections best explain the peaks' positions, the
+/// calibration it implies, the peaks it leaves unexplained and the power of its
+/// equivalent reflections. `None` when no map inside the bounds puts lattice reflections
+/// on two independent peaks.
+pub fn match_lattice(
+    measurement: &LatticeMeasurement,
+    lattice: &dyn Lattice,
+    bounds: &MapBounds,
+) -> Option<LatticeMatch> {
+    let peaks = measurement.peaks();
+    let bin_per_m = measurement.bin_per_m;
+    let contrast = |k: [f64; 2]| measurement.spectrum.contrast_near(k);
+    let window = SpectrumWindow {
+        half: measurement.spectrum_half(),
+        fast_axis: bounds.fast_axis,
+        contrast: &contrast,
     };
-    let first = [[1, 0], [0, 1], [1, 1], [1, -1]]
-        .iter()
-        .filter_map(|&i| frequency(target, i).map(|f| f.norm()))
-        .fold(f64::INFINITY, f64::min);
-    length <= 1.02 * first
-}
-
-/// Matches `measurement` to `lattice`: the basis of the lattice needing the least
-/// anisotropic orientation-preserving map onto the measured cell. When the image's
-/// dominant periodicity is a finer lattice inside the measured cell (a superstructure, e.g.
-/// the 2 × 2 charge-density wave of TiSe₂: the strongest peak belongs to the finer lattice's
-/// first shell), the finer lattice is matched instead and the supercell reported.
-pub fn match_lattice(measurement: &LatticeMeasurement, lattice: &dyn Lattice) -> LatticeMatch {
-    let measured = measurement.lattice.matrix();
+    let fit = fit_named(lattice, peaks, bin_per_m, &window, bounds)?;
     let ideal = lattice_matrix(lattice);
-    let strongest = measurement.strongest_frequency();
-    let plain = best_basis(&measured, &ideal);
-    let mut chosen = (Matrix2::identity(), plain);
-    // A strongest peak the lattice's own motif predicts (a kagome's second order) is no
-    // sign of a superstructure.
-    let own_reflection = integer_index(&measured, strongest)
-        .is_some_and(|index| predicted_strong(lattice, &(ideal * plain.1), index));
-    for s in supercells().into_iter().filter(|_| !own_reflection) {
-        let Some(finer) = s.try_inverse().map(|inverse| measured * inverse) else {
-            continue;
-        };
-        let (anisotropy, u) = best_basis(&finer, &ideal);
-        if anisotropy <= plain.0 * 1.02 + 1e-9
-            && anisotropy < chosen.1.0 * 1.02 + 1e-9
-            && (chosen.0 == Matrix2::identity() || anisotropy < chosen.1.0)
-            && strongest_in_first_shell(&finer, &(ideal * u), strongest)
-        {
-            chosen = (s, (anisotropy, u));
-        }
-    }
-    let (supercell, (_, u)) = chosen;
-    let cell = measured * supercell.try_inverse().unwrap_or_else(Matrix2::identity);
-    let target_inverse = (ideal * u).try_inverse().unwrap_or_else(Matrix2::identity);
-    let calibration = calibration_of(measurement, &measured, &supercell, &target_inverse);
+    let a = file_map(&fit.basis, bin_per_m, &ideal)?;
+    let file_cell = a * ideal;
+    let calibration = calibration_of(&fit, bin_per_m, &ideal)?;
+    let measured = measurement.lattice.matrix();
+    let supercell = file_cell
+        .try_inverse()
+        .map(|inverse| (inverse * measured).map(f64::round))
+        .unwrap_or_else(Matrix2::identity);
     let nn = lattice.nearest_neighbour_distance();
-    let integer = |m: &Matrix2<f64>| {
-        [
-            [m[(0, 0)] as i64, m[(0, 1)] as i64],
-            [m[(1, 0)] as i64, m[(1, 1)] as i64],
-        ]
-    };
-    LatticeMatch {
+    Some(LatticeMatch {
         lattice: lattice.name().to_string(),
-        basis_change: integer(&u),
-        supercell: integer(&supercell),
+        supercell: [
+            [supercell[(0, 0)] as i64, supercell[(0, 1)] as i64],
+            [supercell[(1, 0)] as i64, supercell[(1, 1)] as i64],
+        ],
         calibration,
-        shells: shells(measurement, &cell, &(ideal * u)),
+        cell_in_file_m: [
+            [file_cell[(0, 0)], file_cell[(1, 0)]],
+            [file_cell[(0, 1)], file_cell[(1, 1)]],
+        ],
+        shells: shells(measurement, &file_cell, &ideal),
+        explained_fraction: fit.explained_fraction,
+        primary_coverage: fit.primary_coverage,
+        explains_image: fit.explains_image(),
+        unexplained: fit.unexplained(peaks, bin_per_m),
         nn_in_file_m: nn * calibration.mean_scale,
         nn_in_file_sigma_m: nn * calibration.mean_scale_sigma,
-    }
+    })
 }
 
-/// The calibration `K` of `A = measured·S⁻¹·target⁻¹` with uncertainties propagated from
-/// the spectral peak positions.
+/// The calibration `K` of the fitted map `A = K·Q`, with uncertainties propagated from the
+/// fitted reciprocal basis' covariance.
 fn calibration_of(
-    measurement: &LatticeMeasurement,
-    measured: &Matrix2<f64>,
-    supercell: &Matrix2<f64>,
-    target_inverse: &Matrix2<f64>,
-) -> Calibration {
-    let to_lattice = supercell.try_inverse().unwrap_or_else(Matrix2::identity) * target_inverse;
-    let a = measured * to_lattice;
+    fit: &NamedFit,
+    bin_per_m: [f64; 2],
+    ideal: &Matrix2<f64>,
+) -> Option<Calibration> {
+    let a = file_map(&fit.basis, bin_per_m, ideal)?;
     let (k, rotation) = rq(&a);
     let (s1, s2) = singular_values(&a);
-    // The measured cell in terms of the basis dual to the fitted reciprocal basis, so that
-    // a perturbed fit maps to the same cell (no re-reduction, which may swap vectors).
-    let as_measured = measurement.sigma_basis();
-    let v = as_measured
-        .try_inverse()
-        .map(|inv| (inv * measured).map(f64::round))
-        .unwrap_or_else(Matrix2::identity);
-    let k_of = |basis: &Matrix2<f64>| rq(&(basis * v * to_lattice)).0;
-    let sigma = |f: &dyn Fn(&Matrix2<f64>) -> f64| measurement.sigma_of(|b| f(&k_of(b)));
+    let k_of = |n: &Matrix2<f64>| {
+        file_map(n, bin_per_m, ideal).map_or(Matrix2::from_element(f64::NAN), |a| rq(&a).0)
+    };
+    let sigma =
+        |f: &dyn Fn(&Matrix2<f64>) -> f64| propagate(&fit.basis, &fit.covariance, |n| f(&k_of(n)));
     let shear = |k: &Matrix2<f64>| (k[(0, 1)] / k[(1, 1)]).atan().to_degrees();
-    Calibration {
+    Some(Calibration {
         matrix: [[k[(0, 0)], k[(0, 1)]], [0.0, k[(1, 1)]]],
         scale: [k[(0, 0)], k[(1, 1)]],
         scale_sigma: [sigma(&|k| k[(0, 0)]), sigma(&|k| k[(1, 1)])],
@@ -354,7 +278,7 @@ fn calibration_of(
         mean_scale_sigma: sigma(&|k| (k[(0, 0)] * k[(1, 1)]).sqrt()),
         anisotropy: s1 / s2,
         rotation_deg: rotation.to_degrees(),
-    }
+    })
 }
 
 /// Frequency of index `(h, k)` of basis `cell` (columns), cycles per metre.

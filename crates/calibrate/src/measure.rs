@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::CalibrationError;
 use crate::basis::{FittedBasis, find_basis, propagate, reduce};
-use crate::spectrum::PowerSpectrum;
+use crate::spectrum::{Peak, PowerSpectrum};
 
 /// The shape of a 2-D lattice, judged from its reduced cell (tolerances: 3 % in length
 /// ratio, 2° in angle).
@@ -149,19 +149,27 @@ pub struct LatticeMeasurement {
     /// The measured reciprocal basis (bins, reduced) and its covariance.
     pub(crate) reciprocal: Matrix2<f64>,
     pub(crate) covariance: Matrix4<f64>,
-    /// Frequency (cycles per metre) and power of the strongest peak.
-    strongest: (Vector2<f64>, f64),
+    /// Every peak detected (bins), strongest first.
+    peaks: Vec<Peak>,
 }
 
 impl LatticeMeasurement {
     /// Power of the strongest detected peak.
     pub fn strongest_power(&self) -> f64 {
-        self.strongest.1
+        self.peaks.first().map_or(0.0, |p| p.power)
     }
 
-    /// Spatial frequency of the strongest detected peak, cycles per metre (file units).
-    pub fn strongest_frequency(&self) -> Vector2<f64> {
-        self.strongest.0
+    /// The largest `|kx|`, `|ky|` of the spectrum, bins.
+    pub(crate) fn spectrum_half(&self) -> [f64; 2] {
+        [
+            (self.spectrum.columns / 2) as f64,
+            (self.spectrum.rows / 2) as f64,
+        ]
+    }
+
+    /// The peaks detected (frequencies in bins of the spectrum), strongest first.
+    pub fn peaks(&self) -> &[Peak] {
+        &self.peaks
     }
 
     /// Power and background (summed over 5 × 5 bins) at spatial frequency `g` (cycles per metre, file units).
@@ -327,10 +335,7 @@ pub fn measure_lattice(
         bin_per_m,
         reciprocal: basis,
         covariance,
-        strongest: (
-            Vector2::new(peaks[0].k[0] * bin_per_m[0], peaks[0].k[1] * bin_per_m[1]),
-            peaks[0].power,
-        ),
+        peaks,
     };
     // Uncertainties of the reduced cell's lengths and angle: invariant quantities, so they
     // are computed from the conventional cell of each perturbed basis.

@@ -159,6 +159,20 @@ impl PowerSpectrum {
         (sum, 25.0 * self.background_at(k))
     }
 
+    /// The largest power in the 3 × 3 bins around `k` (bins) over the background there: how
+    /// clearly the spectrum shows something at a predicted reflection, whether or not it
+    /// was detected as a peak.
+    pub fn contrast_near(&self, k: [f64; 2]) -> f64 {
+        let (cx, cy) = (k[0].round() as i64, k[1].round() as i64);
+        let mut top = 0.0f64;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                top = top.max(self.at(cx + dx, cy + dy));
+            }
+        }
+        top / self.background_at(k).max(f64::MIN_POSITIVE)
+    }
+
     fn radial_median(&self) -> Vec<f64> {
         let max_r = self.rows.min(self.columns) / 2;
         let mut bins: Vec<Vec<f64>> = vec![Vec::new(); max_r + 1];

@@ -237,11 +237,15 @@ fn the_read_budget_is_a_flag() {
 #[test]
 fn a_preset_takes_a_head_off_by_40_percent_but_not_by_a_factor_2() {
     let dir = tempfile::tempdir().unwrap();
-    // The file's pixel size is 15.625 pm: 40 % smaller and 40 % larger pass (calibrated from
-    // the lattice, with a warning), twice as large stops.
+    // The file's pixel size is 15.625 pm: with the graphite preset named, 40 % smaller and
+    // 40 % larger pass (calibrated from the lattice, with a warning), twice as large stops.
     for (pitch, name) in [("9.375pm", "small"), ("21.875pm", "large")] {
         let out = dir.path().join(name);
-        let output = correct(&example(), &["--pitch", pitch], &out);
+        let output = correct(
+            &example(),
+            &["--lattice", "graphite", "--pitch", pitch],
+            &out,
+        );
         assert!(
             output.status.success(),
             "{pitch}: {}",
@@ -257,8 +261,16 @@ fn a_preset_takes_a_head_off_by_40_percent_but_not_by_a_factor_2() {
     }
     let output = correct(
         &example(),
-        &["--pitch", "31.25pm"],
+        &["--lattice", "graphite", "--pitch", "31.25pm"],
         &dir.path().join("double"),
     );
     fails_saying(&output, &["wrong by a factor 2.", "in file units"]);
+    // A lattice nobody named is an assumption: it never rescales the pixel size beyond a
+    // typed constant's 15 %.
+    let output = correct(
+        &example(),
+        &["--pitch", "9.375pm"],
+        &dir.path().join("unnamed"),
+    );
+    fails_saying(&output, &["wrong by a factor 0.6", "in file units"]);
 }

@@ -41,8 +41,10 @@ fn corrected_lattice_matches(input: &Path, args: &[&str], a: f64) {
         String::from_utf8_lossy(&output.stderr)
     );
     let lattice = Hexagonal::new("hexagonal", a, PlaneGroup::P6mm).unwrap();
+    // The lattice given, looked for within 30 % of its constant (a corrected image should
+    // show it; a superstructure's coarser cell must not be taken instead).
     let anything = CheckOptions {
-        pitch_tolerance: 100.0,
+        pitch_tolerance: 0.3,
         check_lattice_type: false,
         ..CheckOptions::default()
     };
@@ -179,7 +181,13 @@ fn images_that_cannot_support_the_model_stop_clearly_or_fall_back_honestly() {
                 "{name}: no FFT check of the corrected image"
             );
         } else {
-            assert!(stderr.contains("features"), "{name}: {stderr}");
+            // Too few features, or a lattice that does not explain the Fourier peaks
+            // (then the peaks it leaves are named).
+            assert!(
+                stderr.contains("features")
+                    || (stderr.contains("cannot match") && stderr.contains("period at")),
+                "{name}: {stderr}"
+            );
         }
     }
 }

@@ -129,6 +129,18 @@ fn angle_error_deg(lattice: &dyn Lattice, calibration: &Calibration) -> f64 {
     worst
 }
 
+/// The bounds a corrected image's lattice is looked for in: any stretch or shear the
+/// calibration stage accepts, and a scale within `1 + tolerance` either way along both axes.
+fn corrected_bounds(geometry: &ScanGeometry, tolerance: f64) -> dhct_calibrate::MapBounds {
+    let options = CheckOptions {
+        pitch_tolerance: tolerance,
+        ..CheckOptions::default()
+    };
+    let mut bounds = options.bounds(geometry.fast_axis());
+    bounds.slow_scale = bounds.fast_scale;
+    bounds
+}
+
 /// Measures each corrected image's lattice (grid of `geometry`, sample units); images whose
 /// lattice cannot be measured are left out.
 pub(crate) fn check_corrected(
@@ -139,7 +151,15 @@ pub(crate) fn check_corrected(
     let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
     let check = |&(pass, z): &(ScanPass, &Array2<f64>)| {
         let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
-        let calibration = match_lattice(&measured, lattice).calibration;
+        // Near the lattice given first (a corrected image should show it), then anywhere
+        // within a factor 2 (so that one that went wrong is measured and flagged).
+        let calibration = [0.15, 1.0]
+            .into_iter()
+            .filter_map(|tolerance| {
+                match_lattice(&measured, lattice, &corrected_bounds(geometry, tolerance))
+            })
+            .find(|m| m.explains_image)?
+            .calibration;
         Some(CorrectedImageCheck {
             pass,
             calibration,

@@ -160,6 +160,24 @@ pub struct SurfaceConfig {
     /// Regions of homogeneous sample strain.
     #[serde(default)]
     pub strain: Vec<StrainRegion>,
+    /// Height modulations at fractional lattice frequencies: a superstructure's or a
+    /// charge-density wave's satellites, a period doubling, an incommensurate moiré.
+    #[serde(default)]
+    pub modulations: Vec<Modulation>,
+}
+
+/// A height modulation `amplitude·cos(2π·G·(p − origin))` over the whole surface, with `G`
+/// the lattice's reciprocal vector at a fractional index: `[0.5, 0]` doubles the period
+/// along the lattice's first reflection, `[1/3, 1/3]` is a (√3×√3)R30° superstructure of
+/// a hexagonal lattice. It rotates with the lattice (the first domain's angle).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Modulation {
+    /// Index `(h, k)` in the reciprocal basis of the lattice's translation cell (any real
+    /// numbers, not both 0).
+    pub index: [f64; 2],
+    /// Amplitude, metres.
+    pub amplitude_m: f64,
 }
 
 /// Which lattice the surface follows.
@@ -637,6 +655,18 @@ impl SurfaceConfig {
         self.defects.validate()?;
         check_len("surface.steps", &self.steps, MAX_LIST)?;
         check_len("surface.strain", &self.strain, MAX_LIST)?;
+        check_len("surface.modulations", &self.modulations, MAX_LIST)?;
+        for (index, modulation) in self.modulations.iter().enumerate() {
+            let field = format!("surface.modulations[{index}]");
+            finite2(&format!("{field}.index"), modulation.index)?;
+            finite(&format!("{field}.amplitude_m"), modulation.amplitude_m)?;
+            if modulation.index == [0.0, 0.0] {
+                return Err(invalid(
+                    format!("{field}.index"),
+                    "must not be (0, 0): that is no modulation but a height offset",
+                ));
+            }
+        }
         if let Some(domain) = &self.second_domain {
             domain.region.validate("surface.second_domain.region")?;
             finite("surface.second_domain.angle_rad", domain.angle_rad)?;

@@ -58,8 +58,9 @@ pub mod surface;
 pub mod truth;
 
 pub use config::{
-    DefectConfig, FeatureShape, LatticeConfig, Lobe, NoiseConfig, OutputConfig, OutputFormat,
-    ScanConfig, SecondDomain, SimulationConfig, StepEdge, StrainRegion, SurfaceConfig, TipConfig,
+    DefectConfig, FeatureShape, LatticeConfig, Lobe, Modulation, NoiseConfig, OutputConfig,
+    OutputFormat, ScanConfig, SecondDomain, SimulationConfig, StepEdge, StrainRegion,
+    SurfaceConfig, TipConfig,
 };
 pub use effects::{AcquisitionContext, Effect, EffectConfig, HeightEffect, HysteresisLaw};
 pub use error::SimulationError;

@@ -441,6 +441,48 @@ pub struct Surface {
     domains: Vec<DomainTable>,
     adatoms: AdatomGrid,
     features: Vec<SurfaceFeature>,
+    modulations: Vec<CompiledModulation>,
+}
+
+/// A [`crate::config::Modulation`] in the sample frame.
+#[derive(Debug, Clone, Copy)]
+struct CompiledModulation {
+    /// `2π·G`, radians per metre.
+    wave: Vector2<f64>,
+    /// The lattice origin, metres.
+    origin: Vector2<f64>,
+    /// Amplitude, metres.
+    amplitude: f64,
+}
+
+impl CompiledModulation {
+    /// The modulations of `surface`: each index turned into a frequency by the lattice's
+    /// reciprocal basis, rotated with the surface.
+    fn all(surface: &SurfaceConfig, lattice: &dyn Lattice) -> Vec<CompiledModulation> {
+        let [a1, a2] = lattice.translation_cell();
+        let Some(inverse) = Matrix2::from_columns(&[a1, a2]).try_inverse() else {
+            return Vec::new();
+        };
+        let reciprocal = inverse.transpose();
+        let (s, c) = surface.angle_rad.sin_cos();
+        let rotation = Matrix2::new(c, -s, s, c);
+        surface
+            .modulations
+            .iter()
+            .map(|m| CompiledModulation {
+                wave: rotation
+                    * reciprocal
+                    * Vector2::new(m.index[0], m.index[1])
+                    * (2.0 * std::f64::consts::PI),
+                origin: Vector2::new(surface.origin_m[0], surface.origin_m[1]),
+                amplitude: m.amplitude_m,
+            })
+            .collect()
+    }
+
+    fn height(&self, p: Vector2<f64>) -> f64 {
+        self.amplitude * self.wave.dot(&(p - self.origin)).cos()
+    }
 }
 
 /// splitmix64: a fast, well-mixed 64-bit hash step.
@@ -544,6 +586,7 @@ impl Surface {
             domains,
             adatoms: AdatomGrid::new(adatom_positions, adatom_amplitude, adatom_shape, grid_area),
             features,
+            modulations: CompiledModulation::all(surface, lattice),
         })
     }
 
@@ -557,6 +600,9 @@ impl Surface {
         };
         for domain in &self.domains {
             z += domain.height(p);
+        }
+        for modulation in &self.modulations {
+            z += modulation.height(p);
         }
         z + self.adatoms.height(p)
     }

@@ -116,7 +116,11 @@ impl Row {
             .unwrap_or_default();
         Row {
             output: output.display().to_string(),
-            lattice: s.lattice.clone(),
+            lattice: if s.lattice_assumed {
+                format!("{} (assumed: no lattice named)", s.lattice)
+            } else {
+                s.lattice.clone()
+            },
             nearest_neighbour_distance_m: Some(s.nearest_neighbour_distance_m),
             features: Some(s.passes.iter().map(|p| p.features).sum()),
             indexed: Some(s.passes.iter().map(|p| p.indexed).sum()),

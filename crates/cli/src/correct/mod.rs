@@ -147,7 +147,7 @@ pub fn analyse(
         PipelineError::Calibration(_) => CorrectError::InputMismatch(explain(&e)),
         _ => CorrectError::Analysis(explain(&e)),
     })?;
-    let summary = summary::summarise(
+    let mut summary = summary::summarise(
         input,
         retrace,
         lattice.as_ref(),
@@ -155,6 +155,7 @@ pub fn analyse(
         &analysis,
         read_s,
     );
+    summary.lattice_assumed = config.lattice.is_none();
     Ok(Corrected {
         pair,
         config,

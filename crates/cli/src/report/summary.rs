@@ -149,6 +149,9 @@ pub struct RunSummary {
     pub retrace_input: Option<String>,
     /// The lattice's name.
     pub lattice: String,
+    /// Whether the lattice was assumed (none was named: graphite, held to a typed
+    /// constant's pixel-size tolerance) rather than given by the user.
+    pub lattice_assumed: bool,
     /// The lattice's nearest-neighbour distance, metres.
     pub nearest_neighbour_distance_m: f64,
     /// The input's scan geometry.
@@ -308,6 +311,7 @@ pub fn summarise(
         input,
         retrace_input,
         lattice: lattice.name().to_string(),
+        lattice_assumed: false,
         nearest_neighbour_distance_m: lattice.nearest_neighbour_distance(),
         geometry: geometry.clone(),
         model: analysis.dhct.model.clone(),

@@ -63,7 +63,10 @@ pub fn resolve(config: &CorrectConfig) -> Result<Resolved> {
     if let Some(group) = config.plane_group {
         options.unit_cell.plane_group = Some(group);
     }
-    apply_check_policy(config, nn_m.is_some() && !nn_auto, &mut options);
+    // A lattice nobody named is an assumption: it may be checked against the image but
+    // never rescale the pixel size beyond what a typed constant may.
+    let constant_given = (nn_m.is_some() && !nn_auto) || config.lattice.is_none();
+    apply_check_policy(config, constant_given, &mut options);
     Ok(Resolved {
         lattice_name,
         nn_m: if nn_auto { None } else { nn_m },
@@ -73,8 +76,9 @@ pub fn resolve(config: &CorrectConfig) -> Result<Resolved> {
     })
 }
 
-/// How far the file's pixel size may be off: 15 % for a typed constant, a factor 1.75 for a
-/// preset's, ×10 with `--calibrate`; `--trust-inputs` turns the check (and the calibration
+/// How far the file's pixel size may be off: 15 % for a typed constant (or a lattice
+/// assumed because none was named), a factor 1.75 for a named preset's, ×10 with
+/// `--calibrate`; `--trust-inputs` turns the check (and the calibration
 /// from the lattice) off. A tolerance set in a config file is kept.
 fn apply_check_policy(config: &CorrectConfig, typed: bool, options: &mut PipelineOptions) {
     let check = &mut options.calibration.check;

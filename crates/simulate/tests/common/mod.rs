@@ -49,6 +49,7 @@ pub fn base_config() -> SimulationConfig {
             second_domain: None,
             steps: Vec::new(),
             strain: Vec::new(),
+            modulations: Vec::new(),
         },
         tip: TipConfig::default(),
         noise: NoiseConfig::default(),
