@@ -6,7 +6,7 @@
 //! * **anisotropic tip**: features 2.5× longer along one direction, so equivalent
 //!   reflections differ strongly in power;
 //! * **line jumps**: per-line height offsets as large as half the corrugation;
-//! * **few cells**: frames only 8–10 cells across;
+//! * **few cells**: frames only 6–8 large cells (10–12 atomic ones) across;
 //! * **strong drift**: a slow-axis drift that stretches or squeezes the raw lattice 1.5×.
 //!
 //! Each but the strong drift is also written with a pixel size off by up to 20 %. The corrected lattice, measured
@@ -16,8 +16,7 @@
 
 mod common;
 
-use common::das_like;
-use dhct_calibrate::{CheckOptions, match_lattice, measure_lattice};
+use common::{corrected_lattice, das_like};
 use dhct_lattice::{Hexagonal, Lattice, Square};
 use dhct_pipeline::{PipelineError, PipelineOptions, run};
 use dhct_scan::{ScanPair, ScanPass};
@@ -132,7 +131,14 @@ fn config(surface: &Surface, class: Class, seed: u64) -> (SimulationConfig, [f64
             config.noise.line_offset_sigma_m = 0.5 * surface.height_m;
         }
         Class::FewCells => {
-            let cells = [8.0, 9.0, 10.0][seed as usize];
+            // The large cell as few times across as on the real 7×7 frames that were
+            // refused; an atomic lattice 10–12 times (below that the Fourier judge itself
+            // is uncertain by ~1 % on a perfect image).
+            let cells = if surface.name == "7x7-like" {
+                [6.0, 7.0, 8.0][seed as usize]
+            } else {
+                [10.0, 11.0, 12.0][seed as usize]
+            };
             config.scan.width_m = cells * surface.cell_m;
             config.scan.height_m = cells * surface.cell_m;
         }
@@ -209,25 +215,6 @@ fn options(lattice: &dyn Lattice) -> PipelineOptions {
     options
 }
 
-/// The corrected trace's lattice against the truth: `(kx, ky, shear°)` of the named
-/// lattice fitted to its Fourier peaks.
-fn corrected_lattice(
-    pair: &ScanPair,
-    corrected: &ndarray::Array2<f64>,
-    lattice: &dyn Lattice,
-) -> [f64; 3] {
-    let measured = measure_lattice(corrected.view(), pair.geometry(), None)
-        .expect("a lattice in the corrected image");
-    let bounds = CheckOptions {
-        pitch_tolerance: 0.15,
-        ..CheckOptions::default()
-    }
-    .bounds(pair.geometry().fast_axis());
-    let matched = match_lattice(&measured, lattice, &bounds).expect("the named lattice fits");
-    let c = matched.calibration;
-    [c.scale[0], c.scale[1], c.shear_deg]
-}
-
 #[test]
 fn every_class_inside_the_bounds_is_corrected_to_within_1_percent() {
     let mut failures = Vec::new();
@@ -250,8 +237,13 @@ fn every_class_inside_the_bounds_is_corrected_to_within_1_percent() {
                 };
                 let [kx, ky, shear] =
                     corrected_lattice(&pair, &analysis.passes[0].corrected_image, lattice);
+                let compared = analysis
+                    .affine
+                    .first()
+                    .map(|c| (c.model_rms_m * 1e12, c.affine_rms_m * 1e12, c.model_scale));
                 println!(
-                    "{label}: {:?}, corrected x {kx:.4}, y {ky:.4}, shear {shear:.2}°",
+                    "{label}: {:?} (rms model/affine {compared:.1?} pm), corrected x {kx:.4}, \
+                     y {ky:.4}, shear {shear:.2}°",
                     analysis.correction
                 );
                 if (kx - 1.0).abs() > 0.01 || (ky - 1.0).abs() > 0.01 || shear.abs() > 0.5 {

@@ -168,8 +168,12 @@ pub fn find_basis(peaks: &[Peak]) -> Option<FittedBasis> {
 }
 
 /// Position uncertainty of a peak (bins): about half a bin at the detection threshold,
-/// shrinking with the square root of its signal-to-noise ratio.
-fn position_sigma(peak: &Peak) -> f64 {
+/// shrinking with the square root of its signal-to-noise ratio; half a bin for a peak
+/// whose position could not be refined (next to the scan-line band), however strong.
+pub(crate) fn position_sigma(peak: &Peak) -> f64 {
+    if peak.unrefined {
+        return 0.5;
+    }
     (0.5 * (crate::spectrum::MIN_PEAK_SNR / peak.snr.max(1e-9)).sqrt()).clamp(0.02, 0.5)
 }
 
@@ -248,6 +252,7 @@ mod tests {
             k: [kx, ky],
             power,
             snr: 100.0,
+            unrefined: false,
         }
     }
 

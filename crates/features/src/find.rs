@@ -233,16 +233,26 @@ fn find_prepared(
         .apply(pre.filled.as_ref().unwrap_or(&pre.signed).view());
     clock.lap(&mut timings.correlation_s);
 
-    let segment = |ncc: &Array2<f64>, rejected: &mut Vec<RejectedCandidate>| {
-        let regions = watershed_regions(ncc, options.threshold);
-        let candidates = regions.len();
-        (
-            area_filter(regions, options.area_filter, columns, rejected),
-            candidates,
-        )
-    };
+    // `signed`: the image the features' heights are read from (polarity applied).
+    let segment =
+        |ncc: &Array2<f64>, signed: &Array2<f64>, rejected: &mut Vec<RejectedCandidate>| {
+            let regions = watershed_regions(ncc, options.threshold);
+            let candidates = regions.len();
+            let tracked = (options.min_relative_height > 0.0 && signed.dim() == ncc.dim())
+                .then(|| tracked_kind(&regions, signed, options.min_relative_height));
+            (
+                area_filter(
+                    regions,
+                    options.area_filter,
+                    columns,
+                    tracked.as_deref(),
+                    rejected,
+                ),
+                candidates,
+            )
+        };
     let mut rejected = Vec::new();
-    let (mut kept, mut candidates) = segment(&ncc, &mut rejected);
+    let (mut kept, mut candidates) = segment(&ncc, &pre.signed, &mut rejected);
     clock.lap(&mut timings.segmentation_s);
 
     let window = fit_window(options, prepared);
@@ -255,7 +265,7 @@ fn find_prepared(
             // the correlation with them: it is taken again on the lines cut at the steps.
             ncc = prepared.plan.apply(filled_for_correlation(levelled).view());
             rejected.clear();
-            (kept, candidates) = segment(&ncc, &mut rejected);
+            (kept, candidates) = segment(&ncc, &unlevelled, &mut rejected);
         }
         let fit = RegionFit {
             kept: &kept,
@@ -928,17 +938,44 @@ fn drop_shallow(features: &mut Vec<Feature>, fraction: f64, rejected: &mut Vec<R
     });
 }
 
+/// Which regions belong to the tracked kind of feature when the lattice tracks only the
+/// deepest (or brightest) of several (`min_relative_height` > 0, e.g. the corner holes of
+/// Si(111)-7×7): those whose signed height at their peak is at least `fraction` × the 90th
+/// percentile of all regions' (the rule [`drop_shallow`] applies to the fits later).
+fn tracked_kind(regions: &[Region], signed: &Array2<f64>, fraction: f64) -> Vec<bool> {
+    let columns = signed.ncols();
+    let height = |r: &Region| {
+        let v = signed[[r.peak / columns, r.peak % columns]];
+        if v.is_finite() { v } else { f64::NEG_INFINITY }
+    };
+    let mut heights: Vec<f64> = regions.iter().map(height).collect();
+    if heights.is_empty() {
+        return Vec::new();
+    }
+    let rank = ((heights.len() - 1) as f64 * 0.9).round() as usize;
+    let reference = *heights.select_nth_unstable_by(rank, f64::total_cmp).1;
+    regions
+        .iter()
+        .map(|r| height(r) >= fraction * reference)
+        .collect()
+}
+
 /// The DHCT area filter: keep regions with median/√10 < area < median·√10, the median taken
-/// over regions larger than 10 px.
+/// over regions larger than 10 px (of the tracked kind only, when `tracked` says which: a
+/// drift-stretched Si(111)-7×7 image resolves twice as many shallow minima as corner holes,
+/// whose median area would otherwise reject the corner holes as too large).
 fn area_filter(
     regions: Vec<Region>,
     enabled: bool,
     columns: usize,
+    tracked: Option<&[bool]>,
     rejected: &mut Vec<RejectedCandidate>,
 ) -> Vec<Region> {
     let mut areas: Vec<usize> = regions
         .iter()
-        .map(|r| r.area)
+        .enumerate()
+        .filter(|(i, _)| tracked.is_none_or(|t| t.get(*i).copied().unwrap_or(true)))
+        .map(|(_, r)| r.area)
         .filter(|&a| a > MIN_AREA_FOR_MEDIAN)
         .collect();
     if !enabled || areas.is_empty() {

@@ -1,7 +1,26 @@
 //! Helpers shared by the workspace-level tests.
 
-use dhct_lattice::{MotifSite, PlaneGroup, UserLattice};
+use dhct_calibrate::{CheckOptions, match_lattice, measure_lattice};
+use dhct_lattice::{Lattice, MotifSite, PlaneGroup, UserLattice};
+use dhct_scan::ScanPair;
 use nalgebra::Vector2;
+
+/// A corrected image's lattice against the lattice given, as an outside check would
+/// measure it: the lattice fitted to the image's Fourier peaks (within 15 % of its
+/// constant), `[x scale, y scale, shear°]` (1, 1, 0 when the image shows exactly the
+/// lattice). `corrected` lies on `pair`'s grid, in sample units.
+pub fn corrected_lattice(
+    pair: &ScanPair,
+    corrected: &ndarray::Array2<f64>,
+    lattice: &dyn Lattice,
+) -> [f64; 3] {
+    let measured = measure_lattice(corrected.view(), pair.geometry(), None)
+        .expect("a lattice in the corrected image");
+    let bounds = CheckOptions::default().bounds(pair.geometry().fast_axis());
+    let matched = match_lattice(&measured, lattice, &bounds).expect("the lattice fits");
+    let c = matched.calibration;
+    [c.scale[0], c.scale[1], c.shear_deg]
+}
 
 /// A 7×7-like surface: corner hole at the origin (depth 1), 12 adatoms (height 0.5) on a
 /// ring around the centroid of each half cell, and a shallower minimum (depth 0.25) at each
