@@ -73,8 +73,12 @@ pub enum Verdict {
     Right,
     /// Stopped with an error (its first line).
     Refused(String),
-    /// Corrected at exit 0, but the corrected image's lattice is not the surface's.
+    /// Corrected at exit 0, but the corrected image's lattice is not the surface's, and
+    /// dhct did not say so.
     Wrong(String),
+    /// Corrected, a pass's lattice off, and dhct warned about that pass itself
+    /// (`corrected_image_off`): not silently wrong, but not right either.
+    Flagged(String),
     /// The file is not there (`DHCT_REAL_DATA` unset or missing).
     Missing(String),
 }
@@ -91,9 +95,10 @@ pub struct FileResult {
     /// The lattice fit's rms deviation with the drift model and with the affine map
     /// (largest region), metres.
     pub model_vs_affine_m: Option<[f64; 2]>,
-    /// Per pass judged: (pass, x scale, y scale, shear°, non-affine rms raw, corrected, in
-    /// periods).
+    /// Per pass judged.
     pub passes: Vec<PassJudgement>,
+    /// The passes dhct itself flagged as off (`corrected_image_off`).
+    pub flagged: Vec<String>,
 }
 
 /// The judgement of one corrected image.
@@ -120,6 +125,7 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
         correction: None,
         model_vs_affine_m: None,
         passes: Vec::new(),
+        flagged: Vec::new(),
     };
     let input = match locate(file, root) {
         Ok(path) => path,
@@ -144,7 +150,7 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
     let raw = dhct_sm4_io::read_path(&input)
         .ok()
         .and_then(|f| f.topography().cloned());
-    let mut wrong = Vec::new();
+    let (mut wrong, mut flagged) = (Vec::new(), Vec::new());
     for (pass, name) in [
         (ScanPass::Trace, "corrected_trace.gsf"),
         (ScanPass::Retrace, "corrected_retrace.gsf"),
@@ -158,7 +164,8 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
         match judge_pass(file, pass, &corrected, raw.as_ref()) {
             Ok(judgement) => {
                 if !judgement_is_right(file, &judgement) {
-                    wrong.push(format!(
+                    let said = result.flagged.iter().any(|f| *f == pass.to_string());
+                    (if said { &mut flagged } else { &mut wrong }).push(format!(
                         "{pass}: x {:.4}, y {:.4}, shear {:.2}°",
                         judgement.scale[0], judgement.scale[1], judgement.shear_deg
                     ));
@@ -169,11 +176,16 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
         }
     }
     result.verdict = if result.passes.is_empty() {
-        Verdict::Wrong(format!("no corrected image could be judged: {}", wrong.join("; ")))
-    } else if wrong.is_empty() {
-        Verdict::Right
-    } else {
+        Verdict::Wrong(format!(
+            "no corrected image could be judged: {}",
+            wrong.join("; ")
+        ))
+    } else if !wrong.is_empty() {
         Verdict::Wrong(wrong.join("; "))
+    } else if !flagged.is_empty() {
+        Verdict::Flagged(flagged.join("; "))
+    } else {
+        Verdict::Right
     };
     result
 }
@@ -195,7 +207,13 @@ fn locate(file: &CorpusFile, root: &Path) -> Result<PathBuf, String> {
 }
 
 /// `dhct correct INPUT -o OUT ARGS` from the repository root; `Err(stderr)` on failure.
-fn correct(dhct: &Path, input: &Path, args: &[String], root: &Path, out: &Path) -> Result<(), String> {
+fn correct(
+    dhct: &Path,
+    input: &Path,
+    args: &[String],
+    root: &Path,
+    out: &Path,
+) -> Result<(), String> {
     let _ = std::fs::remove_dir_all(out);
     let output = Command::new(dhct)
         .current_dir(root)
@@ -229,8 +247,22 @@ fn read_model(out: &Path, result: &mut FileResult) {
         return;
     };
     result.correction = model["correction"].as_str().map(str::to_owned);
+    for warning in model["warnings"].as_array().into_iter().flatten() {
+        if warning["code"] == "corrected_image_off"
+            && let Some(message) = warning["message"].as_str()
+        {
+            for pass in ["trace", "retrace"] {
+                if message.starts_with(&format!("corrected {pass}:")) {
+                    result.flagged.push(pass.to_string());
+                }
+            }
+        }
+    }
     let first = &model["affine_baseline"][0];
-    if let (Some(m), Some(a)) = (first["model_rms_m"].as_f64(), first["affine_rms_m"].as_f64()) {
+    if let (Some(m), Some(a)) = (
+        first["model_rms_m"].as_f64(),
+        first["affine_rms_m"].as_f64(),
+    ) {
         result.model_vs_affine_m = Some([m, a]);
     }
 }
@@ -241,14 +273,30 @@ fn judge_lattice(file: &CorpusFile) -> Hexagonal {
     Hexagonal::new("judge", a, PlaneGroup::P6mm).expect("a positive constant")
 }
 
-/// The judge's fit of `pair`'s `pass`: near the constant when it is known, at any scale
-/// otherwise.
-fn fit(file: &CorpusFile, pair: &ScanPair, pass: ScanPass) -> Result<LatticeMatch, String> {
-    let image = pair.image(pass).ok_or("no such image")?;
+/// The image of `pass` in `pair`, or its only image (a GSF holds one, in either slot).
+fn image_of(pair: &ScanPair, pass: ScanPass) -> Option<&dhct_scan::ImageChannel> {
+    pair.image(pass)
+        .or_else(|| pair.image(ScanPass::Trace))
+        .or_else(|| pair.image(ScanPass::Retrace))
+}
+
+/// The judge's fit of `pair`'s `pass`: near the constant when it is known and `near` (a
+/// corrected image), at any scale otherwise (a raw image, whose pixel size may be off).
+fn fit(
+    file: &CorpusFile,
+    pair: &ScanPair,
+    pass: ScanPass,
+    near: bool,
+) -> Result<LatticeMatch, String> {
+    let image = image_of(pair, pass).ok_or("no image")?;
     let measured =
         measure_lattice(image.z.view(), pair.geometry(), None).map_err(|e| e.to_string())?;
     let options = CheckOptions {
-        pitch_tolerance: if file.judge_a_m.is_some() { 0.15 } else { f64::MAX },
+        pitch_tolerance: if near && file.judge_a_m.is_some() {
+            0.15
+        } else {
+            f64::MAX
+        },
         ..CheckOptions::default()
     };
     let mut bounds = options.bounds(pair.geometry().fast_axis());
@@ -264,17 +312,16 @@ fn judge_pass(
     corrected: &ScanPair,
     raw: Option<&ScanPair>,
 ) -> Result<PassJudgement, String> {
-    // A GSF holds one image: the trace slot.
-    let matched = fit(file, corrected, ScanPass::Trace)?;
+    let matched = fit(file, corrected, pass, true)?;
     let c = matched.calibration;
     let scale = if file.judge_a_m.is_some() {
         c.scale
     } else {
         [c.anisotropy, 1.0]
     };
-    let corrected_non_affine = non_affine_periods(corrected, ScanPass::Trace, &matched);
+    let corrected_non_affine = non_affine_periods(corrected, pass, &matched);
     let raw_non_affine = raw.and_then(|raw| {
-        let matched = fit(file, raw, pass).ok()?;
+        let matched = fit(file, raw, pass, false).ok()?;
         non_affine_periods(raw, pass, &matched)
     });
     Ok(PassJudgement {
@@ -289,7 +336,7 @@ fn judge_pass(
 /// The non-affine displacement of `pair`'s `pass` for the two cell reflections of
 /// `matched`, in periods of the first.
 fn non_affine_periods(pair: &ScanPair, pass: ScanPass, matched: &LatticeMatch) -> Option<f64> {
-    let image = pair.image(pass)?;
+    let image = image_of(pair, pass)?;
     let [a1, a2] = matched.cell_in_file_m;
     let cell = nalgebra::Matrix2::new(a1[0], a2[0], a1[1], a2[1]);
     let reciprocal = cell.try_inverse()?.transpose();

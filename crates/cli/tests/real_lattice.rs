@@ -80,7 +80,14 @@ fn corrected_lattice_matches(input: &Path, args: &[&str], a: f64) {
             c.scale[1],
             c.shear_deg
         );
-        let angle = measured.lattice.angle_deg;
+        // The fitted lattice's cell in the corrected image (the coarsest cell indexing its
+        // peaks would be a superstructure's on TiSe₂ and Pb/Pt).
+        let [v1, v2] = measured.matched.cell_in_file_m;
+        let angle = (v1[0] * v2[1] - v1[1] * v2[0])
+            .abs()
+            .atan2(v1[0] * v2[0] + v1[1] * v2[1])
+            .to_degrees();
+        let angle = if angle > 90.0 { 180.0 - angle } else { angle };
         let right = c.scale.iter().all(|k| (k - 1.0).abs() < 0.015) && (angle - 60.0).abs() < 1.0;
         // A pass whose corrected lattice is off must carry the warning that says so; the
         // trace must be right.
