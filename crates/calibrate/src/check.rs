@@ -119,7 +119,27 @@ pub fn check_inputs(
         && wide.explains_image
         && type_contradiction(wide, options).is_none()
     {
-        return Err(wrong_scale(measurement, wide, fast_axis, options));
+        // The lattice does show at the constant given, under a stronger pattern: say so.
+        let partly = within.as_ref().filter(|m| {
+            m.primary_coverage >= crate::MIN_PRIMARY_COVERAGE
+                && m.explained_fraction < crate::MIN_EXPLAINED_FRACTION
+        });
+        let at_given = partly.map_or(String::new(), |m| {
+            format!(
+                "; at {} it explains only {:.0} % of the strong Fourier peaks' amplitude{}",
+                crate::length(m.nn_in_file_m / m.calibration.mean_scale),
+                100.0 * m.explained_fraction,
+                if m.unexplained.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " (the rest: {} peaks on none of its reflections, e.g. a superstructure)",
+                        m.unexplained.len()
+                    )
+                }
+            )
+        });
+        return Err(wrong_scale(measurement, wide, fast_axis, options, at_given));
     }
     let best = within.or(any_scale);
     let evidence = match &best {
@@ -220,6 +240,7 @@ fn wrong_scale(
     matched: &LatticeMatch,
     fast_axis: Axis,
     options: &CheckOptions,
+    at_given: String,
 ) -> CalibrationError {
     let calibration = &matched.calibration;
     let (fast, slow) = match fast_axis {
@@ -238,6 +259,7 @@ fn wrong_scale(
         measured_nn_sigma_m: nn * calibration.scale_sigma[0].max(calibration.scale_sigma[1]),
         factor,
         tolerance: options.pitch_tolerance,
+        at_given,
     }
 }
 

@@ -54,7 +54,7 @@ pub enum CalibrationError {
     #[error(
         "the image shows {shows}, i.e. the {lattice} lattice's nearest-neighbour distance is \
          {measured} ± {sigma} in file units; {given} cannot match it: the file's pixel size \
-         would be wrong by a factor {factor:.3} (at most {tolerance_percent:.0} % is accepted along the fast axis)",
+         would be wrong by a factor {factor:.3} (at most {tolerance_percent:.0} % is accepted along the fast axis){at_given}",
         measured = crate::length(*measured_nn_m),
         sigma = crate::length(*measured_nn_sigma_m),
         given = crate::length(*given_nn_m),
@@ -77,5 +77,9 @@ pub enum CalibrationError {
         factor: f64,
         /// The largest relative pixel-size error accepted.
         tolerance: f64,
+        /// What the lattice explains at the constant given, when it explains something
+        /// there (e.g. "; at 3.780 Å it explains only 24 % of the strong Fourier peaks'
+        /// amplitude"), else empty.
+        at_given: String,
     },
 }
