@@ -176,6 +176,39 @@ pub struct LatticeMatch {
     pub nn_in_file_sigma_m: f64,
 }
 
+impl LatticeMatch {
+    /// In words: how much of the image's strong Fourier peaks the lattice explains and the
+    /// strongest it leaves, e.g. "the hexagonal lattice explains 55 % of the strong Fourier
+    /// peaks' amplitude; 6 strong peaks lie on none of its reflections (a superstructure,
+    /// satellites or a moiré; the strongest: 2.192 nm period, 41 % of the strongest power,
+    /// index (-0.34, -0.66))".
+    pub fn explanation(&self) -> String {
+        let explained = format!(
+            "the {} lattice explains {:.0} % of the strong Fourier peaks' amplitude",
+            self.lattice,
+            100.0 * self.explained_fraction
+        );
+        match self.unexplained.first() {
+            None => explained,
+            Some(p) => format!(
+                "{explained}; {} strong peak{} on none of its reflections (a superstructure, \
+                 satellites or a moiré; the strongest: {} period, {:.0} % of the strongest \
+                 power, index ({:.2}, {:.2}))",
+                self.unexplained.len(),
+                if self.unexplained.len() == 1 {
+                    " lies"
+                } else {
+                    "s lie"
+                },
+                crate::length(p.period_m),
+                100.0 * p.relative_power,
+                p.fractional_index[0],
+                p.fractional_index[1]
+            ),
+        }
+    }
+}
+
 /// Singular values `(s1 ≥ s2)` of a 2 × 2 matrix.
 pub(crate) fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
     let ata = a.transpose() * a;

@@ -469,9 +469,10 @@ fn calibration_lines(summary: &RunSummary) -> String {
             for pass in &found.passes {
                 let _ = writeln!(
                     s,
-                    "{}: the image shows {}",
+                    "{}: the image shows {}; {}",
                     pass.pass,
-                    pass.lattice.describe()
+                    pass.lattice.describe(),
+                    pass.matched.explanation()
                 );
             }
             let c = &found.calibration;

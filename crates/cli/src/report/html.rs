@@ -204,7 +204,12 @@ fn calibration_section(html: &mut Html, summary: &RunSummary) {
     let mut rows: Vec<(String, String)> = found
         .passes
         .iter()
-        .map(|p| (format!("{} shows", p.pass), p.lattice.describe()))
+        .flat_map(|p| {
+            [
+                (format!("{} shows", p.pass), p.lattice.describe()),
+                (format!("{} explained", p.pass), p.matched.explanation()),
+            ]
+        })
         .collect();
     let c = &found.calibration;
     rows.extend([
