@@ -8,59 +8,21 @@
 
 mod common;
 
-use common::{corrected_lattice, das_like};
-use dhct_lattice::{Hexagonal, Lattice, Square};
+use common::{Surface, corrected_lattice, surfaces};
+
 use dhct_pipeline::{PipelineOptions, run};
 use dhct_scan::{ScanPair, ScanPass};
-use dhct_simulate::config::{FeatureShape, LatticeConfig, NoiseConfig};
+use dhct_simulate::config::{FeatureShape, NoiseConfig};
 use dhct_simulate::effects::EffectConfig;
 use dhct_simulate::{Simulation, SimulationConfig, presets};
 
-struct Case {
-    name: &'static str,
-    surface: LatticeConfig,
-    lattice: Box<dyn Lattice>,
-    width_m: f64,
-    feature_sigma_m: f64,
-    height_m: f64,
-}
-
-fn cases() -> Vec<Case> {
-    vec![
-        Case {
-            name: "graphite",
-            surface: LatticeConfig::Graphite,
-            lattice: Box::new(Hexagonal::graphite()),
-            width_m: 5e-9,
-            feature_sigma_m: 0.6e-10,
-            height_m: 40e-12,
-        },
-        Case {
-            name: "square",
-            surface: LatticeConfig::Square { a_m: 3.6e-10 },
-            lattice: Box::new(Square::new(3.6e-10).expect("valid")),
-            width_m: 7e-9,
-            feature_sigma_m: 0.8e-10,
-            height_m: 40e-12,
-        },
-        Case {
-            name: "7x7-like",
-            surface: LatticeConfig::User(das_like()),
-            lattice: Box::new(Hexagonal::si111_7x7()),
-            width_m: 40e-9,
-            feature_sigma_m: 2.5e-10,
-            height_m: 60e-12,
-        },
-    ]
-}
-
 /// `case` simulated with drift, creep and hysteresis plus an x drift shearing the frame by
 /// `shear_deg`, then written with its pixel size multiplied by `error` per axis.
-fn miscalibrated(case: &Case, error: [f64; 2], shear_deg: f64) -> ScanPair {
+fn miscalibrated(case: &Surface, error: [f64; 2], shear_deg: f64) -> ScanPair {
     let mut config: SimulationConfig = presets::ci_small();
     config.scan.width_m = case.width_m;
     config.scan.height_m = case.width_m;
-    config.surface.lattice = case.surface.clone();
+    config.surface.lattice = case.config.clone();
     config.surface.angle_rad = 0.21;
     config.surface.feature = FeatureShape {
         height_m: case.height_m,
@@ -104,7 +66,7 @@ fn miscalibrated(case: &Case, error: [f64; 2], shear_deg: f64) -> ScanPair {
     .expect("same shape")
 }
 
-fn check(case: &Case, error: [f64; 2], shear_deg: f64) {
+fn check(case: &Surface, error: [f64; 2], shear_deg: f64) {
     let pair = miscalibrated(case, error, shear_deg);
     let mut options = PipelineOptions::for_lattice(case.lattice.as_ref());
     options.features.line_correction = dhct_features::LineCorrection::None;
@@ -144,7 +106,7 @@ fn scale_errors_up_to_30_percent_and_shear_up_to_10_degrees_are_calibrated_away(
         ([1.3, 1.15], -10.0),
         ([0.8, 0.8], 0.0),
     ];
-    for case in cases() {
+    for case in surfaces() {
         for (error, shear) in settings {
             check(&case, error, shear);
         }
@@ -155,7 +117,7 @@ fn scale_errors_up_to_30_percent_and_shear_up_to_10_degrees_are_calibrated_away(
 fn a_large_cell_on_a_small_frame_is_corrected_or_stops_clearly() {
     // 6 cells across: corrected, by the drift model where enough corner holes keep a full
     // neighbour shell, else by the affine map with a warning that says so.
-    let mut case = cases().pop().expect("the 7x7-like case");
+    let mut case = surfaces().pop().expect("the 7x7-like case");
     case.width_m = 16e-9;
     let pair = miscalibrated(&case, [1.2, 0.9], 3.0);
     let mut options = PipelineOptions::for_lattice(case.lattice.as_ref());

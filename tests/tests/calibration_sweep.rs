@@ -16,58 +16,13 @@
 
 mod common;
 
-use common::{corrected_lattice, das_like};
-use dhct_lattice::{Hexagonal, Lattice, Square};
+use common::{Surface, corrected_lattice, surfaces};
+use dhct_lattice::Lattice;
 use dhct_pipeline::{PipelineError, PipelineOptions, run};
 use dhct_scan::{ScanPair, ScanPass};
-use dhct_simulate::config::{FeatureShape, LatticeConfig, Modulation, NoiseConfig};
+use dhct_simulate::config::{FeatureShape, Modulation, NoiseConfig};
 use dhct_simulate::effects::EffectConfig;
 use dhct_simulate::{Simulation, SimulationConfig, presets};
-
-/// One lattice of the sweep.
-struct Surface {
-    name: &'static str,
-    config: LatticeConfig,
-    lattice: Box<dyn Lattice>,
-    /// Frame width for the ordinary classes, metres.
-    width_m: f64,
-    /// Cell constant (the translation cell's first vector), metres.
-    cell_m: f64,
-    feature_sigma_m: f64,
-    height_m: f64,
-}
-
-fn surfaces() -> Vec<Surface> {
-    vec![
-        Surface {
-            name: "graphite",
-            config: LatticeConfig::Graphite,
-            lattice: Box::new(Hexagonal::graphite()),
-            width_m: 5e-9,
-            cell_m: 2.46e-10,
-            feature_sigma_m: 0.6e-10,
-            height_m: 40e-12,
-        },
-        Surface {
-            name: "square",
-            config: LatticeConfig::Square { a_m: 3.6e-10 },
-            lattice: Box::new(Square::new(3.6e-10).expect("valid")),
-            width_m: 7e-9,
-            cell_m: 3.6e-10,
-            feature_sigma_m: 0.8e-10,
-            height_m: 40e-12,
-        },
-        Surface {
-            name: "7x7-like",
-            config: LatticeConfig::User(das_like()),
-            lattice: Box::new(Hexagonal::si111_7x7()),
-            width_m: 40e-9,
-            cell_m: 2.688e-9,
-            feature_sigma_m: 2.5e-10,
-            height_m: 60e-12,
-        },
-    ]
-}
 
 /// The classes of the sweep.
 #[derive(Debug, Clone, Copy, PartialEq)]

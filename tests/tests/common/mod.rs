@@ -1,8 +1,12 @@
 //! Helpers shared by the workspace-level tests.
 
+// Each test file that includes this module uses part of it.
+#![allow(dead_code)]
+
 use dhct_calibrate::{CheckOptions, match_lattice, measure_lattice};
-use dhct_lattice::{Lattice, MotifSite, PlaneGroup, UserLattice};
+use dhct_lattice::{Hexagonal, Lattice, MotifSite, PlaneGroup, Square, UserLattice};
 use dhct_scan::ScanPair;
+use dhct_simulate::config::LatticeConfig;
 use nalgebra::Vector2;
 
 /// A corrected image's lattice against the lattice given, as an outside check would
@@ -58,4 +62,52 @@ pub fn das_like() -> UserLattice {
         motif,
     )
     .expect("a valid lattice")
+}
+
+/// One simulated surface of the calibration tests: the simulator's lattice, the lattice
+/// the user names for it, and a frame and feature that show it.
+pub struct Surface {
+    pub name: &'static str,
+    pub config: LatticeConfig,
+    pub lattice: Box<dyn Lattice>,
+    /// Frame width for the ordinary classes, metres.
+    pub width_m: f64,
+    /// Cell constant (the translation cell's first vector), metres.
+    pub cell_m: f64,
+    pub feature_sigma_m: f64,
+    pub height_m: f64,
+}
+
+/// Graphite, a square lattice (3.6 Å) and a Si(111)-7×7-like cell ([`das_like`], tracked by
+/// its corner holes with the `si111-7x7` preset).
+pub fn surfaces() -> Vec<Surface> {
+    vec![
+        Surface {
+            name: "graphite",
+            config: LatticeConfig::Graphite,
+            lattice: Box::new(Hexagonal::graphite()),
+            width_m: 5e-9,
+            cell_m: 2.46e-10,
+            feature_sigma_m: 0.6e-10,
+            height_m: 40e-12,
+        },
+        Surface {
+            name: "square",
+            config: LatticeConfig::Square { a_m: 3.6e-10 },
+            lattice: Box::new(Square::new(3.6e-10).expect("valid")),
+            width_m: 7e-9,
+            cell_m: 3.6e-10,
+            feature_sigma_m: 0.8e-10,
+            height_m: 40e-12,
+        },
+        Surface {
+            name: "7x7-like",
+            config: LatticeConfig::User(das_like()),
+            lattice: Box::new(Hexagonal::si111_7x7()),
+            width_m: 40e-9,
+            cell_m: 2.688e-9,
+            feature_sigma_m: 2.5e-10,
+            height_m: 60e-12,
+        },
+    ]
 }
