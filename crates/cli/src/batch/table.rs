@@ -172,11 +172,12 @@ impl Row {
             (Status::Failed, _, _) => format!("FAILED  {}: {error}", self.input),
             (Status::Skipped, _, _) => format!("skipped {}: {error}", self.input),
             (Status::Ok, Some(ax), Some(ay)) => format!(
-                "ok      {}: {} features, a = {:.4} x {:.4} Å, {:.2} s",
+                "ok      {}: {} features, a = {:.4} x {:.4} Å, {}, {:.2} s",
                 self.input,
                 self.features.unwrap_or(0),
                 ax * 1e10,
                 ay * 1e10,
+                self.lattice,
                 self.seconds
             ),
             (Status::Ok, _, _) => format!(
