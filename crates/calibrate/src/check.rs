@@ -119,26 +119,7 @@ pub fn check_inputs(
         && wide.explains_image
         && type_contradiction(wide, options).is_none()
     {
-        // The lattice does show at the constant given, under a stronger pattern: say so.
-        let partly = within.as_ref().filter(|m| {
-            m.primary_coverage >= crate::MIN_PRIMARY_COVERAGE
-                && m.explained_fraction < crate::MIN_EXPLAINED_FRACTION
-        });
-        let at_given = partly.map_or(String::new(), |m| {
-            format!(
-                "; at {} it explains only {:.0} % of the strong Fourier peaks' amplitude{}",
-                crate::length(m.nn_in_file_m / m.calibration.mean_scale),
-                100.0 * m.explained_fraction,
-                if m.unexplained.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        " (the rest: {} peaks on none of its reflections, e.g. a superstructure)",
-                        m.unexplained.len()
-                    )
-                }
-            )
-        });
+        let at_given = partial_fit_note(within.as_ref());
         return Err(wrong_scale(measurement, wide, fast_axis, options, at_given));
     }
     let best = within.or(any_scale);
@@ -160,6 +141,31 @@ pub fn check_inputs(
         measured: Box::new(measurement.lattice.clone()),
         best: best.map(Box::new),
     })
+}
+
+/// What the lattice explains at the constant given, when its strongest reflections are
+/// there but a stronger pattern (a superstructure) leaves it below
+/// [`crate::MIN_EXPLAINED_FRACTION`]; empty otherwise.
+fn partial_fit_note(within: Option<&LatticeMatch>) -> String {
+    let Some(m) = within.filter(|m| {
+        m.primary_coverage >= crate::MIN_PRIMARY_COVERAGE
+            && m.explained_fraction < crate::MIN_EXPLAINED_FRACTION
+    }) else {
+        return String::new();
+    };
+    let rest = if m.unexplained.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (the rest: {} peaks on none of its reflections, e.g. a superstructure)",
+            m.unexplained.len()
+        )
+    };
+    format!(
+        "; at {} it explains only {:.0} % of the strong Fourier peaks' amplitude{rest}",
+        crate::length(m.nn_in_file_m / m.calibration.mean_scale),
+        100.0 * m.explained_fraction,
+    )
 }
 
 /// Why a match explains too little: its explained fraction and the strong peaks it
