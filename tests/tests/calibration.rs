@@ -8,39 +8,17 @@
 
 mod common;
 
-use common::{Surface, corrected_lattice, surfaces};
+use common::{Surface, corrected_lattice, simulate_miscalibrated, surfaces};
 
 use dhct_pipeline::{PipelineOptions, run};
-use dhct_scan::{ScanPair, ScanPass};
-use dhct_simulate::config::{FeatureShape, NoiseConfig};
+use dhct_scan::ScanPair;
 use dhct_simulate::effects::EffectConfig;
-use dhct_simulate::{Simulation, SimulationConfig, presets};
 
 /// `case` simulated with drift, creep and hysteresis plus an x drift shearing the frame by
 /// `shear_deg`, then written with its pixel size multiplied by `error` per axis.
 fn miscalibrated(case: &Surface, error: [f64; 2], shear_deg: f64) -> ScanPair {
-    let mut config: SimulationConfig = presets::ci_small();
-    config.scan.width_m = case.width_m;
-    config.scan.height_m = case.width_m;
-    config.surface.lattice = case.config.clone();
-    config.surface.angle_rad = 0.21;
-    config.surface.feature = FeatureShape {
-        height_m: case.height_m,
-        sigma_m: [case.feature_sigma_m; 2],
-        angle_rad: 0.0,
-        lobes: Vec::new(),
-    };
-    config.noise = NoiseConfig {
-        white_sigma_m: 2e-12,
-        ..NoiseConfig::default()
-    };
-    let geometry = Simulation::from_config(&config)
-        .expect("valid config")
-        .run()
-        .expect("runs")
-        .pair
-        .geometry()
-        .clone();
+    let mut config = case.simulation(0.21);
+    let geometry = config.scan.geometry().expect("a valid scan");
     let shear_velocity = shear_deg.to_radians().tan() * geometry.slow_speed();
     for effect in &mut config.effects {
         if let EffectConfig::ThermalDrift(drift) = effect {
@@ -48,22 +26,7 @@ fn miscalibrated(case: &Surface, error: [f64; 2], shear_deg: f64) -> ScanPair {
             drift.velocity_m_per_s[0] += shear_velocity;
         }
     }
-    let pair = Simulation::from_config(&config)
-        .expect("valid config")
-        .run()
-        .expect("runs")
-        .pair;
-    let file_geometry = pair
-        .geometry()
-        .clone()
-        .with_pitch(geometry.pitch_x() * error[0], geometry.pitch_y() * error[1])
-        .expect("positive");
-    ScanPair::new(
-        file_geometry,
-        pair.trace().expect("trace").clone(),
-        pair.image(ScanPass::Retrace).cloned(),
-    )
-    .expect("same shape")
+    simulate_miscalibrated(&config, error)
 }
 
 fn check(case: &Surface, error: [f64; 2], shear_deg: f64) {

@@ -16,13 +16,13 @@
 
 mod common;
 
-use common::{Surface, corrected_lattice, surfaces};
+use common::{Surface, corrected_lattice, simulate_miscalibrated, surfaces};
 use dhct_lattice::Lattice;
 use dhct_pipeline::{PipelineError, PipelineOptions, run};
-use dhct_scan::{ScanPair, ScanPass};
-use dhct_simulate::config::{FeatureShape, Modulation, NoiseConfig};
+use dhct_scan::ScanPair;
+use dhct_simulate::SimulationConfig;
+use dhct_simulate::config::Modulation;
 use dhct_simulate::effects::EffectConfig;
-use dhct_simulate::{Simulation, SimulationConfig, presets};
 
 /// The classes of the sweep.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,22 +45,8 @@ const CLASSES: [Class; 5] = [
 /// The simulation of `surface` with `class` for `seed` (0, 1, 2), and the pixel-size
 /// error it is written with.
 fn config(surface: &Surface, class: Class, seed: u64) -> (SimulationConfig, [f64; 2]) {
-    let mut config: SimulationConfig = presets::ci_small();
+    let mut config = surface.simulation(0.21 + 0.17 * seed as f64);
     config.seed = 100 + seed;
-    config.scan.width_m = surface.width_m;
-    config.scan.height_m = surface.width_m;
-    config.surface.lattice = surface.config.clone();
-    config.surface.angle_rad = 0.21 + 0.17 * seed as f64;
-    config.surface.feature = FeatureShape {
-        height_m: surface.height_m,
-        sigma_m: [surface.feature_sigma_m; 2],
-        angle_rad: 0.0,
-        lobes: Vec::new(),
-    };
-    config.noise = NoiseConfig {
-        white_sigma_m: 2e-12,
-        ..NoiseConfig::default()
-    };
     let error = [[1.2, 0.9], [0.85, 1.1], [1.0, 1.15]][seed as usize];
     match class {
         Class::Satellites => {
@@ -143,25 +129,7 @@ fn simulate(mut config: SimulationConfig, class: Class, error: [f64; 2]) -> Scan
             }
         }
     }
-    let pair = Simulation::from_config(&config)
-        .expect("valid config")
-        .run()
-        .expect("runs")
-        .pair;
-    let file_geometry = pair
-        .geometry()
-        .clone()
-        .with_pitch(
-            pair.geometry().pitch_x() * error[0],
-            pair.geometry().pitch_y() * error[1],
-        )
-        .expect("positive");
-    ScanPair::new(
-        file_geometry,
-        pair.trace().expect("trace").clone(),
-        pair.image(ScanPass::Retrace).cloned(),
-    )
-    .expect("same shape")
+    simulate_miscalibrated(&config, error)
 }
 
 fn options(lattice: &dyn Lattice) -> PipelineOptions {

@@ -6,7 +6,9 @@
 use dhct_calibrate::{CheckOptions, match_lattice, measure_lattice};
 use dhct_lattice::{Hexagonal, Lattice, MotifSite, PlaneGroup, Square, UserLattice};
 use dhct_scan::ScanPair;
-use dhct_simulate::config::LatticeConfig;
+use dhct_scan::ScanPass;
+use dhct_simulate::config::{FeatureShape, LatticeConfig, NoiseConfig};
+use dhct_simulate::{Simulation, SimulationConfig, presets};
 use nalgebra::Vector2;
 
 /// A corrected image's lattice against the lattice given, as an outside check would
@@ -110,4 +112,48 @@ pub fn surfaces() -> Vec<Surface> {
             height_m: 60e-12,
         },
     ]
+}
+
+impl Surface {
+    /// The `ci-small` acquisition (drift, creep, hysteresis) of this surface over its frame,
+    /// the lattice turned by `angle_rad`, round features, 2 pm of white noise.
+    pub fn simulation(&self, angle_rad: f64) -> SimulationConfig {
+        let mut config = presets::ci_small();
+        config.scan.width_m = self.width_m;
+        config.scan.height_m = self.width_m;
+        config.surface.lattice = self.config.clone();
+        config.surface.angle_rad = angle_rad;
+        config.surface.feature = FeatureShape {
+            height_m: self.height_m,
+            sigma_m: [self.feature_sigma_m; 2],
+            angle_rad: 0.0,
+            lobes: Vec::new(),
+        };
+        config.noise = NoiseConfig {
+            white_sigma_m: 2e-12,
+            ..NoiseConfig::default()
+        };
+        config
+    }
+}
+
+/// Runs `config` and writes its scan with the pixel size multiplied by `error` per axis
+/// (a miscalibrated head).
+pub fn simulate_miscalibrated(config: &SimulationConfig, error: [f64; 2]) -> ScanPair {
+    let pair = Simulation::from_config(config)
+        .expect("valid config")
+        .run()
+        .expect("runs")
+        .pair;
+    let geometry = pair.geometry();
+    let file_geometry = geometry
+        .clone()
+        .with_pitch(geometry.pitch_x() * error[0], geometry.pitch_y() * error[1])
+        .expect("positive");
+    ScanPair::new(
+        file_geometry,
+        pair.trace().expect("trace").clone(),
+        pair.image(ScanPass::Retrace).cloned(),
+    )
+    .expect("same shape")
 }
