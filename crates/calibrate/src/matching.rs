@@ -162,9 +162,10 @@ pub struct LatticeMatch {
     /// Fraction of the reflections the lattice predicts strongest (those the spectrum can
     /// show) that are observed peaks.
     pub primary_coverage: f64,
-    /// Whether the lattice explains the image: two independent strong peaks at the
-    /// reflections it predicts strongest and at least [`crate::MIN_EXPLAINED_FRACTION`] of
-    /// the strong peaks' amplitude.
+    /// Whether the lattice explains the image: two independent strong peaks on its two
+    /// strongest predicted shells, at least [`crate::MIN_EXPLAINED_FRACTION`] of the strong
+    /// peaks' amplitude, and at least [`crate::MIN_PRIMARY_COVERAGE`] of its strongest
+    /// predicted reflections seen in the spectrum.
     pub explains_image: bool,
     /// Strong peaks on no lattice reflection (satellites, a superstructure, a moiré),
     /// strongest first.
@@ -257,7 +258,7 @@ pub fn match_lattice(
     let ideal = lattice_matrix(lattice);
     let a = file_map(&fit.basis, bin_per_m, &ideal)?;
     let file_cell = a * ideal;
-    let calibration = calibration_of(&fit, bin_per_m, &ideal)?;
+    let calibration = calibration_of(&a, &fit, bin_per_m, &ideal);
     let measured = measurement.lattice.matrix();
     let supercell = file_cell
         .try_inverse()
@@ -285,23 +286,23 @@ pub fn match_lattice(
     })
 }
 
-/// The calibration `K` of the fitted map `A = K·Q`, with uncertainties propagated from the
+/// The calibration `K` of the fitted map `a` = `A = K·Q`, with uncertainties propagated from the
 /// fitted reciprocal basis' covariance.
 fn calibration_of(
+    a: &Matrix2<f64>,
     fit: &NamedFit,
     bin_per_m: [f64; 2],
     ideal: &Matrix2<f64>,
-) -> Option<Calibration> {
-    let a = file_map(&fit.basis, bin_per_m, ideal)?;
-    let (k, rotation) = rq(&a);
-    let (s1, s2) = singular_values(&a);
+) -> Calibration {
+    let (k, rotation) = rq(a);
+    let (s1, s2) = singular_values(a);
     let k_of = |n: &Matrix2<f64>| {
         file_map(n, bin_per_m, ideal).map_or(Matrix2::from_element(f64::NAN), |a| rq(&a).0)
     };
     let sigma =
         |f: &dyn Fn(&Matrix2<f64>) -> f64| propagate(&fit.basis, &fit.covariance, |n| f(&k_of(n)));
     let shear = |k: &Matrix2<f64>| (k[(0, 1)] / k[(1, 1)]).atan().to_degrees();
-    Some(Calibration {
+    Calibration {
         matrix: [[k[(0, 0)], k[(0, 1)]], [0.0, k[(1, 1)]]],
         scale: [k[(0, 0)], k[(1, 1)]],
         scale_sigma: [sigma(&|k| k[(0, 0)]), sigma(&|k| k[(1, 1)])],
@@ -311,7 +312,7 @@ fn calibration_of(
         mean_scale_sigma: sigma(&|k| (k[(0, 0)] * k[(1, 1)]).sqrt()),
         anisotropy: s1 / s2,
         rotation_deg: rotation.to_degrees(),
-    })
+    }
 }
 
 /// Frequency of index `(h, k)` of basis `cell` (columns), cycles per metre.
