@@ -548,6 +548,17 @@ impl ValidationReport {
         self.sets.iter().find(|s| s.set == set).map(|s| &s.summary)
     }
 
+    /// The summary of the cases of `sets` taken together (small subsets of several sets
+    /// are judged pooled: one miss in a set of seven is not a rate).
+    pub fn pooled(&self, sets: &[ValidationSet]) -> SetSummary {
+        let cases: Vec<&CaseResult> = self
+            .cases
+            .iter()
+            .filter(|c| sets.contains(&c.set))
+            .collect();
+        SetSummary::of(&cases)
+    }
+
     /// Whether the acceptance criteria hold on the tuned set and on every evidence set run.
     pub fn accepted(&self) -> bool {
         self.sets

@@ -6,18 +6,20 @@
 //! localisation noise); `full_image_path_identifies_effects` runs a few cases through
 //! rendered images and the feature finder.
 //!
-//! The full sweep takes minutes and is not part of the default `cargo test`; run it with
+//! The full sweep takes ~25 minutes on 2 cores and is not part of the default `cargo test`
+//! nor of CI; it is the documented validation benchmark:
 //!
 //! ```text
-//! cargo test --release -p dhct-diagnose --test validation -- --ignored --nocapture
+//! cargo test --release -p dhct-diagnose --test validation -- --ignored withheld --nocapture
 //! ```
 //!
-//! (`.ci/run` does). `smoke_validation_covers_every_kind_of_case` is its quick version.
+//! The default suite (and so CI) runs `held_out_sample_meets_the_acceptance_criteria`: the
+//! three position-path held-out sets at their first seeds, judged pooled.
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_images};
 use dhct_diagnose::{
-    Candidate, CaseKind, DiagnoseOptions, SetSeeds, ValidationOptions, VerdictKind,
-    rendered_held_out, second_rendered_held_out, validate,
+    Candidate, DiagnoseOptions, SetSeeds, ValidationOptions, rendered_held_out,
+    second_rendered_held_out, validate,
 };
 
 /// Every set's scans are its own: no seed of any kind (single effects, effect-free,
@@ -53,62 +55,6 @@ fn no_two_sets_share_a_scan() {
             }
         }
     }
-}
-
-/// A handful of tuned-set cases of every kind (an effect, effect-free, out of library);
-/// what it checks can fail: a missed effect, a false alarm, a foreign effect called
-/// explained, a NaN floor.
-#[test]
-fn smoke_validation_covers_every_kind_of_case() {
-    let options = ValidationOptions {
-        effects: vec![Candidate::TipChange, Candidate::LineDrift],
-        sets: vec![SetSeeds {
-            set: ValidationSet::Tuned,
-            seeds: vec![1],
-            null_seeds: vec![100, 101],
-            mixture_offset: 0,
-            foreign_seeds: vec![31],
-        }],
-        mixtures: Vec::new(),
-        ..ValidationOptions::default()
-    };
-    let report = validate(&options);
-    println!("{report}");
-    for c in &report.cases {
-        assert!(c.error.is_none(), "{}: {:?}", c.name, c.error);
-        assert!(
-            c.noise_floor_m.iter().all(|s| s.is_finite() && *s > 0.0),
-            "{}: floor {:?}",
-            c.name,
-            c.noise_floor_m
-        );
-        match c.kind {
-            CaseKind::Single => {
-                assert!(c.correct, "{}: {:?}", c.name, c.identified);
-                assert_eq!(c.verdict, Some(VerdictKind::Explained), "{}", c.name);
-            }
-            CaseKind::EffectFree => assert!(c.correct, "{}: {:?}", c.name, c.verdict),
-            // A strain bubble touches a few dozen features and can stay below the global
-            // 1.2 × floor (a known limit: the verdict looks at the whole-image gap), so
-            // only the telegraph tip is held to "not explained" here.
-            CaseKind::OutOfLibrary if c.name.starts_with("telegraph") => assert!(
-                matches!(
-                    c.verdict,
-                    Some(VerdictKind::Unexplained | VerdictKind::PartlyExplained)
-                ),
-                "{}: {:?}",
-                c.name,
-                c.verdict
-            ),
-            _ => {}
-        }
-    }
-    assert!(
-        report
-            .cases
-            .iter()
-            .any(|c| c.kind == CaseKind::OutOfLibrary)
-    );
 }
 
 #[test]
@@ -167,6 +113,44 @@ fn withheld_effects_are_identified_and_the_gap_closes() {
         "rendered-dev: {rendered}"
     );
     assert!(rendered.foreign_rate() >= 0.65, "rendered-dev: {rendered}");
+}
+
+/// The default suite's (and so CI's) share of the sweep: the three position-path held-out
+/// sets (`held-out`, `foreign`, `foreign-2`) at their first seed of every effect, 8
+/// effect-free scans and the first two seeds of the out-of-library effects each (the same
+/// scans as the full sweep's; no mixtures, which the criteria do not score), judged pooled
+/// by the issue's acceptance criteria (a handful of cases per set is no rate). What it checks can fail: a
+/// missed effect, a false alarm, a foreign effect called explained, a gap left open.
+#[test]
+fn held_out_sample_meets_the_acceptance_criteria() {
+    let held_out = [
+        ValidationSet::HeldOut,
+        ValidationSet::Foreign,
+        ValidationSet::SecondForeign,
+    ];
+    let mut options = ValidationOptions::default();
+    options.sets.retain(|s| held_out.contains(&s.set));
+    for set in &mut options.sets {
+        set.seeds.truncate(1);
+        set.null_seeds.truncate(8);
+        set.foreign_seeds.truncate(2);
+    }
+    options.mixtures.clear();
+    let report = validate(&options);
+    println!("{report}");
+    for c in &report.cases {
+        assert!(c.error.is_none(), "{}: {:?}", c.name, c.error);
+        assert!(
+            c.noise_floor_m.iter().all(|s| s.is_finite() && *s > 0.0),
+            "{}: floor {:?}",
+            c.name,
+            c.noise_floor_m
+        );
+    }
+    let pooled = report.pooled(&held_out);
+    println!("pooled: {pooled}");
+    assert!(pooled.null_cases == 24 && pooled.effect_cases >= 20 && pooled.foreign_cases >= 8);
+    assert!(pooled.accepted(), "pooled held-out sample: {pooled}");
 }
 
 #[test]

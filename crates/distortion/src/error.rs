@@ -38,6 +38,9 @@ pub enum DistortionError {
         /// The geometry's height.
         geometry_rows: usize,
     },
+    /// The features could not be indexed against the lattice for the global registration.
+    #[error("the features cannot be indexed for the global registration: {0}")]
+    Indexing(#[source] dhct_lattice::LatticeFitError),
     /// An argument is out of range.
     #[error("invalid parameter: {0}")]
     BadParameter(String),

@@ -241,10 +241,7 @@ fn fit_drift(
     // axis samples time cannot be resolved (t0 → 0 makes ln(1 + t/t0) diverge, the Matlab's
     // singularity), and beyond 100 frames it is indistinguishable from v + a·t. A logistic
     // map of ln t0 keeps the fit unconstrained ([`LogisticLog`]).
-    let t0_map = LogisticLog {
-        lo: line_scan_time_s.max(1e-6).ln(),
-        hi: (100.0 * span).ln(),
-    };
+    let t0_map = LogisticLog::for_frame(line_scan_time_s, span);
     let mut p0 = start.to_vec();
     p0.push(t0_map.parameter(t0_start));
     let residuals = DriftProblem {
@@ -346,7 +343,6 @@ fn drift_result(
     let p = &fit.params;
     let s = scaled_sigmas(fit, weights, 7);
     let t0 = t0_map.t0(p[6]);
-    let t0_sigma = t0_map.derivative(p[6]) * s[6];
     let drift = DriftCreep {
         velocity_m_per_s: [p[0] / NM, p[3] / NM],
         acceleration_m_per_s2: [p[1] / NM, p[4] / NM],
@@ -356,34 +352,51 @@ fn drift_result(
     if !(t0.is_finite() && p.iter().all(|v| v.is_finite())) {
         return Err(DistortionError::FitFailed("drift/creep"));
     }
-    let names = ["v_x", "a_x", "C_x", "v_y", "a_y", "C_y", "t0"];
-    let parameters = vec![
-        parameter(names[0], p[0] / NM, s[0] / NM, "m/s"),
-        parameter(names[1], p[1] / NM, s[1] / NM, "m/s^2"),
-        parameter(names[2], p[2] / NM, s[2] / NM, "m"),
-        parameter(names[3], p[3] / NM, s[3] / NM, "m/s"),
-        parameter(names[4], p[4] / NM, s[4] / NM, "m/s^2"),
-        parameter(names[5], p[5] / NM, s[5] / NM, "m"),
-        parameter(names[6], t0, t0_sigma, "s"),
-    ];
-    let diagnostics = FitDiagnostics {
-        degenerate_pairs: strong_correlations(&fit.inverse_normal, &names),
-        at_bounds: if t0_map.at_bound(p[6]) {
+    let parameters = drift_parameters(&p[..7], &s[..7], t0_map);
+    let diagnostics = drift_diagnostics(&fit.inverse_normal, p[6], t0_map);
+    Ok((drift, parameters, diagnostics))
+}
+
+/// The drift/creep fit's degenerate pairs (from `inverse`, the inverse normal matrix of
+/// the seven drift parameters in fit order) and `t0` at a bound of its range (`q` its fit
+/// parameter).
+pub(crate) fn drift_diagnostics(
+    inverse: &Option<DMatrix<f64>>,
+    q: f64,
+    t0_map: LogisticLog,
+) -> FitDiagnostics {
+    FitDiagnostics {
+        degenerate_pairs: strong_correlations(inverse, &DRIFT_NAMES),
+        at_bounds: if t0_map.at_bound(q) {
             vec![Bound {
                 parameter: "t0".into(),
-                value: t0,
+                value: t0_map.t0(q),
                 range: [t0_map.lo.exp(), t0_map.hi.exp()],
             }]
         } else {
             Vec::new()
         },
-    };
-    Ok((drift, parameters, diagnostics))
+    }
+}
+
+/// Names of the drift/creep parameters, in fit order.
+const DRIFT_NAMES: [&str; 7] = ["v_x", "a_x", "C_x", "v_y", "a_y", "C_y", "t0"];
+
+/// The reported drift/creep parameters (SI units) of the fit parameters
+/// `p = [v_x, a_x, C_x, v_y, a_y, C_y, q]` (nm units, `t0 = t0_map.t0(q)`) and their 1σ `s`.
+pub(crate) fn drift_parameters(p: &[f64], s: &[f64], t0_map: LogisticLog) -> Vec<Parameter> {
+    let units = ["m/s", "m/s^2", "m", "m/s", "m/s^2", "m"];
+    let mut parameters: Vec<Parameter> = (0..6)
+        .map(|k| parameter(DRIFT_NAMES[k], p[k] / NM, s[k] / NM, units[k]))
+        .collect();
+    let t0 = t0_map.t0(p[6]);
+    parameters.push(parameter("t0", t0, t0_map.derivative(p[6]) * s[6], "s"));
+    parameters
 }
 
 /// 1σ uncertainties of the first `n` parameters of `fit`: `σ̂²·(JᵀWJ)⁻¹` with `σ̂²` the
 /// weighted χ² per degree of freedom (at least one).
-fn scaled_sigmas(fit: &ResidualFit, weights: &[f64], n: usize) -> Vec<f64> {
+pub(crate) fn scaled_sigmas(fit: &ResidualFit, weights: &[f64], n: usize) -> Vec<f64> {
     let chi2: f64 = fit
         .residuals
         .iter()
@@ -423,34 +436,44 @@ fn strong_correlations(inverse: &Option<DMatrix<f64>>, names: &[&str]) -> Vec<De
 /// `t0 = exp(lo + (hi − lo)·σ(p))`: the creep time constant as a function of an
 /// unconstrained parameter `p` (σ the logistic function), bounded to `[e^lo, e^hi]`.
 #[derive(Debug, Clone, Copy)]
-struct LogisticLog {
+pub(crate) struct LogisticLog {
     lo: f64,
     hi: f64,
 }
 
 impl LogisticLog {
+    /// The range of the creep time constant `t0`: one line's scanning time (creep faster
+    /// than the slow axis samples time cannot be resolved) to 100 frames (beyond, it is
+    /// indistinguishable from `v + a·t`).
+    pub(crate) fn for_frame(line_scan_time_s: f64, frame_duration_s: f64) -> LogisticLog {
+        LogisticLog {
+            lo: line_scan_time_s.max(1e-6).ln(),
+            hi: (100.0 * frame_duration_s.max(1e-9)).ln(),
+        }
+    }
+
     fn logistic(p: f64) -> f64 {
         1.0 / (1.0 + (-p).exp())
     }
 
-    fn t0(&self, p: f64) -> f64 {
+    pub(crate) fn t0(&self, p: f64) -> f64 {
         (self.lo + (self.hi - self.lo) * Self::logistic(p)).exp()
     }
 
     /// `dt0/dp = t0·(hi − lo)·σ(p)·(1 − σ(p))`.
-    fn derivative(&self, p: f64) -> f64 {
+    pub(crate) fn derivative(&self, p: f64) -> f64 {
         let s = Self::logistic(p);
         self.t0(p) * (self.hi - self.lo) * s * (1.0 - s)
     }
 
     /// Whether `t0(p)` lies within 1 % (in log) of a bound of the range.
-    fn at_bound(&self, p: f64) -> bool {
+    pub(crate) fn at_bound(&self, p: f64) -> bool {
         let fraction = Self::logistic(p);
         !(0.01..=0.99).contains(&fraction)
     }
 
     /// The `p` of `t0` (clamped just inside the bounds).
-    fn parameter(&self, t0: f64) -> f64 {
+    pub(crate) fn parameter(&self, t0: f64) -> f64 {
         let fraction = ((t0.ln() - self.lo) / (self.hi - self.lo)).clamp(1e-6, 1.0 - 1e-6);
         (fraction / (1.0 - fraction)).ln()
     }
@@ -647,7 +670,11 @@ fn hysteresis_irls<R: Residuals>(
 
 /// The reported hysteresis parameters of `choice` (the exponential's time constant in
 /// seconds, its uncertainty propagated from `ln τ_h`).
-fn hysteresis_parameters(choice: HysteresisChoice, p: &[f64], sg: &[f64]) -> Vec<Parameter> {
+pub(crate) fn hysteresis_parameters(
+    choice: HysteresisChoice,
+    p: &[f64],
+    sg: &[f64],
+) -> Vec<Parameter> {
     match choice {
         HysteresisChoice::None => Vec::new(),
         HysteresisChoice::Quartic { .. } => (0..5)

@@ -98,9 +98,35 @@ pub(crate) fn hysteresis_law(
     }
 }
 
+/// The fit parameters of `law` under `choice` (the inverse of [`hysteresis_law`]); a law of
+/// another family starts `choice` at no hysteresis.
+pub(crate) fn law_parameters(
+    choice: HysteresisChoice,
+    law: &HysteresisLaw,
+    line_scan_time_s: f64,
+) -> Vec<f64> {
+    match (choice, law) {
+        (HysteresisChoice::None, _) => Vec::new(),
+        (HysteresisChoice::Quartic { .. }, HysteresisLaw::Quartic { coefficients, .. }) => {
+            coefficients.to_vec()
+        }
+        (HysteresisChoice::Quartic { .. }, _) => vec![0.0; 5],
+        (HysteresisChoice::Power, &HysteresisLaw::Power { k, n }) => vec![k, n],
+        (HysteresisChoice::Power, _) => vec![1.0, 0.0],
+        (
+            HysteresisChoice::Exponential,
+            &HysteresisLaw::Exponential {
+                amplitude,
+                time_constant_s,
+            },
+        ) => vec![amplitude, time_constant_s.ln()],
+        (HysteresisChoice::Exponential, _) => vec![0.0, (0.1 * line_scan_time_s).ln()],
+    }
+}
+
 /// Which function of the law a gradient is of.
 #[derive(Clone, Copy)]
-enum Quantity {
+pub(crate) enum Quantity {
     /// `S(τ)`.
     Scale,
     /// `I(τ) = ∫0^τ (S − 1)`, zero for `τ ≤ 0`.
@@ -109,7 +135,7 @@ enum Quantity {
 
 /// The gradient of `S(x)` or `I(x)` in the fit parameters of `law` (see the module docs),
 /// written to `out` (one entry per parameter).
-fn law_gradient(law: &HysteresisLaw, x: f64, quantity: Quantity, out: &mut [f64]) {
+pub(crate) fn law_gradient(law: &HysteresisLaw, x: f64, quantity: Quantity, out: &mut [f64]) {
     if matches!(quantity, Quantity::ExcessIntegral) && x <= 0.0 {
         out.iter_mut().for_each(|v| *v = 0.0);
         return;

@@ -60,6 +60,9 @@ pub mod local;
 pub mod mask;
 pub mod model;
 pub mod neighbours;
+pub mod registration;
+pub mod route_choice;
+mod seed;
 
 pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sample_positions};
 pub use error::DistortionError;
@@ -72,6 +75,9 @@ pub use neighbours::{
     AngleStats, ExclusionCounts, NeighbourOptions, NeighbourSelection, Rdf, RdfFit,
     SelectedFeature, nn_angle_stats, radial_distribution, select_features, select_nearest,
 };
+pub use registration::Registration;
+pub use route_choice::{ModelRoute, RouteComparison, RoutePolicy};
+pub use seed::SeedMap;
 
 use dhct_features::Feature;
 use dhct_lattice::{Lattice, LocalDistortionMethod};
@@ -90,6 +96,8 @@ pub struct DhctOptions {
     pub fit: FitOptions,
     /// Local-distortion method; `None` = the lattice's own choice.
     pub method: Option<LocalDistortionMethod>,
+    /// Which route's model is used (both are fitted and compared).
+    pub route: RoutePolicy,
 }
 
 impl DhctOptions {
@@ -133,10 +141,29 @@ pub struct PassAnalysis {
 /// The result of [`analyse`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DhctResult {
-    /// The fitted model.
+    /// The fitted model (of the route [`DhctResult::routes`] chose).
     pub model: DistortionModel,
     /// Per-pass diagnostics.
     pub passes: Vec<PassAnalysis>,
+    /// The local route against the global registration, cross-validated; `None` when the
+    /// registration could not be fitted (then `route_note` says why) or was not tried.
+    #[serde(default)]
+    pub routes: Option<RouteComparison>,
+    /// Why the global registration was not compared, when it was tried and failed.
+    #[serde(default)]
+    pub route_note: Option<String>,
+}
+
+impl DhctResult {
+    /// A result of `model` alone (no passes analysed, no routes compared).
+    pub fn of_model(model: DistortionModel) -> DhctResult {
+        DhctResult {
+            model,
+            passes: Vec::new(),
+            routes: None,
+            route_note: None,
+        }
+    }
 }
 
 /// How the neighbours of the local distortions were found.
@@ -184,35 +211,71 @@ pub fn analyse(
     analyse_seeded(inputs, geometry, lattice, options, None)
 }
 
-/// [`analyse`] with the first neighbour search done in `selection_geometry` (the same
-/// pixel grid with another pixel size, e.g. calibrated from the lattice the image shows)
-/// instead of `geometry`: on a file whose pixel size is off by tens of percent the NN
-/// window around the lattice's spacing would otherwise miss every neighbour. The local
-/// distortions are measured in `geometry` all the same, so the model absorbs the pixel
-/// size error (as slow drift and a hysteresis scale) and its parameters keep their
-/// meaning.
+/// [`analyse`] with the first neighbour search done among the raw positions undone by
+/// `seed` (the affine map the image's lattice measured: a pixel size off by tens of percent,
+/// a drift that shears the raw lattice), instead of among the raw positions themselves: the
+/// NN window around the lattice's spacing would otherwise miss most neighbours. The local
+/// distortions are measured in `geometry` all the same, so the model absorbs the map (as
+/// slow drift and a hysteresis scale) and its parameters keep their meaning.
+///
+/// The global registration ([`registration`]) is fitted beside the local route, started
+/// from its model, and the two are cross-validated ([`route_choice`]); the model is the
+/// winner's. When the local route cannot fit a model at all (too few full neighbour shells:
+/// a frame of a few large cells, a lattice stretched past the window), the registration is
+/// started from `seed`'s map (else from the raw positions) and its model is used; only
+/// when that fails too is the local route's error returned.
 pub fn analyse_seeded(
     inputs: &[PassInput],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
     options: &DhctOptions,
-    selection_geometry: Option<&ScanGeometry>,
+    seed: Option<&SeedMap>,
 ) -> Result<DhctResult, DistortionError> {
-    let search = selection_geometry.unwrap_or(geometry);
+    // Passes without features are skipped; `inputs[k]` belongs to `passes[k]` from here.
+    let inputs: Vec<&PassInput> = inputs.iter().filter(|i| !i.features.is_empty()).collect();
+    let (mut model, passes) = match local_route(&inputs, geometry, lattice, options, seed) {
+        Ok(local) => local,
+        Err(local_error) => {
+            return registration_alone(&inputs, geometry, lattice, options, seed, &local_error)
+                .map_err(|_| local_error);
+        }
+    };
+    let (routes, route_note) =
+        match global_route(&inputs, &passes, geometry, lattice, &model, options) {
+            Ok(routes) => (Some(routes), None),
+            Err(e) => (None, Some(e.to_string())),
+        };
+    if let Some(routes) = &routes
+        && routes.chosen == ModelRoute::GlobalRegistration
+    {
+        model = routes.registration.model.clone();
+    }
+    Ok(DhctResult {
+        model,
+        passes,
+        routes,
+        route_note,
+    })
+}
+
+/// The paper's route: neighbours (seeded by `seed`, refined in the corrected frame), local
+/// distortions, the pooled model fit.
+fn local_route(
+    inputs: &[&PassInput],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+    seed: Option<&SeedMap>,
+) -> Result<(DistortionModel, Vec<PassAnalysis>), DistortionError> {
     let method = options
         .method
         .unwrap_or_else(|| lattice.local_distortion_method());
-    // Passes without features are skipped; `inputs[k]` belongs to `passes[k]` from here.
-    let inputs: Vec<&PassInput> = inputs.iter().filter(|i| !i.features.is_empty()).collect();
     // The passes are independent until the pooled fit: measured side by side.
     let mut passes: Vec<PassAnalysis> = inputs
         .par_iter()
         .map(|input| {
             let pass = input.features[0].pass;
-            let points_px: Vec<[f64; 2]> =
-                input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
-            let selection =
-                select_features(&points_px, search, input.mask, lattice, &options.neighbours)?;
+            let selection = select_seeded(input, seed, geometry, lattice, options)?;
             Ok(measure_pass(
                 input, pass, selection, None, geometry, lattice, method,
             ))
@@ -223,11 +286,9 @@ pub fn analyse_seeded(
         // Too distorted for the window: a first model from the k nearest neighbours.
         passes = passes
             .into_iter()
-            .zip(&inputs)
+            .zip(inputs)
             .map(|(previous, input)| {
-                let points_px: Vec<[f64; 2]> =
-                    input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
-                let selected = select_nearest(&points_px, search, input.mask, lattice)?;
+                let selected = nearest_seeded(input, seed, geometry, lattice)?;
                 let nearest = NeighbourSelection {
                     selected,
                     exclusions: ExclusionCounts::default(),
@@ -249,7 +310,10 @@ pub fn analyse_seeded(
     for _ in 0..2 {
         let refined: Vec<NeighbourSelection> = inputs
             .par_iter()
-            .map(|input| select_in_sample_frame(input, &model, geometry, lattice, options))
+            .map(|input| {
+                let to_sample = |f: &Feature| model.to_sample(geometry, f.pass, f.x_px, f.y_px);
+                select_in_frame(input, to_sample, geometry, lattice, options)
+            })
             .collect::<Result<_, DistortionError>>()?;
         let gained = refined.iter().zip(&passes).any(|(selection, previous)| {
             let before = previous.used_selection().selected.len();
@@ -279,7 +343,81 @@ pub fn analyse_seeded(
             .collect();
         model = fit_pooled(&passes, geometry, options)?;
     }
-    Ok(DhctResult { model, passes })
+    Ok((model, passes))
+}
+
+/// The global registration alone, from `seed`'s map (the raw positions without one),
+/// when the local route could not fit a model; its cross-validation has no local route to
+/// compare with.
+fn registration_alone(
+    inputs: &[&PassInput],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+    seed: Option<&SeedMap>,
+    local_error: &DistortionError,
+) -> Result<DhctResult, DistortionError> {
+    let start = seed
+        .and_then(|s| s.as_model(geometry))
+        .unwrap_or_else(DistortionModel::identity);
+    let inputs: Vec<PassInput> = inputs.iter().map(|i| **i).collect();
+    let (registration, features) = registration::register_from(
+        &inputs,
+        geometry,
+        lattice,
+        &start,
+        registration::StartQuality::Rough,
+        &options.fit,
+    )?;
+    let routes = route_choice::compare_routes(
+        &[],
+        &features,
+        registration,
+        geometry,
+        lattice.nearest_neighbour_distance(),
+        &options.fit,
+        options.route,
+    )?;
+    Ok(DhctResult {
+        model: routes.registration.model.clone(),
+        passes: Vec::new(),
+        routes: Some(routes),
+        route_note: Some(format!(
+            "the local route could not fit a model ({local_error}); the model is the global \
+             registration's"
+        )),
+    })
+}
+
+/// The global registration started from `model` (features indexed in its corrected
+/// frame), cross-validated against the local route of `passes`.
+fn global_route(
+    inputs: &[&PassInput],
+    passes: &[PassAnalysis],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    model: &DistortionModel,
+    options: &DhctOptions,
+) -> Result<RouteComparison, DistortionError> {
+    let inputs: Vec<PassInput> = inputs.iter().map(|i| **i).collect();
+    let (registration, features) = registration::register_from(
+        &inputs,
+        geometry,
+        lattice,
+        model,
+        registration::StartQuality::Fitted,
+        &options.fit,
+    )?;
+    let local: Vec<LocalDistortion> = passes.iter().flat_map(|p| p.local.clone()).collect();
+    route_choice::compare_routes(
+        &local,
+        &features,
+        registration,
+        geometry,
+        lattice.nearest_neighbour_distance(),
+        &options.fit,
+        options.route,
+    )
 }
 
 /// Local distortions of one pass with the neighbours of `refined` and where they came from
@@ -324,36 +462,107 @@ fn measure_pass(
     }
 }
 
-/// Neighbour selection among the features of `input` moved to the sample frame by `model`.
-/// Features outside the mask (judged at their raw position) are left out first; indices
-/// refer to `input.features`.
-fn select_in_sample_frame(
+/// The positions (pixels of `geometry`) of the features of `input` inside its mask (judged
+/// at their raw position), each moved by `to_frame` (raw metres → metres of another frame),
+/// and their indices in `input.features`.
+fn moved_positions(
     input: &PassInput,
-    model: &DistortionModel,
     geometry: &ScanGeometry,
-    lattice: &dyn Lattice,
-    options: &DhctOptions,
-) -> Result<NeighbourSelection, DistortionError> {
+    to_frame: impl Fn(&Feature) -> [f64; 2],
+) -> (Vec<usize>, Vec<[f64; 2]>) {
     let raw: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
     let inside = neighbours::inside_mask(&raw, input.mask);
     let kept: Vec<usize> = (0..raw.len()).filter(|&i| inside[i]).collect();
-    let corrected: Vec<[f64; 2]> = kept
+    let moved = kept
         .iter()
         .map(|&i| {
-            let f = &input.features[i];
-            let [x, y] = model.to_sample(geometry, f.pass, f.x_px, f.y_px);
+            let [x, y] = to_frame(&input.features[i]);
             [x / geometry.pitch_x(), y / geometry.pitch_y()]
         })
         .collect();
-    let mut selection = select_features(&corrected, geometry, None, lattice, &options.neighbours)?;
-    selection.exclusions.outside_mask = raw.len() - kept.len();
-    for s in &mut selection.selected {
+    (kept, moved)
+}
+
+/// Indices of `selected` (into the kept features) back to indices into `input.features`.
+fn reindexed(mut selected: Vec<SelectedFeature>, kept: &[usize]) -> Vec<SelectedFeature> {
+    for s in &mut selected {
         s.index = kept[s.index];
         for n in &mut s.neighbours {
             *n = kept[*n];
         }
     }
+    selected
+}
+
+/// Neighbour selection among the features of `input` moved by `to_frame` (raw metres →
+/// metres of the frame searched). Features outside the mask (judged at their raw position)
+/// are left out first; indices refer to `input.features`.
+fn select_in_frame(
+    input: &PassInput,
+    to_frame: impl Fn(&Feature) -> [f64; 2],
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+) -> Result<NeighbourSelection, DistortionError> {
+    let (kept, moved) = moved_positions(input, geometry, to_frame);
+    let mut selection = select_features(&moved, geometry, None, lattice, &options.neighbours)?;
+    selection.exclusions.outside_mask = input.features.len() - kept.len();
+    selection.selected = reindexed(std::mem::take(&mut selection.selected), &kept);
     Ok(selection)
+}
+
+/// Raw metres → the frame `seed` undoes the measured map in (about the frame centre).
+fn seed_frame<'a>(seed: &'a SeedMap, geometry: &'a ScanGeometry) -> impl Fn(&Feature) -> [f64; 2] {
+    let (px, py) = (geometry.pitch_x(), geometry.pitch_y());
+    let centre = [
+        0.5 * (geometry.columns() as f64 - 1.0) * px,
+        0.5 * (geometry.rows() as f64 - 1.0) * py,
+    ];
+    move |f: &Feature| seed.to_sample_like([f.x_px * px, f.y_px * py], centre)
+}
+
+/// The first neighbour selection of a pass: among the raw positions, or among them undone
+/// by `seed`.
+fn select_seeded(
+    input: &PassInput,
+    seed: Option<&SeedMap>,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+    options: &DhctOptions,
+) -> Result<NeighbourSelection, DistortionError> {
+    match seed {
+        Some(seed) => select_in_frame(
+            input,
+            seed_frame(seed, geometry),
+            geometry,
+            lattice,
+            options,
+        ),
+        None => {
+            let points: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+            select_features(&points, geometry, input.mask, lattice, &options.neighbours)
+        }
+    }
+}
+
+/// [`select_nearest`] among the raw positions, or among them undone by `seed`.
+fn nearest_seeded(
+    input: &PassInput,
+    seed: Option<&SeedMap>,
+    geometry: &ScanGeometry,
+    lattice: &dyn Lattice,
+) -> Result<Vec<SelectedFeature>, DistortionError> {
+    match seed {
+        Some(seed) => {
+            let (kept, moved) = moved_positions(input, geometry, seed_frame(seed, geometry));
+            let selected = select_nearest(&moved, geometry, None, lattice)?;
+            Ok(reindexed(selected, &kept))
+        }
+        None => {
+            let points: Vec<[f64; 2]> = input.features.iter().map(|f| [f.x_px, f.y_px]).collect();
+            select_nearest(&points, geometry, input.mask, lattice)
+        }
+    }
 }
 
 fn fit_pooled(

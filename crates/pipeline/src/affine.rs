@@ -4,10 +4,10 @@
 //! region's features from their fitted lattice, and how many the fit could use).
 
 use dhct_calibrate::Calibration;
-use dhct_distortion::{DistortionModel, DriftCreep, HysteresisLaw};
+use dhct_distortion::{DistortionModel, SeedMap};
 use dhct_features::FeatureSet;
 use dhct_lattice::{Lattice, LatticeFitOptions, fit_lattice};
-use dhct_scan::{Axis, ScanDirection, ScanGeometry};
+use dhct_scan::ScanGeometry;
 use serde::{Deserialize, Serialize};
 
 use crate::RegionFit;
@@ -115,42 +115,19 @@ pub(crate) fn trusted_alone(calibration: &Calibration) -> bool {
         && calibration.shear_deg.abs() <= ALONE_MAX_SHEAR_DEG
 }
 
-/// The global affine correction `K⁻¹` as a distortion model, to correct images with when
-/// it beats the full model: the x scale as a constant hysteresis stretch (power law with
-/// `n = 0`, `S = 2 − 1/kx`), the y scale and the shear as constant drift along the slow
-/// axis. Exact along both axes but for the drift's share within each line (`v·τ`, at most
-/// `|1/ky − 1|/2` pixel across a line). `None` for a vertical fast axis or `kx ≤ ½`.
+/// The global affine correction `K⁻¹` as a distortion model ([`SeedMap::as_model`]), to
+/// correct images with when it beats the full model.
 pub(crate) fn affine_model(
     geometry: &ScanGeometry,
     calibration: &Calibration,
 ) -> Option<DistortionModel> {
-    let kx = calibration.scale[0];
-    if geometry.fast_axis() != Axis::Horizontal || kx <= 0.5 {
-        return None;
-    }
-    let [[_, shear], [_, inverse_ky]] = calibration.file_to_sample();
-    // Slow-axis velocity of the commanded y (m/s, display frame).
-    let slow = match geometry.slow_direction() {
-        ScanDirection::Up => -geometry.slow_speed(),
-        _ => geometry.slow_speed(),
-    };
-    let drift = DriftCreep {
-        velocity_m_per_s: [shear * slow, (inverse_ky - 1.0) * slow],
-        ..DriftCreep::none()
-    };
-    Some(DistortionModel::new(
-        drift,
-        HysteresisLaw::Power {
-            k: 2.0 - 1.0 / kx,
-            n: 0.0,
-        },
-    ))
+    SeedMap::new(calibration.matrix)?.as_model(geometry)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use dhct_scan::ScanPass;
+    use dhct_scan::{ScanDirection, ScanPass};
 
     #[test]
     fn the_affine_model_maps_controller_positions_by_k_inverse() {

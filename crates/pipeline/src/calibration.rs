@@ -6,6 +6,7 @@ use dhct_calibrate::{
     Calibration, CalibrationError, CheckOptions, PairCalibration, binning_factor, calibrate_pair,
     match_lattice, measure_lattice_binned,
 };
+use dhct_distortion::SeedMap;
 use dhct_features::PARALLEL_PASSES_MAX_PIXELS;
 use dhct_lattice::Lattice;
 use dhct_scan::{ScanGeometry, ScanPair, ScanPass};
@@ -62,17 +63,10 @@ pub(crate) fn measure(
     }
 }
 
-/// `geometry` with the pixel size the lattice implies (the file's divided by the
-/// calibration's x and y scale): where the neighbour search looks for the lattice.
-pub(crate) fn seeded_geometry(
-    geometry: &ScanGeometry,
-    found: &PairCalibration,
-) -> Option<ScanGeometry> {
-    let [kx, ky] = found.calibration.scale;
-    geometry
-        .clone()
-        .with_pitch(geometry.pitch_x() / kx, geometry.pitch_y() / ky)
-        .ok()
+/// The affine map the lattice measured (file metres per sample metres): the neighbour
+/// search looks for the lattice among the raw positions with it undone.
+pub(crate) fn seed_map(found: &PairCalibration) -> Option<SeedMap> {
+    SeedMap::new(found.calibration.matrix)
 }
 
 /// The lattice of one corrected image, measured by FFT as an outside check would measure

@@ -265,8 +265,8 @@ fn find_all_features(inputs: &Inputs) -> Result<Vec<FoundPass>, PipelineError> {
     Ok(found)
 }
 
-/// Step 2: the drift/creep/hysteresis model, its neighbour search seeded with the pixel
-/// size the measured lattice implies. Returns the model, or the global affine correction
+/// Step 2: the drift/creep/hysteresis model, its neighbour search seeded with the affine
+/// map the measured lattice implies. Returns the model, or the global affine correction
 /// with the reason the model failed.
 fn fit_distortion_model(
     inputs: &Inputs,
@@ -281,10 +281,7 @@ fn fit_distortion_model(
             mask: inputs.mask,
         })
         .collect();
-    let seeded = calibration
-        .as_ref()
-        .ok()
-        .and_then(|found| calibration::seeded_geometry(geometry, found));
+    let seeded = calibration.as_ref().ok().and_then(calibration::seed_map);
     // A model that cannot be fitted (too few features with full neighbour shells: a large
     // cell on a small frame) falls back to the global affine correction when the lattice
     // was measured: never worse than it.
@@ -304,10 +301,7 @@ fn fit_distortion_model(
                 .and_then(|found| affine::affine_model(geometry, &found.calibration));
             match affine {
                 Some(model) => Ok((
-                    DhctResult {
-                        model,
-                        passes: Vec::new(),
-                    },
+                    DhctResult::of_model(model),
                     Some(model_error(e, found, lattice).to_string()),
                 )),
                 None => Err(model_error(e, found, lattice)),
@@ -404,6 +398,8 @@ fn with_affine(
         dhct: DhctResult {
             model,
             passes: chosen.dhct.passes.clone(),
+            routes: chosen.dhct.routes.clone(),
+            route_note: chosen.dhct.route_note.clone(),
         },
         rejected_model: Some(chosen.dhct.model.clone()),
         correction: CorrectionSource::Affine,

@@ -612,10 +612,7 @@ mod tests {
                 range: [0.01, 52428.8],
             }],
         };
-        let warnings = fit_warnings(&DhctResult {
-            model,
-            passes: Vec::new(),
-        });
+        let warnings = fit_warnings(&DhctResult::of_model(model));
         assert_eq!(
             codes(&warnings),
             [

@@ -510,6 +510,12 @@ fn calibration_lines(summary: &RunSummary) -> String {
             check.pass, k.scale[0], k.scale[1], k.shear_deg
         );
     }
+    if let Some(routes) = &summary.model_routes {
+        let _ = writeln!(s, "model: {}", routes.describe());
+    }
+    if let Some(note) = &summary.model_route_note {
+        let _ = writeln!(s, "model: {note}");
+    }
     if summary.correction == dhct_pipeline::CorrectionSource::Affine {
         let _ = writeln!(s, "correction: {}", html::affine_reason(summary));
     }

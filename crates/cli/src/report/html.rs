@@ -243,6 +243,12 @@ fn calibration_section(html: &mut Html, summary: &RunSummary) {
             ),
         ));
     }
+    if let Some(routes) = &summary.model_routes {
+        rows.push(("model: local vs global route".into(), routes.describe()));
+    }
+    if let Some(note) = &summary.model_route_note {
+        rows.push(("model: how it was found".into(), note.clone()));
+    }
     for check in &summary.corrected_images {
         let k = &check.calibration;
         rows.push((

@@ -2,7 +2,9 @@
 //! summary printed by `--json`.
 
 use dhct_calibrate::PairCalibration;
-use dhct_distortion::{DistortionModel, ExclusionCounts, Parameter, RdfFit};
+use dhct_distortion::{
+    DistortionModel, ExclusionCounts, ModelRoute, Parameter, RdfFit, RouteComparison,
+};
 use dhct_features::LineLevelling;
 use dhct_lattice::{Lattice, PlaneGroup};
 use dhct_pipeline::{
@@ -138,6 +140,64 @@ pub struct UnitCellSummary {
     pub asymmetric_unit: Vec<[f64; 2]>,
 }
 
+/// The local route against the global registration ([`dhct_distortion::RouteComparison`]
+/// without the registration's model, which `model` holds when it was chosen).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RouteSummary {
+    /// The route used: `local-distortion` or `global-registration`.
+    pub chosen: ModelRoute,
+    /// The route with the smaller held-out deviation.
+    pub better: ModelRoute,
+    /// Held-out RMS deviation from the ideal lattice of the local route, metres.
+    pub local_held_out_rms_m: f64,
+    /// The same of the global registration, metres.
+    pub global_held_out_rms_m: f64,
+    /// Cross-validation folds (interleaved bands of lines).
+    pub folds: usize,
+    /// Features indexed and registered.
+    pub features: usize,
+}
+
+impl RouteSummary {
+    fn of(c: &RouteComparison) -> RouteSummary {
+        RouteSummary {
+            chosen: c.chosen,
+            better: c.better,
+            local_held_out_rms_m: c.local_held_out_rms_m,
+            global_held_out_rms_m: c.global_held_out_rms_m,
+            folds: c.folds,
+            features: c.features,
+        }
+    }
+
+    /// One sentence: both routes' held-out deviations and the one used.
+    pub fn describe(&self) -> String {
+        let local = if self.local_held_out_rms_m.is_finite() {
+            format!("{:.1} pm", self.local_held_out_rms_m * 1e12)
+        } else {
+            "not fitted".into()
+        };
+        let used = match self.chosen {
+            ModelRoute::LocalDistortion => "local distortions (the paper's route)",
+            ModelRoute::GlobalRegistration => "global registration",
+        };
+        let mut line = format!(
+            "held-out rms deviation from the lattice: local distortions {local}, global \
+             registration {:.1} pm ({} features, {}-fold cross-validation); model from {used}",
+            self.global_held_out_rms_m * 1e12,
+            self.features,
+            self.folds
+        );
+        if self.better != self.chosen {
+            line.push_str(
+                " (the global registration cross-validates better; it can also absorb part of \
+                 an event outside the model, such as a tip change: compare with dhct diagnose)",
+            );
+        }
+        line
+    }
+}
+
 /// Everything numeric of a run (`model.json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunSummary {
@@ -184,6 +244,13 @@ pub struct RunSummary {
     pub calibration_note: Option<String>,
     /// Per region: the full model against the global affine correction (same lattice fit).
     pub affine_baseline: Vec<AffineComparison>,
+    /// The model's two routes (local distortions, global registration) cross-validated on
+    /// the image's own features, and the one chosen; `null` with `model_route_note` saying
+    /// why when the registration could not be fitted.
+    pub model_routes: Option<RouteSummary>,
+    /// Why the routes were not compared, or how the model was found when the local route
+    /// failed.
+    pub model_route_note: Option<String>,
     /// Which correction the corrected data come from (`drift-model` or `affine`).
     pub correction: CorrectionSource,
     /// The fitted drift/creep/hysteresis model when the affine correction was kept instead
@@ -332,6 +399,8 @@ pub fn summarise(
         calibration: analysis.calibration.as_ref().ok().cloned(),
         calibration_note: analysis.calibration.as_ref().err().cloned(),
         affine_baseline: analysis.affine.clone(),
+        model_routes: analysis.dhct.routes.as_ref().map(RouteSummary::of),
+        model_route_note: analysis.dhct.route_note.clone(),
         correction: analysis.correction,
         rejected_model: analysis.rejected_model.clone(),
         corrected_images: analysis.corrected_images.clone(),

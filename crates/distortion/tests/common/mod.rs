@@ -3,7 +3,8 @@
 #![allow(dead_code)]
 
 use dhct_distortion::{
-    DhctOptions, DhctResult, PassInput, analyse, correct_features, nn_angle_stats, select_features,
+    DhctOptions, DhctResult, DistortionModel, PassInput, analyse, correct_features, nn_angle_stats,
+    select_features,
 };
 use dhct_features::{FeatureOptions, FeatureSet, find_features_in_pair};
 use dhct_lattice::Lattice;
@@ -21,26 +22,39 @@ pub struct Run {
 }
 
 pub fn run(config: &SimulationConfig, options: &DhctOptions) -> Run {
-    let simulation = Simulation::from_config(config).expect("valid config");
-    let output = simulation.run().expect("simulation runs");
-    let lattice = config.surface.lattice.build().expect("lattice");
-    let nn = lattice.nearest_neighbour_distance();
-    let sets = find_features_in_pair(&output.pair, &FeatureOptions::for_neighbour_distance(nn))
-        .expect("features found");
-    let inputs: Vec<PassInput> = sets
+    let mut run = simulate_and_find(config);
+    let inputs: Vec<PassInput> = run
+        .sets
         .iter()
         .map(|s| PassInput {
             features: &s.features,
             mask: None,
         })
         .collect();
-    let result = analyse(&inputs, output.pair.geometry(), lattice.as_ref(), options)
-        .expect("DHCT analysis succeeds");
+    run.result = analyse(
+        &inputs,
+        run.output.pair.geometry(),
+        run.lattice.as_ref(),
+        options,
+    )
+    .expect("DHCT analysis succeeds");
+    run
+}
+
+/// Simulates `config` and finds its features; the result holds the identity model (no
+/// analysis run).
+pub fn simulate_and_find(config: &SimulationConfig) -> Run {
+    let simulation = Simulation::from_config(config).expect("valid config");
+    let output = simulation.run().expect("simulation runs");
+    let lattice = config.surface.lattice.build().expect("lattice");
+    let nn = lattice.nearest_neighbour_distance();
+    let sets = find_features_in_pair(&output.pair, &FeatureOptions::for_neighbour_distance(nn))
+        .expect("features found");
     Run {
         output,
         lattice,
         sets,
-        result,
+        result: DhctResult::of_model(DistortionModel::identity()),
     }
 }
 
