@@ -1,7 +1,7 @@
 //! The whole diagnosis: base stage, position-level base fit, noise floor, location of the
 //! gap, greedy selection of effects, shrink.
 
-use dhct_distortion::{DhctOptions, DistortionModel, PassInput};
+use dhct_distortion::{DhctOptions, DistortionModel, PassInput, RoutePolicy};
 use dhct_lattice::{Lattice, LatticeFitOptions};
 use dhct_scan::ScanGeometry;
 use dhct_simulate::EffectConfig;
@@ -61,7 +61,12 @@ pub struct DiagnoseOptions {
 impl Default for DiagnoseOptions {
     fn default() -> Self {
         DiagnoseOptions {
-            dhct: DhctOptions::default(),
+            // The base model is the paper's local route: a global registration can absorb
+            // part of the very events the diagnosis looks for.
+            dhct: DhctOptions {
+                route: RoutePolicy::Local,
+                ..DhctOptions::default()
+            },
             candidates: Candidate::ALL.to_vec(),
             selection: SelectionOptions::default(),
             cv_scheme: CvScheme::PerCandidate,

@@ -4,7 +4,7 @@
 
 use dhct_diagnose::synth::{ValidationCase, ValidationSet, simulate_positions};
 use dhct_diagnose::{Candidate, DiagnoseOptions, diagnose, diagnose_with_model};
-use dhct_distortion::{DhctOptions, analyse};
+use dhct_distortion::analyse;
 use dhct_lattice::LatticeFitOptions;
 
 #[test]
@@ -17,14 +17,10 @@ fn the_given_correction_is_the_one_diagnosed() {
     let fitted_here =
         diagnose(&inputs, &scan.geometry, lattice.as_ref(), &options).expect("diagnoses");
 
-    let model = analyse(
-        &inputs,
-        &scan.geometry,
-        lattice.as_ref(),
-        &DhctOptions::default(),
-    )
-    .expect("DHCT fit")
-    .model;
+    // The diagnosis's own base fit (the paper's local route).
+    let model = analyse(&inputs, &scan.geometry, lattice.as_ref(), &options.dhct)
+        .expect("DHCT fit")
+        .model;
     let lattice_fit = LatticeFitOptions::default();
     let given = diagnose_with_model(
         &inputs,

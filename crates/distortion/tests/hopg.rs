@@ -170,8 +170,9 @@ fn hopg_terrace_sharpens_and_time_scale_is_irrelevant() {
         angles_after.rms_deviation_deg < angles_before.rms_deviation_deg,
         "NN angles approach 60°"
     );
-    // The terrace is noisy (NN angle scatter ~14°); the scale is only loosely pinned.
-    assert!((fit_after.nn_distance_m / nn - 1.0).abs() < 0.05);
+    // The terrace is noisy (NN angle scatter ~14°): the RDF peak within 2 % (2.39 Å from
+    // the local route, 2.43 Å from the global registration).
+    assert!((fit_after.nn_distance_m / nn - 1.0).abs() < 0.02);
 
     // A pure change of the (assumed) time scale must not change the correction.
     let lambda = 7.3;

@@ -189,10 +189,13 @@ impl RouteSummary {
             self.folds
         );
         if self.better != self.chosen {
-            line.push_str(
-                " (the global registration cross-validates better; it can also absorb part of \
-                 an event outside the model, such as a tip change: compare with dhct diagnose)",
-            );
+            line.push_str(match self.better {
+                ModelRoute::GlobalRegistration => {
+                    " (the global registration cross-validates better; the paper's route was \
+                     asked for)"
+                }
+                ModelRoute::LocalDistortion => " (the local route cross-validates better)",
+            });
         }
         line
     }
