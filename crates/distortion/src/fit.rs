@@ -313,18 +313,7 @@ fn drift_irls(
         let fit = fit_residuals(residuals, 2 * m, &p0, &weights, &iterations(200))
             .ok_or(DistortionError::FitFailed("drift/creep"))?;
         p0.clone_from(&fit.params);
-        let (rx, ry) = fit.residuals.split_at(m);
-        let (sx, sy) = (robust_scale(rx).max(1e-300), robust_scale(ry).max(1e-300));
-        let (hx, hy) = if robust_rounds > 0 && round > 0 {
-            (huber_weights(rx, sx), huber_weights(ry, sy))
-        } else {
-            (vec![1.0; m], vec![1.0; m])
-        };
-        weights = hx
-            .iter()
-            .map(|h| h / (sx * sx))
-            .chain(hy.iter().map(|h| h / (sy * sy)))
-            .collect();
+        weights = axis_weights(&fit.residuals, m, robust_rounds > 0 && round > 0);
         result = Some(fit);
     }
     let fit = result.ok_or(DistortionError::FitFailed("drift/creep"))?;
@@ -697,6 +686,22 @@ fn iterations(max_iterations: usize) -> LmOptions {
         max_iterations,
         ..LmOptions::default()
     }
+}
+
+/// Weights of `2m` residuals, the `m` x ones then the `m` y ones: each axis by its own
+/// robust scale (`1/σ²`), times Huber weights when `huber`.
+pub(crate) fn axis_weights(residuals: &[f64], m: usize, huber: bool) -> Vec<f64> {
+    let (rx, ry) = residuals[..2 * m].split_at(m);
+    let (sx, sy) = (robust_scale(rx).max(1e-300), robust_scale(ry).max(1e-300));
+    let (hx, hy) = if huber {
+        (huber_weights(rx, sx), huber_weights(ry, sy))
+    } else {
+        (vec![1.0; m], vec![1.0; m])
+    };
+    hx.iter()
+        .map(|h| h / (sx * sx))
+        .chain(hy.iter().map(|h| h / (sy * sy)))
+        .collect()
 }
 
 /// Robust scale of fit residuals about zero (0 when there are none).

@@ -14,14 +14,14 @@
 
 use dhct_lattice::{IndexedPoint, Lattice, LatticeFitOptions, fit_lattice};
 use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
-use dhct_numerics::robust::{huber_weights, mad_sigma_about};
+use dhct_numerics::robust::mad_sigma_about;
 use dhct_scan::{ScanGeometry, ScanPass};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::fit::{
-    FitOptions, HysteresisChoice, LogisticLog, drift_diagnostics, drift_parameters,
+    FitOptions, HysteresisChoice, LogisticLog, axis_weights, drift_diagnostics, drift_parameters,
     hysteresis_parameters, scaled_sigmas,
 };
 use crate::hysteresis_problem::{Quantity, hysteresis_law, law_gradient, law_parameters};
@@ -560,20 +560,9 @@ fn robust_fit(
         let fit = fit_residuals(problem, problem.rows(), &p, &weights, &lm)
             .ok_or(DistortionError::FitFailed("global registration"))?;
         p.clone_from(&fit.params);
-        let (rx, ry) = fit.residuals[..2 * m].split_at(m);
-        let scale = |r: &[f64]| mad_sigma_about(r, 0.0).unwrap_or(0.0).max(1e-300);
-        let (sx, sy) = (scale(rx), scale(ry));
-        let (hx, hy) = if round > 0 && robust_rounds > 0 {
-            (huber_weights(rx, sx), huber_weights(ry, sy))
-        } else {
-            (vec![1.0; m], vec![1.0; m])
-        };
-        weights = hx
-            .iter()
-            .map(|h| h / (sx * sx))
-            .chain(hy.iter().map(|h| h / (sy * sy)))
-            .chain([1.0; 2])
-            .collect();
+        // The positions by their own scale; the creep prior keeps its unit weight.
+        weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);
+        weights.extend([1.0; 2]);
         last = Some(fit);
     }
     let fit = last.ok_or(DistortionError::FitFailed("global registration"))?;

@@ -6,9 +6,7 @@
 mod common;
 
 use dhct_distortion::registration::{StartQuality, register_from};
-use dhct_distortion::{
-    DhctOptions, DistortionModel, FitOptions, PassInput, SeedMap, analyse, analyse_seeded,
-};
+use dhct_distortion::{DhctOptions, DistortionModel, FitOptions, SeedMap, analyse, analyse_seeded};
 use dhct_simulate::effects::{EffectConfig, ThermalDrift};
 use dhct_simulate::{LatticeConfig, SimulationConfig, presets};
 
@@ -27,14 +25,7 @@ fn graphite_512() -> SimulationConfig {
 /// within 3σ.
 fn registered_matches_truth(run: &mut common::Run, start: DistortionModel, quality: StartQuality) {
     let geometry = run.output.pair.geometry().clone();
-    let inputs: Vec<PassInput> = run
-        .sets
-        .iter()
-        .map(|s| PassInput {
-            features: &s.features,
-            mask: None,
-        })
-        .collect();
+    let inputs = common::pass_inputs(&run.sets);
     let local = common::residuals(run, 20.0);
     let (registration, features) = register_from(
         &inputs,
@@ -159,14 +150,7 @@ fn strong_drift_is_analysed_from_the_measured_map() {
         }
     }
     let mut run = common::simulate_and_find(&config);
-    let inputs: Vec<PassInput> = run
-        .sets
-        .iter()
-        .map(|s| PassInput {
-            features: &s.features,
-            mask: None,
-        })
-        .collect();
+    let inputs = common::pass_inputs(&run.sets);
     let geometry = run.output.pair.geometry();
     let seed = SeedMap::new(measured_map(&run)).expect("regular map");
     eprintln!("measured map {:?}", seed.file_per_sample);

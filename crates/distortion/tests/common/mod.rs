@@ -23,22 +23,25 @@ pub struct Run {
 
 pub fn run(config: &SimulationConfig, options: &DhctOptions) -> Run {
     let mut run = simulate_and_find(config);
-    let inputs: Vec<PassInput> = run
-        .sets
-        .iter()
-        .map(|s| PassInput {
-            features: &s.features,
-            mask: None,
-        })
-        .collect();
-    run.result = analyse(
-        &inputs,
+    let result = analyse(
+        &pass_inputs(&run.sets),
         run.output.pair.geometry(),
         run.lattice.as_ref(),
         options,
     )
     .expect("DHCT analysis succeeds");
+    run.result = result;
     run
+}
+
+/// Every pass's features, without a mask.
+pub fn pass_inputs(sets: &[FeatureSet]) -> Vec<PassInput<'_>> {
+    sets.iter()
+        .map(|s| PassInput {
+            features: &s.features,
+            mask: None,
+        })
+        .collect()
 }
 
 /// Simulates `config` and finds its features; the result holds the identity model (no
