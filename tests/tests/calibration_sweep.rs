@@ -197,3 +197,47 @@ fn a_threefold_stretch_and_an_image_without_a_lattice_are_refused() {
     let result = run(&noise, lattice, None, &options(lattice), &|_| {});
     assert!(result.is_err(), "an image without a lattice ran to the end");
 }
+
+/// A commensurate (√7×√7)R19.1° superstructure six times as powerful as the atoms' first
+/// reflections (FeBr₂ on Au(111) shows one), with the pixel-size search as wide as
+/// `--calibrate` makes it: the atoms' lattice is the one calibrated (the reading that needs
+/// no pixel-size correction first), the superstructure's reflections are left over and
+/// reported, never the cell.
+#[test]
+fn a_superstructure_stronger_than_the_atoms_is_left_over_not_made_the_lattice() {
+    let surface = surfaces().remove(0);
+    let lattice = surface.lattice.as_ref();
+    let mut config = surface.simulation(0.3);
+    config.seed = 107;
+    let amplitude_m = fraction_of_first_order(&surface, 6.0);
+    // The three first reflections of the superstructure, |g| = |g₁|/√7.
+    config.surface.modulations = [[3.0, 1.0], [-1.0, 2.0], [-2.0, -3.0]]
+        .into_iter()
+        .map(|[h, k]| Modulation {
+            index: [h / 7.0, k / 7.0],
+            amplitude_m,
+        })
+        .collect();
+    let pair = simulate_miscalibrated(&config, [1.0, 1.0]);
+    let mut options = options(lattice);
+    options.calibration.check.pitch_tolerance = 9.0;
+    let analysis = run(&pair, lattice, None, &options, &|_| {}).expect("corrected");
+    let calibration = analysis.calibration.as_ref().expect("measured");
+    let matched = &calibration.passes[0].matched;
+    assert!(
+        (calibration.calibration.mean_scale - 1.0).abs() < 0.2,
+        "the superstructure was made the lattice: {:?}",
+        calibration.calibration
+    );
+    let long: Vec<_> = matched
+        .unexplained
+        .iter()
+        .filter(|p| (p.period_m / (3f64.sqrt() / 2.0 * surface.cell_m) - 7f64.sqrt()).abs() < 0.2)
+        .collect();
+    assert!(!long.is_empty(), "{:?}", matched.unexplained);
+    let [kx, ky, shear] = corrected_lattice(&pair, &analysis.passes[0].corrected_image, lattice);
+    assert!(
+        (kx - 1.0).abs() <= 0.01 && (ky - 1.0).abs() <= 0.01 && shear.abs() <= 0.5,
+        "corrected x {kx:.4}, y {ky:.4}, shear {shear:.2}°"
+    );
+}

@@ -2,7 +2,8 @@
 //! from the corrected image alone.
 //!
 //! Each file is corrected by the `dhct` command with the corpus' arguments; when that is
-//! refused and the error's hint offers `--calibrate`, once more with it. The corrected
+//! refused and the error's hint offers a flag (`--polarity dark`, `--calibrate`), once more
+//! with it. The corrected
 //! trace and retrace written (GSF, sample units) are then judged without dhct's own fit:
 //!
 //! * **lattice**: the surface's lattice fitted to the corrected image's Fourier peaks must
@@ -76,8 +77,9 @@ pub enum Verdict {
     /// Corrected at exit 0, but the corrected image's lattice is not the surface's, and
     /// dhct did not say so.
     Wrong(String),
-    /// Corrected, a pass's lattice off, and dhct warned about that pass itself
-    /// (`corrected_image_off`): not silently wrong, but not right either.
+    /// Corrected, a pass's lattice off (or not measurable by the judge), and dhct warned
+    /// about that pass itself (`corrected_image_off`, `corrected_image_unchecked`): not
+    /// silently wrong, but not right either.
     Flagged(String),
     /// The file is not there (`DHCT_REAL_DATA` unset or missing).
     Missing(String),
@@ -97,7 +99,8 @@ pub struct FileResult {
     pub model_vs_affine_m: Option<[f64; 2]>,
     /// Per pass judged.
     pub passes: Vec<PassJudgement>,
-    /// The passes dhct itself flagged as off (`corrected_image_off`).
+    /// The passes dhct itself flagged as off or unchecked (`corrected_image_off`,
+    /// `corrected_image_unchecked`).
     pub flagged: Vec<String>,
 }
 
@@ -136,10 +139,9 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
     };
     let mut outcome = correct(dhct, &input, &file.args, root, out);
     if let Err(stderr) = &outcome
-        && stderr.contains("--calibrate")
-        && !file.args.iter().any(|a| a == "--calibrate")
+        && let Some(flag) = hinted_flag(stderr, &file.args)
     {
-        result.args.push("--calibrate".into());
+        result.args.extend(flag);
         outcome = correct(dhct, &input, &result.args, root, out);
     }
     if let Err(stderr) = outcome {
@@ -172,10 +174,13 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
                 }
                 result.passes.push(judgement);
             }
-            Err(why) => wrong.push(format!("{pass}: {why}")),
+            Err(why) => {
+                let said = result.flagged.iter().any(|f| *f == pass.to_string());
+                (if said { &mut flagged } else { &mut wrong }).push(format!("{pass}: {why}"));
+            }
         }
     }
-    result.verdict = if result.passes.is_empty() {
+    result.verdict = if result.passes.is_empty() && flagged.is_empty() {
         Verdict::Wrong(format!(
             "no corrected image could be judged: {}",
             wrong.join("; ")
@@ -188,6 +193,19 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
         Verdict::Right
     };
     result
+}
+
+/// The flag a refusal's hint offers first that the arguments lack: `--polarity dark` (or
+/// bright) when the hint says to add it, else `--calibrate` when the hint names it.
+fn hinted_flag(stderr: &str, args: &[String]) -> Option<Vec<String>> {
+    let hint = stderr.lines().find(|l| l.starts_with("hint:"))?;
+    let has = |flag: &str| args.iter().any(|a| a == flag);
+    for polarity in ["dark", "bright"] {
+        if hint.contains(&format!("add --polarity {polarity}")) && !has("--polarity") {
+            return Some(vec!["--polarity".into(), polarity.into()]);
+        }
+    }
+    (hint.contains("--calibrate") && !has("--calibrate")).then(|| vec!["--calibrate".into()])
 }
 
 fn locate(file: &CorpusFile, root: &Path) -> Result<PathBuf, String> {
@@ -248,7 +266,8 @@ fn read_model(out: &Path, result: &mut FileResult) {
     };
     result.correction = model["correction"].as_str().map(str::to_owned);
     for warning in model["warnings"].as_array().into_iter().flatten() {
-        if warning["code"] == "corrected_image_off"
+        if (warning["code"] == "corrected_image_off"
+            || warning["code"] == "corrected_image_unchecked")
             && let Some(message) = warning["message"].as_str()
         {
             for pass in ["trace", "retrace"] {

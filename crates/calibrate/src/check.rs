@@ -63,12 +63,22 @@ impl CheckOptions {
                 ))
             }
         };
-        in_range("pitch_tolerance", self.pitch_tolerance, 0.0, 100.0)?;
+        in_range(
+            "pitch_tolerance",
+            self.pitch_tolerance,
+            0.0,
+            MAX_PITCH_TOLERANCE,
+        )?;
         in_range("max_anisotropy", self.max_anisotropy, 1.0, 100.0)?;
         in_range("max_shear_deg", self.max_shear_deg, 0.0, 80.0)?;
         in_range("max_shell_spread", self.max_shell_spread, 1.0, 1e12)
     }
 }
+
+/// The largest pixel-size tolerance a user may set. Beyond it (the command line's `--nn
+/// auto`) the constant is unknown, and no reading of the image is preferred for the scale
+/// it needs.
+pub const MAX_PITCH_TOLERANCE: f64 = 100.0;
 
 /// The slow axis may be off by this factor more than the fast axis: a constant drift of
 /// up to about the slow-scan speed stretches or squeezes it like a wrong pixel size.
@@ -96,7 +106,9 @@ impl CheckOptions {
 }
 
 /// Fits `lattice` to the measured peaks within the options' bounds and checks the match:
-/// the map must explain the image's strong peaks. When none inside the bounds does, the
+/// the map must explain the image's strong peaks. A map within the default (typed-constant)
+/// pixel-size tolerance that explains them is taken before a wider tolerance is searched.
+/// When none inside the bounds does, the
 /// error says why: a map outside the pixel-size tolerance would ([`CalibrationError::WrongScale`]),
 /// or no plausible map does, naming the peaks left unexplained
 /// ([`CalibrationError::WrongLatticeType`]).
@@ -106,11 +118,29 @@ pub fn check_inputs(
     fast_axis: Axis,
     options: &CheckOptions,
 ) -> Result<LatticeMatch, CalibrationError> {
+    let accepted = |m: &LatticeMatch| {
+        !options.check_lattice_type
+            || (m.explains_image && type_contradiction(m, options).is_none())
+    };
+    // The reading that needs the smallest pixel-size correction comes first: where the
+    // file's pixel size explains the image (the atoms under a commensurate superstructure),
+    // a wider tolerance does not make the superstructure the lattice.
+    let typed = CheckOptions::default().pitch_tolerance;
+    if options.pitch_tolerance > typed && options.pitch_tolerance <= MAX_PITCH_TOLERANCE {
+        let narrow = CheckOptions {
+            pitch_tolerance: typed,
+            ..*options
+        };
+        if let Some(matched) = match_lattice(measurement, lattice, &narrow.bounds(fast_axis))
+            && accepted(&matched)
+        {
+            return Ok(matched);
+        }
+    }
     let bounds = options.bounds(fast_axis);
     let within = match_lattice(measurement, lattice, &bounds);
     if let Some(matched) = &within
-        && (!options.check_lattice_type
-            || (matched.explains_image && type_contradiction(matched, options).is_none()))
+        && accepted(matched)
     {
         return Ok(matched.clone());
     }
@@ -162,7 +192,8 @@ fn partial_fit_note(within: Option<&LatticeMatch>) -> String {
         )
     };
     format!(
-        "; at {} it explains only {:.0} % of the strong Fourier peaks' amplitude{rest}",
+        "; at {} it explains only {:.0} % of the strong Fourier peaks' amplitude \
+         (of those at its periods or shorter){rest}",
         crate::length(m.nn_in_file_m / m.calibration.mean_scale),
         100.0 * m.explained_fraction,
     )
@@ -198,7 +229,7 @@ fn unexplained_evidence(matched: &LatticeMatch) -> String {
     };
     format!(
         "its best map (a {:.2}× stretch) explains {:.0} % of the strong Fourier peaks' \
-         amplitude{missing}; left unexplained: {}",
+         amplitude (of those at its periods or shorter){missing}; left unexplained: {}",
         matched.calibration.anisotropy,
         100.0 * matched.explained_fraction,
         if peaks.is_empty() {

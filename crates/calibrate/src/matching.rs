@@ -157,7 +157,10 @@ pub struct LatticeMatch {
     pub cell_in_file_m: [[f64; 2]; 2],
     /// The first reciprocal shells of the lattice and their powers in the image.
     pub shells: Vec<ShellCheck>,
-    /// Fraction of the strong peaks' amplitude (√power) that lattice reflections explain.
+    /// Fraction of the strong peaks' amplitude (√power) that lattice reflections explain,
+    /// of the peaks at the lattice's periods or shorter (a strong peak at a longer period
+    /// is a superstructure or moiré over it: in [`LatticeMatch::unexplained`], not counted
+    /// against the lattice).
     pub explained_fraction: f64,
     /// Fraction of the reflections the lattice predicts strongest (those the spectrum can
     /// show) that are observed peaks.
@@ -185,7 +188,8 @@ impl LatticeMatch {
     /// index (-0.34, -0.66))".
     pub fn explanation(&self) -> String {
         let explained = format!(
-            "the {} lattice explains {:.0} % of the strong Fourier peaks' amplitude",
+            "the {} lattice explains {:.0} % of the strong Fourier peaks' amplitude \
+             (of those at its periods or shorter)",
             self.lattice,
             100.0 * self.explained_fraction
         );

@@ -33,7 +33,7 @@ use crate::structure::{amplitude, structure_factor};
 pub const STRONG_POWER_FRACTION: f64 = 0.02;
 
 /// The named lattice must explain at least this fraction of the strong peaks' amplitude
-/// (√power), and two independent strong peaks must be at the reflections of its two strongest
+/// (√power; of the peaks at its periods or shorter: a longer period is a pattern over it), and two independent strong peaks must be at the reflections of its two strongest
 /// predicted shells. A superstructure as strong as the lattice (Pb on Pt(111)) leaves about half
 /// of the amplitude unexplained; a lattice of the wrong type explains two peaks at most by
 /// chance.
@@ -163,7 +163,8 @@ pub(crate) struct NamedFit {
     pub covariance: Matrix4<f64>,
     /// Each peak's index in the lattice, if it is explained.
     pub indices: Vec<Option<[i64; 2]>>,
-    /// Fraction of the strong peaks' amplitude explained.
+    /// Fraction of the strong peaks' amplitude explained, of those at the lattice's
+    /// periods or shorter.
     pub explained_fraction: f64,
     /// Whether two independent strong peaks are at reflections of the two shells the lattice
     /// predicts strongest.
@@ -279,12 +280,31 @@ struct Indexing {
     independent: bool,
 }
 
+/// A strong peak shorter in frequency than this fraction of the lattice's lowest
+/// reflection (a period longer than the lattice's longest) cannot be any reflection of it:
+/// it belongs to a pattern over the lattice (a superstructure, a moiré, satellites).
+const LONG_PERIOD: f64 = 0.9;
+
+/// The frequency (bins) of the lattice's lowest non-extinct reflection under `basis`.
+fn lowest_reflection(basis: &Matrix2<f64>, shells: &[PredictedShell]) -> f64 {
+    shells
+        .iter()
+        .flat_map(|s| s.indices.iter())
+        .filter(|h| h[0].abs() <= 2 && h[1].abs() <= 2)
+        .map(|h| (basis * Vector2::new(h[0] as f64, h[1] as f64)).norm())
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Indexes `peaks` with `basis` (a peak is explained within 1 bin or 4 % of its radius,
 /// at most a quarter of the shortest basis vector, at a reflection that is not extinct).
+/// The explained fraction is of the strong peaks the lattice could explain: those at a
+/// period longer than its longest ([`LONG_PERIOD`]) are a pattern over it, reported but
+/// not counted against it.
 fn index(basis: &Matrix2<f64>, peaks: &[Peak], shells: &[PredictedShell]) -> Option<Indexing> {
     let inverse = basis.try_inverse()?;
     let shortest = basis.column(0).norm().min(basis.column(1).norm());
     let strongest = peaks.first().map_or(0.0, |p| p.power);
+    let long_period_below = LONG_PERIOD * lowest_reflection(basis, shells);
     let (mut score, mut explained, mut strong_total) = (0.0, 0.0, 0.0);
     let mut strong_indices: Vec<[i64; 2]> = Vec::new();
     let indices: Vec<Option<[i64; 2]>> = peaks
@@ -297,7 +317,7 @@ fn index(basis: &Matrix2<f64>, peaks: &[Peak], shells: &[PredictedShell]) -> Opt
             let weight = weight_of(shells, index);
             let amplitude = p.power.max(0.0).sqrt();
             let strong = p.power >= STRONG_POWER_FRACTION * strongest;
-            if strong {
+            if strong && k.norm() >= long_period_below {
                 strong_total += amplitude;
             }
             let hit = (basis * h - k).norm() <= tolerance && weight > 0.0;

@@ -116,6 +116,41 @@ fn hopg_terrace_corrected_lattice_is_graphite() {
     );
 }
 
+/// FeBr₂ on Au(111) (Nanonis, FAIRmat): a (√7×√7)-like superstructure far stronger than
+/// the atoms. The atoms' lattice at the constant typed explains the image; the
+/// superstructure's peaks are left over, and with `--calibrate` they are not made the
+/// lattice either.
+#[test]
+fn febr2_under_a_strong_superstructure_keeps_the_atoms_lattice() {
+    let input = tests_data("real/febr2_on_au111_4nm.sxm");
+    let dir = tempfile::tempdir().unwrap();
+    for (i, extra) in [&[][..], &["--calibrate"][..]].into_iter().enumerate() {
+        let args = [&["--lattice", "hexagonal", "--nn", "3.78A"][..], extra].concat();
+        let out = dir.path().join(i.to_string());
+        let output = correct(&input, &args, &out);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{args:?}: {stderr}");
+        let model: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap())
+                .unwrap();
+        // The pixel size calibrated from the atoms (a few %), not from the superstructure
+        // (×2.6), and both corrected images' lattices, measured by FFT, the atoms'.
+        let mean_scale = model["calibration"]["calibration"]["mean_scale"]
+            .as_f64()
+            .unwrap();
+        assert!((mean_scale - 1.0).abs() < 0.1, "{args:?}: {mean_scale}");
+        let checks = model["corrected_images"].as_array().unwrap();
+        assert_eq!(checks.len(), 2, "{args:?}: {stderr}");
+        for check in checks {
+            let scale = &check["calibration"]["scale"];
+            for k in [scale[0].as_f64().unwrap(), scale[1].as_f64().unwrap()] {
+                assert!((k - 1.0).abs() <= 0.015, "{args:?}: {check}");
+            }
+            assert!(check["angle_error_deg"].as_f64().unwrap() <= 1.0, "{check}");
+        }
+    }
+}
+
 #[test]
 fn tise2_with_a_miscalibrated_head_is_calibrated_by_its_lattice() {
     let Some(path) = real_data("tise2_nanonis_generic_5e.sxm") else {
@@ -197,4 +232,27 @@ fn images_that_cannot_support_the_model_stop_clearly_or_fall_back_honestly() {
             );
         }
     }
+}
+
+/// h-BN around a defect (Nanonis, spmpy): the atoms appear dark. Read as bright, too few
+/// features are found; the error counts the minima and the hint names the polarity.
+#[test]
+fn dark_atoms_read_as_bright_are_named_with_the_other_polarity() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = tests_data("real/hbn_defect_nanonis_2nm.sxm");
+    let args = ["--lattice", "hexagonal", "--nn", "2.504A"];
+    let output = correct(&input, &args, &dir.path().join("bright"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("its minima give") && stderr.contains("hint: add --polarity dark"),
+        "{stderr}"
+    );
+    let dark = [&args[..], &["--polarity", "dark"]].concat();
+    let output = correct(&input, &dark, &dir.path().join("dark"));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
 }

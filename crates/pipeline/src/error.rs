@@ -1,7 +1,7 @@
 //! Errors of the chain, each naming the stage that failed and what to try.
 
 use dhct_distortion::DistortionError;
-use dhct_features::FeatureError;
+use dhct_features::{FeatureError, Polarity};
 use dhct_lattice::{LatticeError, LatticeFitError};
 use dhct_unitcell::UnitCellError;
 use thiserror::Error;
@@ -14,9 +14,10 @@ pub enum PipelineError {
     Features(#[from] FeatureError),
     /// Too few features were found to analyse the lattice.
     #[error(
-        "only {found} features found in the {pass} image (at least {needed} needed): \
+        "only {found} features found in the {pass} image (at least {needed} needed){}: \
          check --nn (the nearest-neighbour distance), --polarity, and that the image is \
-         atomically resolved"
+         atomically resolved",
+        opposite_note(*.opposite_polarity)
     )]
     TooFewFeatures {
         /// Which image.
@@ -25,6 +26,9 @@ pub enum PipelineError {
         found: usize,
         /// How many are needed.
         needed: usize,
+        /// When the image's features of the other polarity (minima for bright atoms,
+        /// maxima for dark) are enough: that polarity and how many it gives.
+        opposite_polarity: Option<(Polarity, usize)>,
     },
     /// Features were found but too few sit in the lattice's neighbour pattern.
     #[error(
@@ -85,4 +89,17 @@ pub enum PipelineError {
     /// An option is out of range.
     #[error("invalid option: {0}")]
     BadOption(String),
+}
+
+/// "; its minima give 41 features (the atoms may appear dark)" or nothing.
+fn opposite_note(opposite: Option<(Polarity, usize)>) -> String {
+    match opposite {
+        Some((Polarity::Dark, n)) => {
+            format!("; its minima give {n} features (the atoms may appear dark)")
+        }
+        Some((Polarity::Bright, n)) => {
+            format!("; its maxima give {n} features (the atoms may appear bright)")
+        }
+        None => String::new(),
+    }
 }

@@ -238,13 +238,7 @@ fn check_mask(mask: Option<&Array2<bool>>, geometry: &ScanGeometry) -> Result<()
 /// calibration's mean scale when the lattice was measured). An error when an image has
 /// fewer than [`MIN_FEATURES`].
 fn find_all_features(inputs: &Inputs) -> Result<Vec<FoundPass>, PipelineError> {
-    let mut feature_options = inputs.options.features.clone();
-    if !feature_options.neighbour_distance.is_finite() {
-        feature_options.neighbour_distance = inputs.lattice.nearest_neighbour_distance();
-    }
-    if let Ok(found) = inputs.calibration {
-        feature_options.neighbour_distance *= found.calibration.mean_scale;
-    }
+    let feature_options = feature_options_of(inputs);
     let found = find_features_in_pair_and_correlation(inputs.pair, &feature_options, inputs.mask)?;
     // A correlation map is kept (for plots) in single precision, and one not asked for is
     // let go now, not at the end of the run.
@@ -259,10 +253,58 @@ fn find_all_features(inputs: &Inputs) -> Result<Vec<FoundPass>, PipelineError> {
                 pass: set.pass.to_string(),
                 found: set.features.len(),
                 needed: MIN_FEATURES,
+                opposite_polarity: opposite_polarity(inputs, set),
             });
         }
     }
     Ok(found)
+}
+
+/// The feature options of the run: the kernel sized from the lattice's nearest-neighbour
+/// distance (metres) as the image shows it (scaled by the calibration's mean scale when the
+/// lattice was measured).
+fn feature_options_of(inputs: &Inputs) -> dhct_features::FeatureOptions {
+    let mut feature_options = inputs.options.features.clone();
+    if !feature_options.neighbour_distance.is_finite() {
+        feature_options.neighbour_distance = inputs.lattice.nearest_neighbour_distance();
+    }
+    if let Ok(found) = inputs.calibration {
+        feature_options.neighbour_distance *= found.calibration.mean_scale;
+    }
+    feature_options
+}
+
+/// When `too_few` (an image with too few features) gives more features of the other
+/// polarity, enough for the whole chain (the lattice fit's per-region minimum): that
+/// polarity and the count (atoms that appear
+/// dark, read as bright, leave the minima between them).
+fn opposite_polarity(
+    inputs: &Inputs,
+    too_few: &FeatureSet,
+) -> Option<(dhct_features::Polarity, usize)> {
+    use dhct_features::Polarity;
+    let options = feature_options_of(inputs);
+    let other = match options.polarity {
+        Polarity::Bright => Polarity::Dark,
+        Polarity::Dark => Polarity::Bright,
+    };
+    let image = inputs.pair.image(too_few.pass)?;
+    let flipped = dhct_features::FeatureOptions {
+        polarity: other,
+        ..options.clone()
+    };
+    let found = dhct_features::find_features(
+        image,
+        inputs.pair.geometry(),
+        too_few.pass,
+        &flipped,
+        inputs.mask,
+    )
+    .ok()?
+    .features
+    .len();
+    let needed = MIN_FEATURES.max(inputs.options.regions.min_features);
+    (found >= needed && found > too_few.features.len()).then_some((other, found))
 }
 
 /// Step 2: the drift/creep/hysteresis model, its neighbour search seeded with the affine
@@ -310,6 +352,32 @@ fn fit_distortion_model(
     }
 }
 
+/// A too-few-features error of the lattice fit with the other polarity's count (when it
+/// finds more in the first image).
+fn with_opposite_polarity(
+    error: PipelineError,
+    inputs: &Inputs,
+    sets: &[&FeatureSet],
+) -> PipelineError {
+    match (error, sets.first()) {
+        (
+            PipelineError::TooFewFeatures {
+                pass,
+                found,
+                needed,
+                opposite_polarity: None,
+            },
+            Some(first),
+        ) => PipelineError::TooFewFeatures {
+            pass,
+            found,
+            needed,
+            opposite_polarity: opposite_polarity(inputs, first).filter(|&(_, n)| n > found),
+        },
+        (error, _) => error,
+    }
+}
+
 /// Steps 3–4: the lattice fitted per region to the features `dhct` corrected. When the
 /// lattice was measured and the model was fitted, each region is compared with the global
 /// affine correction; if the affine map does better in the largest region it replaces the
@@ -331,7 +399,8 @@ fn choose_correction(
     } = *inputs;
     let geometry = pair.geometry();
     let (regions, skipped_regions) =
-        fit_regions(pair, lattice, mask, options, sets, &corrected_features)?;
+        fit_regions(pair, lattice, mask, options, sets, &corrected_features)
+            .map_err(|e| with_opposite_polarity(e, inputs, sets))?;
     let mut comparisons = Vec::new();
     if let (Ok(found), false) = (calibration, model_failed) {
         let c = &found.calibration;
@@ -617,6 +686,12 @@ fn collect_warnings(
     warnings.extend(warnings::model_image_warnings(
         lattice,
         &analysis.rejected_model_images,
+    ));
+    let corrected: Vec<ScanPass> = analysis.passes.iter().map(|p| p.pass).collect();
+    warnings.extend(warnings::unchecked_image_warnings(
+        analysis.calibration.is_ok(),
+        &corrected,
+        &analysis.corrected_images,
     ));
     warnings
 }

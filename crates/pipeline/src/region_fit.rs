@@ -241,6 +241,7 @@ fn no_region_error(
             },
             found: skipped.iter().map(|s| s.features).max().unwrap_or(0),
             needed,
+            opposite_polarity: None,
         },
     }
 }

@@ -5,7 +5,7 @@
 use dhct_calibrate::PairCalibration;
 use dhct_distortion::{DhctResult, Parameter};
 use dhct_lattice::Lattice;
-use dhct_scan::{ScanGeometry, ValueSource};
+use dhct_scan::{ScanGeometry, ScanPass, ValueSource};
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -61,6 +61,9 @@ pub enum WarningCode {
     FewIndexed,
     /// A corrected image's lattice, measured by FFT, is not the lattice given.
     CorrectedImageOff,
+    /// A corrected image's lattice could not be measured by FFT, so the correction is not
+    /// checked against the image (the raw image's lattice was measured).
+    CorrectedImageUnchecked,
     /// The drift model could not be fitted; the global affine correction was used.
     ModelNotFitted,
     /// The drift model's corrected image was not the lattice given; the global affine
@@ -153,6 +156,7 @@ impl WarningCode {
             WarningCode::LargeDeviation => "large_deviation",
             WarningCode::FewIndexed => "few_indexed",
             WarningCode::CorrectedImageOff => "corrected_image_off",
+            WarningCode::CorrectedImageUnchecked => "corrected_image_unchecked",
             WarningCode::ModelNotFitted => "model_not_fitted",
             WarningCode::ModelImageOff => "model_image_off",
         }
@@ -424,6 +428,35 @@ pub(crate) fn corrected_image_warnings(
         .collect()
 }
 
+/// Corrected images of `passes` whose lattice could not be measured by FFT although the raw
+/// images' was (`measured`): their correction is not checked against the image.
+pub(crate) fn unchecked_image_warnings(
+    measured: bool,
+    passes: &[ScanPass],
+    checks: &[CorrectedImageCheck],
+) -> Vec<Warning> {
+    if !measured {
+        return Vec::new();
+    }
+    passes
+        .iter()
+        .filter(|&&pass| checks.iter().all(|c| c.pass != pass))
+        .map(|pass| {
+            Warning::new(
+                WarningCode::CorrectedImageUnchecked,
+                format!(
+                    "corrected {pass}: its lattice could not be measured by FFT (the raw \
+                     image's could), so the correction is not checked against the image"
+                ),
+                "check lengths in this image against a known feature before taking them; \
+                 a mask over the atomically resolved area, without defects and steps, helps \
+                 the measurement",
+            )
+            .with_inputs(&[UserInput::Mask])
+        })
+        .collect()
+}
+
 /// The drift model's corrected images that failed the FFT check, when the affine
 /// correction was kept for that reason.
 pub(crate) fn model_image_warnings(
@@ -671,6 +704,23 @@ mod tests {
         };
         assert!(!better.model_is_worse());
         assert!(affine_warnings(&[better], false).is_empty());
+    }
+
+    #[test]
+    fn a_corrected_image_that_could_not_be_measured_is_named_when_the_raw_one_was() {
+        let checked = CorrectedImageCheck {
+            pass: ScanPass::Trace,
+            calibration: dhct_calibrate::Calibration::identity(),
+            angle_error_deg: 0.0,
+        };
+        let both = [ScanPass::Trace, ScanPass::Retrace];
+        let warnings = unchecked_image_warnings(true, &both, &[checked]);
+        assert_eq!(codes(&warnings), [WarningCode::CorrectedImageUnchecked]);
+        assert!(warnings[0].message.starts_with("corrected retrace:"));
+        // Nothing to say when the raw images' lattice was not measured either (that has its
+        // own warning), or when every corrected image was checked.
+        assert!(unchecked_image_warnings(false, &both, &[]).is_empty());
+        assert!(unchecked_image_warnings(true, &both[..1], &[checked]).is_empty());
     }
 
     #[test]

@@ -9,8 +9,9 @@
 //! Prints one row per file: right / refused (with the reason) / wrong, the correction kept
 //! (drift model or affine) with both lattice-fit rms deviations, the corrected lattice's
 //! scales and shear, and the non-affine displacement (Bragg phases) of the raw and the
-//! corrected image. A pass whose lattice is off counts as flagged when dhct's own
-//! `corrected_image_off` warning names it, as wrong otherwise. Exits non-zero when a file
+//! corrected image. A pass whose lattice is off (or cannot be measured) counts as flagged
+//! when dhct's own `corrected_image_off` (`corrected_image_unchecked`) warning names it,
+//! as wrong otherwise. Exits non-zero when a file
 //! is wrong at exit 0 without a warning.
 
 use std::path::PathBuf;
@@ -78,7 +79,7 @@ fn print_row(name: &str, periods: f64, r: &FileResult) {
         Verdict::Right => "right".to_string(),
         Verdict::Refused(why) => format!("refused: {why}"),
         Verdict::Wrong(why) => format!("WRONG: {why}"),
-        Verdict::Flagged(why) => format!("a pass off, flagged by dhct: {why}"),
+        Verdict::Flagged(why) => format!("a pass off or unchecked, flagged by dhct: {why}"),
         Verdict::Missing(why) => format!("missing: {why}"),
     };
     println!(

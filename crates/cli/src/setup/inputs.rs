@@ -121,6 +121,16 @@ pub fn with_measured_nn(
 pub fn explain(error: &PipelineError) -> String {
     match error {
         PipelineError::Calibration(e) => explain_calibration(e),
+        PipelineError::TooFewFeatures {
+            opposite_polarity: Some((polarity, _)),
+            ..
+        } => format!(
+            "{error}\nhint: add --polarity {}, or check --lattice and --nn against the image",
+            match polarity {
+                dhct_features::Polarity::Dark => "dark",
+                dhct_features::Polarity::Bright => "bright",
+            }
+        ),
         PipelineError::TooFewFeatures { .. } | PipelineError::LatticeMismatch { .. } => format!(
             "{error}\nhint: check --lattice and --nn against the image, --polarity, and that \
              the mask covers the atomically resolved part"
