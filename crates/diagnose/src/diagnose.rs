@@ -259,6 +259,11 @@ fn diagnose_from(
     if verdict.kind != VerdictKind::NoGap {
         verdict.note_near_ties(&greedy.added);
     }
+    let (added, below_floor) = if verdict.kind == VerdictKind::NoGap {
+        (Vec::new(), greedy.added)
+    } else {
+        (greedy.added, Vec::new())
+    };
     let residuals = feature_residuals(&prepared, &fitted, base, &current);
     let all = &prepared.observations;
     Ok(DiagnosisReport {
@@ -280,7 +285,8 @@ fn diagnose_from(
             after_top: greedy.top_gap,
             after_greedy: final_summary.gap.gap_to_noise,
         },
-        added: greedy.added,
+        added,
+        below_floor,
         final_model: final_summary,
         final_location,
         sub_feature: None,

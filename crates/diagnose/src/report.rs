@@ -179,8 +179,12 @@ pub struct DiagnosisReport {
     pub location: Option<GapLocation>,
     /// The greedy rounds.
     pub rounds: Vec<GreedyRound>,
-    /// Effects added, in order.
+    /// Effects added, in order (none when the verdict is `no_gap`).
     pub added: Vec<AddedEffect>,
+    /// With `no_gap`: effects the selection still found significant, below the floor (not
+    /// findings), in order.
+    #[serde(default)]
+    pub below_floor: Vec<AddedEffect>,
     /// Gap before and after.
     pub shrink: Shrink,
     /// The final model.
@@ -244,6 +248,14 @@ impl fmt::Display for DiagnosisReport {
         }
         self.write_rounds(f)?;
         self.write_added(f)?;
+        if !self.below_floor.is_empty() {
+            let listed: Vec<Candidate> = self.below_floor.iter().map(|a| a.candidate).collect();
+            writeln!(
+                f,
+                "below the floor (significant, not findings): {}",
+                names(&listed)
+            )?;
+        }
         self.write_shrink(f)
     }
 }

@@ -5,7 +5,7 @@
 //! threshold is [`GAP_THRESHOLD`] (1.2 × the floor).
 //!
 //! * `no_gap`: the base model is within the threshold (effects that were still found
-//!   significant below it are listed as `below_floor`).
+//!   significant below it are listed as `below_floor`, never as `effects` or `added`).
 //! * `explained`: named effects bring a gap above the threshold to within it.
 //! * `partly_explained`: named effects remove at least [`PARTLY_FRACTION`] of the excess
 //!   `gap² − 1` but a gap above the threshold remains.
@@ -98,8 +98,13 @@ pub struct Verdict {
     pub threshold: f64,
     /// Share of the excess `gap² − 1` the named effects removed (0 when there was none).
     pub explained_fraction: f64,
-    /// The named effects, in the order they were added.
+    /// The named effects, in the order they were added (none when the verdict is
+    /// `no_gap`).
     pub effects: Vec<Candidate>,
+    /// With `no_gap`: effects still found significant, whose model stays within the noise
+    /// floor either way. Not findings: the positions do not need them.
+    #[serde(default)]
+    pub below_floor: Vec<Candidate>,
     /// Where the remaining gap lies (after the named effects), largest share first.
     pub remaining: Vec<GapPlace>,
     /// Whether the floor is independent of the residuals (false: it is their own spread,
@@ -177,6 +182,12 @@ pub(crate) fn decide(
     };
     // Excess χ² per degree of freedom × features: comparable with a bin's
     // `(χ²/dof − 1) · count`.
+    // A gap within the floor needs no effect: what was still significant is kept apart.
+    let (effects, below_floor) = if kind == VerdictKind::NoGap {
+        (Vec::new(), effects)
+    } else {
+        (effects, Vec::new())
+    };
     let total_excess = excess(gap_after) * n as f64;
     let remaining = match (kind, final_location) {
         (VerdictKind::PartlyExplained | VerdictKind::Unexplained, Some(l)) => {
@@ -191,6 +202,7 @@ pub(crate) fn decide(
         threshold: GAP_THRESHOLD,
         explained_fraction,
         effects,
+        below_floor,
         remaining,
         floor_independent: source != FloorSource::ResidualSpread,
         summary: String::new(),
@@ -228,17 +240,18 @@ pub(crate) fn names(effects: &[Candidate]) -> String {
 /// The verdict in plain words.
 fn words(v: &Verdict) -> String {
     let mut s = match v.kind {
-        VerdictKind::NoGap if v.effects.is_empty() => format!(
+        VerdictKind::NoGap if v.below_floor.is_empty() => format!(
             "No gap: the base model (drift, creep, hysteresis) explains the feature positions \
              to the noise floor ({:.2} × floor; threshold {:.1}).",
             v.gap_before, v.threshold
         ),
         VerdictKind::NoGap => format!(
             "No gap: the base model explains the feature positions to the noise floor ({:.2} × \
-             floor; threshold {:.1}); {} is significant but below the floor ({:.2} × floor with it).",
+             floor; threshold {:.1}); below the floor, not a finding: {} is significant but \
+             changes the gap only to {:.2} × floor.",
             v.gap_before,
             v.threshold,
-            names(&v.effects),
+            names(&v.below_floor),
             v.gap_after
         ),
         VerdictKind::Explained => format!(
@@ -319,6 +332,17 @@ mod tests {
         assert_eq!(none.kind, VerdictKind::Unexplained);
         assert!(!none.summary.contains("no unmodelled effect needed"));
         assert!(none.summary.starts_with("Unexplained"));
+    }
+
+    #[test]
+    fn effects_significant_below_the_floor_are_not_listed_as_effects() {
+        let verdict = v(1.17, 1.02, vec![Candidate::Vibration]);
+        assert_eq!(verdict.kind, VerdictKind::NoGap);
+        assert!(verdict.effects.is_empty());
+        assert_eq!(verdict.below_floor, [Candidate::Vibration]);
+        assert!(verdict.summary.contains("not a finding"), "{}", verdict.summary);
+        let explained = v(3.0, 1.1, vec![Candidate::TipChange]);
+        assert!(explained.below_floor.is_empty());
     }
 
     #[test]
