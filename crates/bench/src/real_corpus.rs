@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use dhct_calibrate::{CheckOptions, LatticeMatch, match_lattice, measure_lattice};
-use dhct_lattice::{Hexagonal, PlaneGroup};
+use dhct_lattice::{Hexagonal, Lattice, PlaneGroup, Square};
 use dhct_scan::{ScanPair, ScanPass};
 use serde::Deserialize;
 
@@ -45,10 +45,25 @@ pub struct CorpusFile {
     pub surface: String,
     /// The file's vendor and format.
     pub vendor: String,
-    /// The surface's hexagonal lattice constant from the literature, metres, if known.
+    /// The surface's translation lattice the judge fits: `hexagonal` (default) or
+    /// `square`.
+    #[serde(default)]
+    pub judge_lattice: JudgeLattice,
+    /// The surface's lattice constant from the literature, metres, if known.
     pub judge_a_m: Option<f64>,
     /// About how many lattice periods the frame holds.
     pub periods_across: f64,
+}
+
+/// The translation lattice a corpus file is judged with.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JudgeLattice {
+    /// Hexagonal (one site per 60° rhombus).
+    #[default]
+    Hexagonal,
+    /// Square.
+    Square,
 }
 
 /// The corpus manifest.
@@ -286,10 +301,15 @@ fn read_model(out: &Path, result: &mut FileResult) {
     }
 }
 
-/// The hexagonal lattice the judge fits: the literature constant, or (shape only) any.
-fn judge_lattice(file: &CorpusFile) -> Hexagonal {
+/// The lattice the judge fits: the literature constant, or (shape only) any.
+fn judge_lattice(file: &CorpusFile) -> Box<dyn Lattice> {
     let a = file.judge_a_m.unwrap_or(1e-9);
-    Hexagonal::new("judge", a, PlaneGroup::P6mm).expect("a positive constant")
+    match file.judge_lattice {
+        JudgeLattice::Hexagonal => {
+            Box::new(Hexagonal::new("judge", a, PlaneGroup::P6mm).expect("a positive constant"))
+        }
+        JudgeLattice::Square => Box::new(Square::new(a).expect("a positive constant")),
+    }
 }
 
 /// The image of `pass` in `pair`, or its only image (a GSF holds one, in either slot).
@@ -320,7 +340,7 @@ fn fit(
     };
     let mut bounds = options.bounds(pair.geometry().fast_axis());
     bounds.slow_scale = bounds.fast_scale;
-    match_lattice(&measured, &judge_lattice(file), &bounds)
+    match_lattice(&measured, judge_lattice(file).as_ref(), &bounds)
         .filter(|m| m.explains_image)
         .ok_or_else(|| "the surface's lattice does not explain its Fourier peaks".to_string())
 }

@@ -340,7 +340,11 @@ mod tests {
         assert_eq!(verdict.kind, VerdictKind::NoGap);
         assert!(verdict.effects.is_empty());
         assert_eq!(verdict.below_floor, [Candidate::Vibration]);
-        assert!(verdict.summary.contains("not a finding"), "{}", verdict.summary);
+        assert!(
+            verdict.summary.contains("not a finding"),
+            "{}",
+            verdict.summary
+        );
         let explained = v(3.0, 1.1, vec![Candidate::TipChange]);
         assert!(explained.below_floor.is_empty());
     }
