@@ -7,10 +7,13 @@
 //! distribution function, and how local distortion is measured (ellipse fit for ≥ 5
 //! equidistant neighbours, local affine map otherwise).
 //!
-//! Built in: [`Hexagonal`] (graphite's imaged atoms, a = 2.46 Å; the (√3×√3)R30°
-//! alkanethiol SAM on Au(111), a = 4.99 Å), [`Honeycomb`] (graphene, both sublattices),
-//! [`Square`], [`Rectangular`]; any other lattice is a [`UserLattice`] read from TOML or
-//! JSON, without writing Rust.
+//! Built in, by name in [`catalogue::CATALOGUE`] (docs/lattices.md): graphite's imaged
+//! atoms (a = 2.46 Å), honeycomb (graphene, both sublattices), hexagonal, the (√3×√3)R30°
+//! alkanethiol SAM on Au(111) (a = 4.99 Å), Si(111)-7×7, square, rectangular, centred
+//! rectangular, an oblique two-site cell and kagome (types [`Hexagonal`], [`Honeycomb`],
+//! [`Square`], [`Rectangular`], [`CentredRectangular`], [`Oblique`], [`Kagome`] and the 7×7
+//! preset). Any other lattice is a [`UserLattice`] read from TOML or JSON, without writing
+//! Rust.
 //!
 //! Frames: lattice vectors are in the *sample frame*, x to the right and y down (the display
 //! convention of `dhct-scan`), in metres, with `a1` along +x unless a lattice says otherwise.

@@ -48,7 +48,9 @@ impl Length {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CorrectConfig {
-    /// graphite, square, honeycomb, sam-sqrt3, or the path of a user lattice (TOML/JSON).
+    /// A catalogue lattice (`dhct_lattice::catalogue::CATALOGUE`: graphite, honeycomb,
+    /// hexagonal, sam-sqrt3, si111-7x7, square, rectangular, centred-rectangular, oblique,
+    /// kagome), or the path of a user lattice (TOML/JSON).
     pub lattice: Option<String>,
     /// Nearest-neighbour distance; replaces the preset's.
     pub nn: Option<Length>,

@@ -160,9 +160,9 @@ fn explain_calibration(error: &CalibrationError) -> String {
             length(*given_nn_m)
         ),
         CalibrationError::WrongLatticeType { .. } => format!(
-            "{error}\nhint: choose the lattice the image shows with --lattice (graphite, \
-             hexagonal, square, honeycomb, si111-7x7 or a lattice file); --trust-inputs skips \
-             this check"
+            "{error}\nhint: choose the lattice the image shows with --lattice ({} or a \
+             lattice file); --trust-inputs skips this check",
+            dhct_lattice::catalogue::names()
         ),
         _ => error.to_string(),
     }
