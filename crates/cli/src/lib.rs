@@ -7,6 +7,7 @@ pub mod correct;
 pub mod diagnose;
 pub mod flags;
 pub mod info;
+pub mod lattice_check;
 pub mod output_dir;
 pub mod read_limits;
 pub mod report;

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use dhct_cli::{batch, correct, diagnose, info, simulate, units};
+use dhct_cli::{batch, correct, diagnose, info, lattice_check, simulate, units};
 use dhct_scan::ScanDirection;
 use dhct_sm4_io::GeometryOverrides;
 
@@ -154,6 +154,14 @@ enum Command {
         #[command(flatten)]
         geometry: GeometryArgs,
     },
+    /// Check a lattice against the contract every lattice keeps (neighbour shells and
+    /// counts, the neighbour window, the plane group's metric and motif symmetry about its
+    /// origin, the translation cell, the feature appearance): a catalogue name or a
+    /// lattice file (TOML/JSON). Names every broken rule; exits with 1 when one is.
+    Lattice {
+        #[command(subcommand)]
+        action: LatticeAction,
+    },
     /// Simulate an STM acquisition (trace and retrace) of a lattice surface with drift,
     /// creep, hysteresis and other distortions; write the images (SM4, ...) and the ground
     /// truth (ground_truth.json, displacement fields as NPY) into a directory.
@@ -176,6 +184,20 @@ enum Command {
         /// Print the config as TOML (e.g. a preset to edit) instead of simulating.
         #[arg(long)]
         print_config: bool,
+    },
+}
+
+/// What `dhct lattice` does.
+#[derive(Subcommand)]
+enum LatticeAction {
+    /// Check NAME (a catalogue lattice) or FILE (a lattice file) against the contract.
+    Check {
+        /// A catalogue name (graphite, hexagonal, kagome, ...) or a lattice file.
+        lattice: String,
+        /// Nearest-neighbour distance, e.g. 3.2A (needed by catalogue shapes without a
+        /// constant; replaces a file's scale).
+        #[arg(long, value_parser = parse_nn)]
+        nn: Option<correct::Length>,
     },
 }
 
@@ -405,6 +427,14 @@ fn main() -> ExitCode {
             json,
             geometry,
         } => info::run(file, &geometry.overrides(), *json),
+        Command::Lattice {
+            action: LatticeAction::Check { lattice, nn },
+        } => nn
+            .as_ref()
+            .map(|l| l.metres())
+            .transpose()
+            .and_then(|nn_m| lattice_check::run(lattice, nn_m))
+            .map(|text| print!("{text}")),
         Command::Simulate {
             config,
             preset,

@@ -86,3 +86,34 @@ fn a_lattice_file_that_disagrees_with_its_plane_group_names_the_problem() {
         "{stderr}"
     );
 }
+
+/// `dhct lattice check FILE`: a file that keeps the contract is described; one that breaks
+/// a rule stops with exit 1 naming it.
+#[test]
+fn lattice_check_describes_a_good_file_and_names_a_broken_rule() {
+    let dir = tempfile::tempdir().unwrap();
+    let check = |file: &Path| {
+        common::dhct()
+            .args(["lattice", "check", file.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let good = check(&graphite_file(dir.path(), "[1.2300, 2.1304]", "p3m1"));
+    let text = String::from_utf8_lossy(&good.stdout);
+    assert!(
+        good.status.success(),
+        "{}",
+        String::from_utf8_lossy(&good.stderr)
+    );
+    assert!(
+        text.contains("contract holds") && text.contains("2.4600 Å") && text.contains("[6]"),
+        "{text}"
+    );
+    let broken = check(&graphite_file(dir.path(), "[1.2500, 2.1400]", "p6mm"));
+    let stderr = String::from_utf8_lossy(&broken.stderr);
+    assert_eq!(broken.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("p6mm") && stderr.contains("|a1| = |a2|"),
+        "{stderr}"
+    );
+}

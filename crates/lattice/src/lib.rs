@@ -45,6 +45,7 @@ mod precision;
 mod presets;
 mod rotation;
 mod sites;
+pub mod testing;
 mod translations;
 mod user;
 
