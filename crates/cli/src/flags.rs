@@ -15,6 +15,9 @@ pub fn flag(input: UserInput) -> &'static str {
         UserInput::Turnaround => "--turnaround",
         UserInput::ScanDirections => "--fast",
         UserInput::Mask => "--mask",
+        UserInput::Polarity => "--polarity",
+        UserInput::CalibratePixelSize => "--calibrate",
+        UserInput::TrustInputs => "--trust-inputs",
     }
 }
 
@@ -28,7 +31,7 @@ pub fn warning_line(warning: &Warning) -> String {
 }
 
 /// Every input, for front ends that list them.
-pub const ALL_INPUTS: [UserInput; 8] = [
+pub const ALL_INPUTS: [UserInput; 11] = [
     UserInput::Lattice,
     UserInput::NearestNeighbourDistance,
     UserInput::LineTime,
@@ -37,4 +40,7 @@ pub const ALL_INPUTS: [UserInput; 8] = [
     UserInput::Turnaround,
     UserInput::ScanDirections,
     UserInput::Mask,
+    UserInput::Polarity,
+    UserInput::CalibratePixelSize,
+    UserInput::TrustInputs,
 ];

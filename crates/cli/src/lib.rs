@@ -6,6 +6,7 @@ pub mod batch;
 pub mod correct;
 pub mod diagnose;
 pub mod flags;
+pub mod hints;
 pub mod info;
 pub mod lattice_check;
 pub mod output_dir;

@@ -15,7 +15,7 @@ pub enum PipelineError {
     /// Too few features were found to analyse the lattice.
     #[error(
         "only {found} features found in the {pass} image (at least {needed} needed){}: \
-         check --nn (the nearest-neighbour distance), --polarity, and that the image is \
+         check the nearest-neighbour distance, the features' polarity, and that the image is \
          atomically resolved",
         opposite_note(*.opposite_polarity)
     )]

@@ -93,6 +93,13 @@ pub enum UserInput {
     ScanDirections,
     /// A mask restricting the analysis.
     Mask,
+    /// Whether the tracked features are bright (maxima) or dark (minima).
+    Polarity,
+    /// That the lattice constant is right and the file's pixel size may be off
+    /// (calibrate the pixel size from the lattice).
+    CalibratePixelSize,
+    /// That the inputs are trusted: no check against the image, no calibration.
+    TrustInputs,
 }
 
 /// One warning.

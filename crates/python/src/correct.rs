@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use dhct_cli::correct as cli;
 use dhct_cli::correct::{AnalyseRequest, CorrectConfig, CorrectError, Corrected};
+use dhct_cli::hints::Spelling;
 use dhct_pipeline::Stage;
 use dhct_scan::{ScanPair, ScanPass};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray2};
@@ -107,10 +108,13 @@ fn run_detached(
     if let Some(error) = failed.into_inner().ok().flatten() {
         return Err(error);
     }
-    result.map_err(|e| match e {
-        CorrectError::Options(e) => to_py::<OptionError>(&e),
-        CorrectError::InputMismatch(m) => InputMismatchError::new_err(m),
-        CorrectError::Analysis(m) => AnalysisError::new_err(m),
+    // Hints name the keyword arguments of `dhct.correct`, not the command line's flags.
+    result.map_err(|e| match &e {
+        CorrectError::Options(options) => to_py::<OptionError>(options),
+        CorrectError::InputMismatch { .. } => {
+            InputMismatchError::new_err(e.render(Spelling::Python))
+        }
+        CorrectError::Analysis(_) => AnalysisError::new_err(e.render(Spelling::Python)),
     })
 }
 

@@ -201,7 +201,7 @@ def test_progress_errors_are_raised(scan):
 @pytest.mark.parametrize(
     "kwargs, error, needles",
     [
-        (dict(nn="1.23A"), dhct.InputMismatchError, ["--calibrate", "pixel size"]),
+        (dict(nn="1.23A"), dhct.InputMismatchError, ["calibrate=True", "pixel size"]),
         (dict(lattice="square", nn="2.46A"), dhct.InputMismatchError, ["square lattice"]),
         (dict(lattice="square"), dhct.OptionError, ["needs --nn"]),
         (dict(lattice="no-such-lattice"), dhct.OptionError, ["no-such-lattice"]),
@@ -218,7 +218,9 @@ def test_errors_carry_the_command_lines_messages(scan, kwargs, error, needles):
         assert needle in str(caught.value)
 
 
-def test_input_mismatch_message_equals_the_command_lines(cli, example, tmp_path):
+def test_input_mismatch_says_what_the_command_line_says_with_keyword_hints(
+    cli, example, tmp_path
+):
     run = subprocess.run(
         [str(cli), "correct", str(example), "-o", str(tmp_path / "o"), "--nn", "1.23A"],
         capture_output=True,
@@ -228,7 +230,13 @@ def test_input_mismatch_message_equals_the_command_lines(cli, example, tmp_path)
     assert run.returncode == 1
     with pytest.raises(dhct.InputMismatchError) as caught:
         dhct.correct(example, nn="1.23A")
-    assert run.stderr.strip() == f"error: {caught.value}"
+    cli_error, cli_hint = run.stderr.strip().split("\nhint: ")
+    python_error, python_hint = str(caught.value).split("\nhint: ")
+    # The same measurement; the hint names keyword arguments, not flags.
+    assert cli_error == f"error: {python_error}"
+    assert "--calibrate" in cli_hint and "--" not in python_hint
+    assert 'nn="auto"' in python_hint and "calibrate=True" in python_hint
+    assert "trust_inputs=True" in python_hint
 
 
 def test_escape_hatches_resolve_as_the_command_line(example):

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use dhct_calibrate::CalibrationError;
 use dhct_lattice::Lattice;
-use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage};
+use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage, UserInput};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::write_atomically;
@@ -17,11 +18,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
 use rayon::prelude::*;
 
+use crate::hints::{Spelling, explain, explain_calibration};
 use crate::report::figures::{FigureInputs, make_figures};
 pub use crate::report::summary::RunSummary;
 use crate::report::{html, summary, write_bytes, write_figure_files};
 pub use crate::setup::{
-    CorrectConfig, Length, Resolved, build_lattice, explain, load_mask, read_pair, resolve,
+    CorrectConfig, Length, MeasuredNnError, Resolved, build_lattice, load_mask, read_pair, resolve,
     with_measured_nn,
 };
 use feature_table::write_features_csv;
@@ -85,12 +87,39 @@ pub enum CorrectError {
     /// The lattice, constant, mask or pipeline options could not be resolved.
     #[error("{0:#}")]
     Options(anyhow::Error),
-    /// The image does not match the lattice or constant given (with the flag to change).
-    #[error("{0}")]
-    InputMismatch(String),
+    /// The image does not match the lattice or constant given.
+    #[error("{error}")]
+    InputMismatch {
+        /// What the image shows against what was given.
+        error: CalibrationError,
+        /// Whether it happened measuring the nearest-neighbour distance (`auto`).
+        measuring_nn: bool,
+    },
     /// The pipeline itself failed (too few features, lattice not found, ...).
     #[error("{0}")]
-    Analysis(String),
+    Analysis(PipelineError),
+}
+
+impl CorrectError {
+    /// The error with the hint of what to change, spelled for a front end.
+    pub fn render(&self, spelling: Spelling) -> String {
+        match self {
+            CorrectError::Options(e) => format!("{e:#}"),
+            CorrectError::InputMismatch {
+                error,
+                measuring_nn,
+            } => {
+                let text = explain_calibration(error, spelling);
+                if *measuring_nn {
+                    let auto = spelling.set(UserInput::NearestNeighbourDistance, "auto");
+                    format!("{auto}: {text}")
+                } else {
+                    text
+                }
+            }
+            CorrectError::Analysis(e) => explain(e, spelling),
+        }
+    }
 }
 
 /// What to analyse: a scan pair, the config it is resolved with, and labels for the summary.
@@ -140,12 +169,20 @@ pub fn analyse(
         lattice,
         options,
         ..
-    } = with_measured_nn(resolved, &pair, mask.as_ref())
-        .map_err(|e| CorrectError::InputMismatch(format!("{e:#}")))?;
+    } = with_measured_nn(resolved, &pair, mask.as_ref()).map_err(|e| match e {
+        MeasuredNnError::Mismatch(error) => CorrectError::InputMismatch {
+            error,
+            measuring_nn: true,
+        },
+        MeasuredNnError::Options(e) => CorrectError::Options(e),
+    })?;
     let analysis = dhct_pipeline::run(&pair, lattice.as_ref(), mask.as_ref(), &options, on_stage)
         .map_err(|e| match e {
-        PipelineError::Calibration(_) => CorrectError::InputMismatch(explain(&e)),
-        _ => CorrectError::Analysis(explain(&e)),
+        PipelineError::Calibration(error) => CorrectError::InputMismatch {
+            error: *error,
+            measuring_nn: false,
+        },
+        e => CorrectError::Analysis(e),
     })?;
     let mut summary = summary::summarise(
         input,
@@ -213,10 +250,11 @@ pub fn analyse_file(
     )
     .map_err(|e| match e {
         CorrectError::Options(e) => e,
-        CorrectError::InputMismatch(message) => anyhow::anyhow!(message),
-        CorrectError::Analysis(message) => {
-            anyhow::anyhow!(message).context(format!("analysing {}", input.display()))
+        e @ CorrectError::InputMismatch { .. } => {
+            anyhow::anyhow!(e.render(Spelling::CommandLine))
         }
+        e @ CorrectError::Analysis(_) => anyhow::anyhow!(e.render(Spelling::CommandLine))
+            .context(format!("analysing {}", input.display())),
     })
 }
 

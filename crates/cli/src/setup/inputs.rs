@@ -1,10 +1,9 @@
-//! What a config resolves to (lattice, constant, pipeline options), `--nn auto`, and the
-//! hints that turn the pipeline's typed errors into which flag to change.
+//! What a config resolves to (lattice, constant, pipeline options) and `--nn auto`.
 
 use anyhow::{Context, Result};
-use dhct_calibrate::{CalibrationError, CheckOptions, calibrate_pair, length};
+use dhct_calibrate::{CalibrationError, CheckOptions, calibrate_pair};
 use dhct_lattice::Lattice;
-use dhct_pipeline::{PipelineError, PipelineOptions};
+use dhct_pipeline::PipelineOptions;
 use dhct_scan::ScanPair;
 use ndarray::Array2;
 
@@ -94,13 +93,22 @@ fn apply_check_policy(config: &CorrectConfig, typed: bool, options: &mut Pipelin
     }
 }
 
+/// Why the nearest-neighbour distance could not be measured for `--nn auto`.
+#[derive(Debug)]
+pub enum MeasuredNnError {
+    /// The image's lattice could not be matched to the lattice named.
+    Mismatch(CalibrationError),
+    /// The lattice could not be rebuilt with the measured distance.
+    Options(anyhow::Error),
+}
+
 /// For `--nn auto`: the lattice rebuilt with the nearest-neighbour distance the image shows
 /// in the file's units (the pixel size taken as right); otherwise `resolved` unchanged.
 pub fn with_measured_nn(
     mut resolved: Resolved,
     pair: &ScanPair,
     mask: Option<&Array2<bool>>,
-) -> Result<Resolved> {
+) -> Result<Resolved, MeasuredNnError> {
     if !resolved.nn_auto {
         return Ok(resolved);
     }
@@ -109,61 +117,11 @@ pub fn with_measured_nn(
         ..resolved.options.calibration.check
     };
     let found = calibrate_pair(pair, resolved.lattice.as_ref(), mask, &options)
-        .map_err(|e| anyhow::anyhow!("--nn auto: {}", explain_calibration(&e)))?;
+        .map_err(MeasuredNnError::Mismatch)?;
     let nn = resolved.lattice.nearest_neighbour_distance() * found.calibration.mean_scale;
-    resolved.lattice = build_lattice(&resolved.lattice_name, Some(nn))?;
+    resolved.lattice =
+        build_lattice(&resolved.lattice_name, Some(nn)).map_err(MeasuredNnError::Options)?;
     resolved.options.features.neighbour_distance = nn;
     resolved.nn_m = Some(nn);
     Ok(resolved)
-}
-
-/// The pipeline's error with what to change on the command line.
-pub fn explain(error: &PipelineError) -> String {
-    match error {
-        PipelineError::Calibration(e) => explain_calibration(e),
-        PipelineError::TooFewFeatures {
-            opposite_polarity: Some((polarity, _)),
-            ..
-        } => format!(
-            "{error}\nhint: add --polarity {}, or check --lattice and --nn against the image",
-            match polarity {
-                dhct_features::Polarity::Dark => "dark",
-                dhct_features::Polarity::Bright => "bright",
-            }
-        ),
-        PipelineError::TooFewFeatures { .. } | PipelineError::LatticeMismatch { .. } => format!(
-            "{error}\nhint: check --lattice and --nn against the image, --polarity, and that \
-             the mask covers the atomically resolved part"
-        ),
-        PipelineError::LatticeFit(_) => format!(
-            "{error}\nhint: check --lattice and --nn against the image, or give a --mask over \
-             one domain"
-        ),
-        PipelineError::Features(dhct_features::FeatureError::ImageTooSmall { .. }) => {
-            format!("{error}\nhint: check --nn and the pixel size (--pitch)")
-        }
-        _ => error.to_string(),
-    }
-}
-
-fn explain_calibration(error: &CalibrationError) -> String {
-    match error {
-        CalibrationError::WrongScale {
-            given_nn_m,
-            measured_nn_m,
-            ..
-        } => format!(
-            "{error}\nhint: if the file's pixel size is right, use --nn {} (or --nn auto); if \
-             {} is right and the file's pixel size is wrong, add --calibrate; \
-             --trust-inputs skips this check",
-            length(*measured_nn_m).replace(' ', ""),
-            length(*given_nn_m)
-        ),
-        CalibrationError::WrongLatticeType { .. } => format!(
-            "{error}\nhint: choose the lattice the image shows with --lattice ({} or a \
-             lattice file); --trust-inputs skips this check",
-            dhct_lattice::catalogue::names()
-        ),
-        _ => error.to_string(),
-    }
 }

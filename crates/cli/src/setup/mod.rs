@@ -14,7 +14,8 @@ use ndarray::Array2;
 
 pub use config::{CorrectConfig, Length, build_lattice, pipeline_table};
 pub use inputs::{
-    CALIBRATE_PITCH_TOLERANCE, PRESET_PITCH_TOLERANCE, Resolved, explain, resolve, with_measured_nn,
+    CALIBRATE_PITCH_TOLERANCE, MeasuredNnError, PRESET_PITCH_TOLERANCE, Resolved, resolve,
+    with_measured_nn,
 };
 
 /// The scan pair to analyse: the file's channel named `channel` (default: its topography;
