@@ -114,6 +114,10 @@ pub struct Warning {
     /// The inputs [`Warning::what_to_do`] refers to, for front ends to name their options.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub inputs: Vec<UserInput>,
+    /// Whether the advice is to diagnose the gap between the model and the data (front
+    /// ends name their way: `dhct diagnose`, `dhct.diagnose`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub suggests_diagnosis: bool,
 }
 
 impl Warning {
@@ -123,7 +127,14 @@ impl Warning {
             message,
             what_to_do: what_to_do.to_string(),
             inputs: Vec::new(),
+            suggests_diagnosis: false,
         }
+    }
+
+    /// The same warning, advising a diagnosis of the gap.
+    fn suggesting_diagnosis(mut self) -> Warning {
+        self.suggests_diagnosis = true;
+        self
     }
 
     /// The same warning, naming the inputs its advice refers to.
@@ -384,8 +395,9 @@ pub(crate) fn affine_warnings(comparisons: &[AffineComparison], fell_back: bool)
                     }
                 ),
                 "the model does not describe this scan: use the affine result, mask defects \
-                 and steps, or run dhct diagnose to see what is missing",
+                 and steps, or diagnose the gap to see what is missing",
             )
+            .suggesting_diagnosis()
         })
         .collect()
 }
@@ -484,9 +496,11 @@ pub(crate) fn model_image_warnings(
                     how_far_off(lattice, c)
                 ),
                 "take lengths from the corrected images, not drift values; a mask over the \
-                 whole atomically resolved area, or dhct diagnose, shows where the model fails",
+                 whole atomically resolved area, or a diagnosis of the gap, shows where the \
+                 model fails",
             )
             .with_inputs(&[UserInput::Mask])
+            .suggesting_diagnosis()
         })
         .collect()
 }
@@ -606,8 +620,9 @@ fn deviation_warning(r: &RegionFit, passes: &[PassOutput]) -> Option<Warning> {
                 localisation * 1e12
             ),
             "the drift model may not describe this scan, or the surface is not the lattice \
-             given: run dhct diagnose",
+             given: diagnose the gap",
         )
+        .suggesting_diagnosis()
     })
 }
 

@@ -334,7 +334,10 @@ class Result:
 
     @property
     def warnings(self) -> List[Dict[str, str]]:
-        """What not to trust and what to do: each ``{"code", "message", "what_to_do"}``."""
+        """What not to trust and what to do: each ``{"code", "message", "what_to_do"}``,
+        with ``"inputs"`` (the keyword arguments the advice refers to, by quantity, e.g.
+        ``"mask"``, ``"nearest_neighbour_distance"``) and ``"suggests_diagnosis": True``
+        (the advice is :func:`diagnose`) where they apply."""
         return list(self.model["warnings"])
 
     @property
