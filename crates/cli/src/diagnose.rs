@@ -17,7 +17,7 @@ use dhct_scan::ScanGeometry;
 use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 
-use crate::correct::analyse_file;
+use crate::analysis::analyse_file;
 use crate::output_dir::StagedOutput;
 use crate::report::bars::ColourBar;
 use crate::report::figures::{Figure, PictureStyle, metres_per_picture_px};
@@ -45,7 +45,7 @@ pub fn write_stdout(text: &str) -> Result<()> {
 /// refitting it, with what only the images show (what `correct --diagnose` and `dhct
 /// diagnose` write as diagnosis.json), and the residual images.
 pub fn diagnosis_of(
-    corrected: &crate::correct::Corrected,
+    corrected: &crate::analysis::Corrected,
 ) -> Result<(DiagnosisReport, Vec<ResidualImage>)> {
     let passes = &corrected.analysis.passes;
     let inputs: Vec<PassInput> = passes

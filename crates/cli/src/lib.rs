@@ -2,6 +2,7 @@
 //! `diagnose`, `info`, `simulate`) as functions, so that other front ends (the Python
 //! package `dhct`) resolve options and write outputs exactly as the command line does.
 
+pub mod analysis;
 pub mod batch;
 pub mod correct;
 pub mod diagnose;

@@ -356,8 +356,15 @@ pub struct CaseResult {
     /// Effects outside the library in the scan.
     #[serde(default)]
     pub foreign: Vec<ForeignEffect>,
-    /// Effects the diagnosis added, in order.
+    /// Effects the diagnosis named, in order: its findings, or, with a `no_gap` verdict,
+    /// the effects it still found significant below the floor (`below_floor`). Scored as
+    /// before the two were kept apart in the report: a sub-floor effect on an effect-free
+    /// scan is a false alarm here, and a single effect named only below the floor counts
+    /// as named.
     pub identified: Vec<Candidate>,
+    /// Whether [`CaseResult::identified`] are below the floor (`no_gap`).
+    #[serde(default)]
+    pub below_floor: bool,
     /// The diagnosis's verdict.
     pub verdict: Option<VerdictKind>,
     /// Places where the remaining gap lies, as the verdict names them.
@@ -613,6 +620,7 @@ fn run_case(
         set: case.set,
         path: if images { "images" } else { "positions" }.into(),
         identified: Vec::new(),
+        below_floor: false,
         correct: false,
         gap_before: f64::NAN,
         visibility,
@@ -624,7 +632,13 @@ fn run_case(
     };
     match result {
         Ok(report) => {
-            out.identified = report.verdict_details.effects.clone();
+            let details = &report.verdict_details;
+            out.below_floor = details.effects.is_empty() && !details.below_floor.is_empty();
+            out.identified = if out.below_floor {
+                details.below_floor.clone()
+            } else {
+                details.effects.clone()
+            };
             out.verdict = Some(report.verdict);
             out.remaining = report
                 .verdict_details

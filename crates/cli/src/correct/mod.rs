@@ -8,9 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use dhct_calibrate::CalibrationError;
-use dhct_lattice::Lattice;
-use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage, UserInput};
+use dhct_pipeline::{Analysis, Stage};
 use dhct_scan::{ImageChannel, ScanPair, ScanPass};
 use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::write_atomically;
@@ -18,10 +16,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use crate::hints::{Spelling, explain, explain_calibration};
+pub use crate::analysis::{AnalyseRequest, CorrectError, Corrected, analyse, analyse_file};
 use crate::report::figures::{FigureInputs, make_figures};
 pub use crate::report::summary::RunSummary;
-use crate::report::{html, summary, write_bytes, write_figure_files};
+use crate::report::{html, write_bytes, write_figure_files};
 pub use crate::setup::{
     CorrectConfig, Length, MeasuredNnError, Resolved, build_lattice, load_mask, read_pair, resolve,
     with_measured_nn,
@@ -58,154 +56,6 @@ pub(crate) fn progress_bar(enabled: bool) -> ProgressBar {
     }
 }
 
-/// A finished analysis of one scan pair with everything needed to write its outputs
-/// (the same files whichever front end asks for them).
-pub struct Corrected {
-    /// The scan pair analysed (geometry in metres and seconds).
-    pub pair: ScanPair,
-    /// The config the run was resolved from (file + flags).
-    pub config: CorrectConfig,
-    /// The lattice as named (preset or file).
-    pub lattice_name: String,
-    /// The nearest-neighbour distance given or measured (`--nn auto`), metres.
-    pub nn_m: Option<f64>,
-    /// The lattice the run used (with that nearest-neighbour distance).
-    pub lattice: Box<dyn Lattice + Send + Sync>,
-    /// The pipeline options the run used.
-    pub options: PipelineOptions,
-    /// The analysed area (true = used), if a mask was given.
-    pub mask: Option<Array2<bool>>,
-    /// Every intermediate of the pipeline.
-    pub analysis: Analysis,
-    /// The content of `model.json` (`outputs` and `write_s` are filled when written).
-    pub summary: RunSummary,
-}
-
-/// Why an analysis stopped, by which stage refused (the message is the command line's).
-#[derive(Debug, thiserror::Error)]
-pub enum CorrectError {
-    /// The lattice, constant, mask or pipeline options could not be resolved.
-    #[error("{0:#}")]
-    Options(anyhow::Error),
-    /// The image does not match the lattice or constant given.
-    #[error("{error}")]
-    InputMismatch {
-        /// What the image shows against what was given.
-        error: CalibrationError,
-        /// Whether it happened measuring the nearest-neighbour distance (`auto`).
-        measuring_nn: bool,
-    },
-    /// The pipeline itself failed (too few features, lattice not found, ...).
-    #[error("{0}")]
-    Analysis(PipelineError),
-}
-
-impl CorrectError {
-    /// The error with the hint of what to change, spelled for a front end.
-    pub fn render(&self, spelling: Spelling) -> String {
-        match self {
-            CorrectError::Options(e) => format!("{e:#}"),
-            CorrectError::InputMismatch {
-                error,
-                measuring_nn,
-            } => {
-                let text = explain_calibration(error, spelling);
-                if *measuring_nn {
-                    let auto = spelling.set(UserInput::NearestNeighbourDistance, "auto");
-                    format!("{auto}: {text}")
-                } else {
-                    text
-                }
-            }
-            CorrectError::Analysis(e) => explain(e, spelling),
-        }
-    }
-}
-
-/// What to analyse: a scan pair, the config it is resolved with, and labels for the summary.
-pub struct AnalyseRequest {
-    /// The scan pair (e.g. from [`read_pair`] or built from arrays).
-    pub pair: ScanPair,
-    /// The config file (if any) overridden by the caller's options.
-    pub config: CorrectConfig,
-    /// A mask given as an array (true = use), raw-image pixels; intersected with the
-    /// config's mask file and polygon.
-    pub mask: Option<Array2<bool>>,
-    /// The input's name in the summary (a path, or a note for arrays).
-    pub input: String,
-    /// The retrace file's name in the summary, if it came from its own file.
-    pub retrace: Option<String>,
-    /// Time spent reading the input, seconds.
-    pub read_s: f64,
-}
-
-/// Resolves the request's config against its pair and runs the whole pipeline: no file is
-/// written. `on_stage` is told each stage.
-pub fn analyse(
-    request: AnalyseRequest,
-    on_stage: &(dyn Fn(Stage) + Sync),
-) -> Result<Corrected, CorrectError> {
-    let AnalyseRequest {
-        pair,
-        config,
-        mask: given_mask,
-        input,
-        retrace,
-        read_s,
-    } = request;
-    let geometry = pair.geometry().clone();
-    let mask = match (load_mask(&config, &geometry), given_mask) {
-        (Err(e), _) => return Err(CorrectError::Options(e)),
-        (Ok(Some(a)), Some(b)) => Some(
-            dhct_distortion::mask::intersect(&a, &b)
-                .map_err(|e| CorrectError::Options(anyhow::anyhow!("mask: {e}")))?,
-        ),
-        (Ok(a), b) => a.or(b),
-    };
-    let resolved = resolve(&config).map_err(CorrectError::Options)?;
-    let Resolved {
-        lattice_name,
-        nn_m,
-        lattice,
-        options,
-        ..
-    } = with_measured_nn(resolved, &pair, mask.as_ref()).map_err(|e| match e {
-        MeasuredNnError::Mismatch(error) => CorrectError::InputMismatch {
-            error,
-            measuring_nn: true,
-        },
-        MeasuredNnError::Options(e) => CorrectError::Options(e),
-    })?;
-    let analysis = dhct_pipeline::run(&pair, lattice.as_ref(), mask.as_ref(), &options, on_stage)
-        .map_err(|e| match e {
-        PipelineError::Calibration(error) => CorrectError::InputMismatch {
-            error: *error,
-            measuring_nn: false,
-        },
-        e => CorrectError::Analysis(e),
-    })?;
-    let mut summary = summary::summarise(
-        input,
-        retrace,
-        lattice.as_ref(),
-        &geometry,
-        &analysis,
-        read_s,
-    );
-    summary.lattice_assumed = config.lattice.is_none();
-    Ok(Corrected {
-        pair,
-        config,
-        lattice_name,
-        nn_m,
-        lattice,
-        options,
-        mask,
-        analysis,
-        summary,
-    })
-}
-
 /// Runs `dhct correct`; returns the summary (also written as `model.json`).
 pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     // Everything is written into a staging folder, moved into place at the end.
@@ -223,39 +73,6 @@ pub fn run(request: CorrectRequest) -> Result<RunSummary> {
     staged.commit()?;
     bar.finish_and_clear();
     Ok(summary)
-}
-
-/// Reads `input` (and `retrace`, if given) with the config's geometry and channel and runs
-/// [`analyse`] on it, as `dhct correct` and `dhct diagnose` do; errors in the command
-/// line's words.
-pub fn analyse_file(
-    input: &Path,
-    retrace: Option<&Path>,
-    config: CorrectConfig,
-    on_stage: &(dyn Fn(Stage) + Sync),
-) -> Result<Corrected> {
-    let start = Instant::now();
-    let pair = read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
-    let read_s = start.elapsed().as_secs_f64();
-    analyse(
-        AnalyseRequest {
-            pair,
-            config,
-            mask: None,
-            input: input.display().to_string(),
-            retrace: retrace_name(input, retrace),
-            read_s,
-        },
-        on_stage,
-    )
-    .map_err(|e| match e {
-        CorrectError::Options(e) => e,
-        e @ CorrectError::InputMismatch { .. } => {
-            anyhow::anyhow!(e.render(Spelling::CommandLine))
-        }
-        e @ CorrectError::Analysis(_) => anyhow::anyhow!(e.render(Spelling::CommandLine))
-            .context(format!("analysing {}", input.display())),
-    })
 }
 
 /// Writes every output of `corrected` into `output` (through a staging folder, replacing
@@ -422,19 +239,6 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             Ok(name.clone())
         })
         .collect()
-}
-
-/// The name of the file the retrace came from: the one given, or the NPY retrace paired
-/// with an NPY trace through their sidecars.
-fn retrace_name(input: &Path, retrace: Option<&Path>) -> Option<String> {
-    let paired = || match dhct_sm4_io::npy::other_pass_file(input) {
-        Some((path, ScanPass::Retrace)) => Some(path),
-        _ => None,
-    };
-    retrace
-        .map(Path::to_path_buf)
-        .or_else(paired)
-        .map(|p| p.display().to_string())
 }
 
 /// A one-screen text summary.
