@@ -14,7 +14,7 @@ use dhct_pipeline::{Analysis, PipelineError, PipelineOptions, Stage, UserInput};
 use dhct_scan::{ScanPair, ScanPass};
 use ndarray::Array2;
 
-use crate::hints::{Spelling, explain, explain_calibration};
+use crate::hints::{Spelling, explain, explain_calibration, explain_options};
 use crate::report::summary::{self, RunSummary};
 use crate::setup::{
     CorrectConfig, MeasuredNnError, Resolved, load_mask, read_pair, resolve, with_measured_nn,
@@ -66,7 +66,7 @@ impl CorrectError {
     /// The error with the hint of what to change, spelled for a front end.
     pub fn render(&self, spelling: Spelling) -> String {
         match self {
-            CorrectError::Options(e) => format!("{e:#}"),
+            CorrectError::Options(e) => explain_options(e, spelling),
             CorrectError::InputMismatch {
                 error,
                 measuring_nn,
@@ -192,7 +192,7 @@ pub fn analyse_file(
         on_stage,
     )
     .map_err(|e| match e {
-        CorrectError::Options(e) => e,
+        e @ CorrectError::Options(_) => anyhow::anyhow!(e.render(Spelling::CommandLine)),
         e @ CorrectError::InputMismatch { .. } => {
             anyhow::anyhow!(e.render(Spelling::CommandLine))
         }

@@ -8,6 +8,7 @@ use dhct_features::{FeatureError, Polarity};
 use dhct_pipeline::{PipelineError, UserInput};
 
 use crate::flags::flag;
+use crate::setup::LatticeChoiceError;
 
 /// How a front end spells the inputs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,6 +110,27 @@ pub fn explain(error: &PipelineError, spelling: Spelling) -> String {
         _ => return error.to_string(),
     };
     format!("{error}\nhint: {hint}")
+}
+
+/// An options error (a config, lattice or mask that cannot be resolved), with the
+/// options it is about named in `spelling`.
+pub fn explain_options(error: &anyhow::Error, spelling: Spelling) -> String {
+    use UserInput::{Lattice, NearestNeighbourDistance as Nn};
+    match error.downcast_ref::<LatticeChoiceError>() {
+        Some(LatticeChoiceError::NeedsConstant { name }) => format!(
+            "{} needs {} (its nearest-neighbour distance, or auto)",
+            spelling.set(Lattice, name),
+            spelling.names(&[Nn])
+        ),
+        Some(e @ LatticeChoiceError::ImplausibleNn { .. }) => {
+            format!("{}: {e}", spelling.names(&[Nn]))
+        }
+        Some(LatticeChoiceError::FileRescaled) => format!(
+            "{} cannot rescale a lattice file; edit its vectors instead",
+            spelling.names(&[Nn])
+        ),
+        None => format!("{error:#}"),
+    }
 }
 
 /// The calibration's refusal with what to change, in `spelling`.

@@ -110,7 +110,7 @@ fn run_detached(
     }
     // Hints name the keyword arguments of `dhct.correct`, not the command line's flags.
     result.map_err(|e| match &e {
-        CorrectError::Options(options) => to_py::<OptionError>(options),
+        CorrectError::Options(_) => OptionError::new_err(e.render(Spelling::Python)),
         CorrectError::InputMismatch { .. } => {
             InputMismatchError::new_err(e.render(Spelling::Python))
         }

@@ -203,7 +203,7 @@ def test_progress_errors_are_raised(scan):
     [
         (dict(nn="1.23A"), dhct.InputMismatchError, ["calibrate=True", "pixel size"]),
         (dict(lattice="square", nn="2.46A"), dhct.InputMismatchError, ["square lattice"]),
-        (dict(lattice="square"), dhct.OptionError, ["needs --nn"]),
+        (dict(lattice="square"), dhct.OptionError, ['lattice="square" needs nn=']),
         (dict(lattice="no-such-lattice"), dhct.OptionError, ["no-such-lattice"]),
         (dict(pipeline={"features": {"no_such_key": 1}}), dhct.OptionError, ["no_such_key"]),
         (dict(calibrat=True), dhct.OptionError, ["did you mean 'calibrate'"]),
@@ -211,7 +211,7 @@ def test_progress_errors_are_raised(scan):
         (dict(pixel_period=1e30), dhct.OptionError, ["pixel_period"]),
     ],
 )
-def test_errors_carry_the_command_lines_messages(scan, kwargs, error, needles):
+def test_errors_name_the_keyword_arguments(scan, kwargs, error, needles):
     with pytest.raises(error) as caught:
         dhct.correct(scan, **kwargs)
     for needle in needles:

@@ -270,20 +270,44 @@ fn edit_distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
+/// Why the lattice and constant given cannot be combined, in quantities (the front ends
+/// name their options: [`crate::hints`]).
+#[derive(Debug, thiserror::Error)]
+pub enum LatticeChoiceError {
+    /// The nearest-neighbour distance is outside 0.1–100 nm.
+    #[error(
+        "{nn_m} m is not a plausible nearest-neighbour distance (expected 0.1–100 nm, e.g. \
+         2.46 Å)"
+    )]
+    ImplausibleNn {
+        /// The distance given, metres.
+        nn_m: f64,
+    },
+    /// A catalogue shape without a constant, and no distance given.
+    #[error("the {name} lattice needs its nearest-neighbour distance (or auto)")]
+    NeedsConstant {
+        /// The catalogue name.
+        name: &'static str,
+    },
+    /// A distance given with a lattice file.
+    #[error(
+        "a lattice file cannot be rescaled by a nearest-neighbour distance; edit its vectors instead"
+    )]
+    FileRescaled,
+}
+
 /// The lattice named by `name` (a preset or a file), with its NN distance replaced by
 /// `nn_m` if given.
 pub fn build_lattice(name: &str, nn_m: Option<f64>) -> Result<Box<dyn Lattice + Send + Sync>> {
     if let Some(nn) = nn_m
         && !(nn.is_finite() && nn > 1e-11 && nn < 1e-7)
     {
-        bail!(
-            "--nn {nn} m is not a plausible nearest-neighbour distance (expected 0.1–100 nm, e.g. 2.46A)"
-        );
+        return Err(LatticeChoiceError::ImplausibleNn { nn_m: nn }.into());
     }
     if let Some(entry) = dhct_lattice::catalogue::lookup(name) {
         return entry.build(nn_m).map_err(|e| match e {
             LatticeError::NeedsConstant { name } => {
-                anyhow!("--lattice {name} needs --nn (its nearest-neighbour distance, or auto)")
+                LatticeChoiceError::NeedsConstant { name }.into()
             }
             other => other.into(),
         });
@@ -298,7 +322,7 @@ pub fn build_lattice(name: &str, nn_m: Option<f64>) -> Result<Box<dyn Lattice + 
     let user =
         UserLattice::from_path(path).with_context(|| format!("cannot read lattice file {name}"))?;
     if nn_m.is_some() {
-        bail!("--nn cannot rescale a lattice file; edit its vectors instead");
+        return Err(LatticeChoiceError::FileRescaled.into());
     }
     let lattice: Box<dyn Lattice + Send + Sync> = Box::new(user);
     Ok(lattice)
