@@ -345,9 +345,15 @@ mod tests {
         assert!(build_lattice("graphite", Some(2.46)).is_err());
         let e = build_lattice("lieb", None).unwrap_err().to_string();
         assert!(e.contains("unknown lattice"), "{e}");
-        // A catalogue entry without a known constant names the flag that gives it.
-        let e = build_lattice("kagome", None).unwrap_err().to_string();
-        assert!(e.contains("--lattice kagome needs --nn"), "{e}");
+        // A catalogue entry without a known constant says what is missing; the front end
+        // names its option (`--nn`, `nn=`).
+        let e = build_lattice("kagome", None).unwrap_err();
+        assert!(matches!(
+            e.downcast_ref::<LatticeChoiceError>(),
+            Some(LatticeChoiceError::NeedsConstant { name: "kagome" })
+        ));
+        let cli = crate::hints::explain_options(&e, crate::hints::Spelling::CommandLine);
+        assert!(cli.contains("--lattice kagome needs --nn"), "{cli}");
         let k = build_lattice("kagome", Some(3e-10)).unwrap();
         assert!((k.nearest_neighbour_distance() - 3e-10).abs() < 1e-16);
     }
