@@ -249,6 +249,11 @@ struct CorrectArgs {
     /// cividis, greys.
     #[arg(long, value_parser = parse_colormap)]
     colormap: Option<dhct_sm4_io::png_file::Colormap>,
+    /// Also write each pass's displacement field: displacement_trace.npy (shape 2 × rows ×
+    /// columns: dx, dy in metres, where the tip really was relative to the controller) and
+    /// displacement_trace.tiff (the same as two float pages with the pixel size).
+    #[arg(long)]
+    displacement: bool,
     /// Print a JSON summary on stdout instead of text.
     #[arg(long)]
     json: bool,
@@ -276,6 +281,7 @@ impl CorrectArgs {
             mask: self.mask.clone(),
             plane_group: self.plane_group,
             colormap: self.colormap,
+            displacement: self.displacement.then_some(true),
             geometry: self.geometry.overrides(),
             overwrite: self.overwrite,
             ..correct::CorrectConfig::default()

@@ -53,6 +53,7 @@
 //! ```
 
 pub mod correction;
+mod displacement;
 mod error;
 pub mod fit;
 mod hysteresis_problem;
@@ -65,6 +66,7 @@ pub mod route_choice;
 mod seed;
 
 pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sample_positions};
+pub use displacement::{DisplacementField, displacement_field};
 pub use error::DistortionError;
 pub use fit::{FitOptions, HysteresisChoice, fit_model};
 pub use local::{LocalDistortion, LocalSettings, estimate_lattice_angle, local_distortions};

@@ -173,8 +173,26 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
 /// [`Sidecar`]).
 pub fn write<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteError> {
     let (rows, columns) = (channel.rows(), channel.columns());
-    let dict =
-        format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {columns}), }}");
+    write_f8(&format!("({rows}, {columns})"), &[&channel.z], w)
+}
+
+/// Writes images of one size as one `.npy` array of shape `(pages, rows, columns)`
+/// (little-endian `f8`, C order; e.g. a displacement field's `dx`, `dy` as `[0]`, `[1]`).
+pub fn write_stack<W: Write>(pages: &[&Array2<f64>], w: &mut W) -> Result<(), WriteError> {
+    let (rows, columns) = pages.first().map_or((0, 0), |p| p.dim());
+    if pages.iter().any(|p| p.dim() != (rows, columns)) {
+        return Err(WriteError::Unrepresentable {
+            format: FORMAT,
+            reason: "the pages of a stack must have one size".into(),
+        });
+    }
+    write_f8(&format!("({}, {rows}, {columns})", pages.len()), pages, w)
+}
+
+/// The `.npy` header for `shape` (Python tuple syntax) and the values of `arrays` in order.
+fn write_f8<W: Write>(shape: &str, arrays: &[&Array2<f64>], w: &mut W) -> Result<(), WriteError> {
+    let values: usize = arrays.iter().map(|a| a.len()).sum();
+    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
     // magic (6) + version (2) + length (2) + dict + padding + '\n' must be a multiple of 64.
     let unpadded = MAGIC.len() + 2 + 2 + dict.len() + 1;
     let padding = (64 - unpadded % 64) % 64;
@@ -183,14 +201,14 @@ pub fn write<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteErr
         format: FORMAT,
         reason: format!("header of {header_len} bytes does not fit a version 1.0 file"),
     })?;
-    let mut out = Vec::with_capacity(usize::from(header_len) + 10 + rows * columns * 8);
+    let mut out = Vec::with_capacity(usize::from(header_len) + 10 + values * 8);
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&[1, 0]);
     out.extend_from_slice(&header_len.to_le_bytes());
     out.extend_from_slice(dict.as_bytes());
     out.extend(std::iter::repeat_n(b' ', padding));
     out.push(b'\n');
-    for value in channel.z.iter() {
+    for value in arrays.iter().flat_map(|a| a.iter()) {
         out.extend_from_slice(&value.to_le_bytes());
     }
     w.write_all(&out)?;

@@ -163,33 +163,60 @@ fn pixels_per_centimetre(pitch_m: f64) -> Result<Rational, WriteError> {
     })
 }
 
+/// [`write_f32_with_pixel_size`] for several images of one size, one page each, in order
+/// (e.g. a displacement field's `dx` and `dy`); each page carries its own name and unit.
+pub fn write_f32_pages_with_pixel_size<W: Write>(
+    pages: &[&ImageChannel],
+    pitch_m: [f64; 2],
+    w: &mut W,
+) -> Result<(), WriteError> {
+    let resolution = [
+        pixels_per_centimetre(pitch_m[0])?,
+        pixels_per_centimetre(pitch_m[1])?,
+    ];
+    write_f32_pages(pages, Some(resolution), w)
+}
+
 fn write_f32_tagged<W: Write>(
     channel: &ImageChannel,
     resolution: Option<[Rational; 2]>,
     w: &mut W,
 ) -> Result<(), WriteError> {
-    let (width, height) = dimensions(channel)?;
-    let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
-    let description = match resolution {
-        Some(_) => imagej_description(channel),
-        None => description(channel, None),
-    };
+    write_f32_pages(&[channel], resolution, w)
+}
+
+fn write_f32_pages<W: Write>(
+    pages: &[&ImageChannel],
+    resolution: Option<[Rational; 2]>,
+    w: &mut W,
+) -> Result<(), WriteError> {
     let mut cursor = Cursor::new(Vec::new());
     {
         let mut encoder = TiffEncoder::new(&mut cursor).map_err(encoder_error)?;
-        let mut image = encoder
-            .new_image::<colortype::Gray32Float>(width, height)
-            .map_err(encoder_error)?;
-        let tags = image.encoder();
-        tags.write_tag(Tag::ImageDescription, description.as_str())
-            .map_err(encoder_error)?;
-        if let Some([x, y]) = resolution {
-            tags.write_tag(Tag::XResolution, x).map_err(encoder_error)?;
-            tags.write_tag(Tag::YResolution, y).map_err(encoder_error)?;
-            tags.write_tag(Tag::ResolutionUnit, ResolutionUnit::Centimeter.to_u16())
+        for channel in pages {
+            let (width, height) = dimensions(channel)?;
+            let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
+            let description = match resolution {
+                Some(_) => imagej_description(channel),
+                None => description(channel, None),
+            };
+            let mut image = encoder
+                .new_image::<colortype::Gray32Float>(width, height)
                 .map_err(encoder_error)?;
+            let tags = image.encoder();
+            tags.write_tag(Tag::ImageDescription, description.as_str())
+                .map_err(encoder_error)?;
+            if let Some([x, y]) = &resolution {
+                let copy = |r: &Rational| Rational { n: r.n, d: r.d };
+                tags.write_tag(Tag::XResolution, copy(x))
+                    .map_err(encoder_error)?;
+                tags.write_tag(Tag::YResolution, copy(y))
+                    .map_err(encoder_error)?;
+                tags.write_tag(Tag::ResolutionUnit, ResolutionUnit::Centimeter.to_u16())
+                    .map_err(encoder_error)?;
+            }
+            image.write_data(&data).map_err(encoder_error)?;
         }
-        image.write_data(&data).map_err(encoder_error)?;
     }
     w.write_all(cursor.get_ref())?;
     Ok(())

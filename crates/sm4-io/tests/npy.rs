@@ -284,3 +284,22 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_stack_is_one_three_dimensional_array_in_page_order() {
+    let a = Array2::from_shape_fn((2, 3), |(r, c)| (r * 3 + c) as f64);
+    let b = a.mapv(|v| -v);
+    let mut bytes = Vec::new();
+    npy::write_stack(&[&a, &b], &mut bytes).unwrap();
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+    assert!(header.contains("'shape': (2, 2, 3)"), "{header}");
+    let data: Vec<f64> = bytes[10 + header_len..]
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert_eq!(data, [0., 1., 2., 3., 4., 5., -0., -1., -2., -3., -4., -5.]);
+    assert!((10 + header_len) % 64 == 0);
+    let odd = Array2::<f64>::zeros((3, 2));
+    assert!(npy::write_stack(&[&a, &odd], &mut Vec::new()).is_err());
+}

@@ -105,3 +105,26 @@ fn pixel_sizes_that_are_no_tiff_resolution_are_refused() {
     let mut decoder = Decoder::new(Cursor::new(bytes.as_slice())).unwrap();
     assert!((rational(&mut decoder, Tag::YResolution) - 5.0).abs() < 1e-9);
 }
+
+#[test]
+fn pages_of_one_size_are_written_in_order_each_with_the_pixel_size() {
+    let dx = channel();
+    let dy = ImageChannel::new("dy", "m", dx.z.mapv(|v| -v));
+    let mut bytes = Vec::new();
+    tiff_file::write_f32_pages_with_pixel_size(&[&dx, &dy], [2e-11, 2e-11], &mut bytes).unwrap();
+    let mut decoder = Decoder::new(Cursor::new(bytes.as_slice())).unwrap();
+    let mut firsts = Vec::new();
+    loop {
+        let metres_per_pixel = 0.01 / rational(&mut decoder, Tag::XResolution);
+        assert!((metres_per_pixel / 2e-11 - 1.0).abs() < 1e-9);
+        let tiff::decoder::DecodingResult::F32(data) = decoder.read_image().unwrap() else {
+            panic!("not f32");
+        };
+        firsts.push(data[1]);
+        if !decoder.more_images() {
+            break;
+        }
+        decoder.next_image().unwrap();
+    }
+    assert_eq!(firsts, [1e-11f32, -1e-11f32]);
+}

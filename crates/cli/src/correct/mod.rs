@@ -123,7 +123,13 @@ fn write_into(
                         colormap,
                     })
                 },
-                || write_data_images(dir, pair, analysis),
+                || {
+                    let mut written = write_data_images(dir, pair, analysis)?;
+                    if config.displacement == Some(true) {
+                        written.extend(write_displacement_fields(dir, pair, analysis)?);
+                    }
+                    Ok::<_, anyhow::Error>(written)
+                },
             )
         },
         || write_features_csv(dir, analysis),
@@ -239,6 +245,33 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             Ok(name.clone())
         })
         .collect()
+}
+
+/// Each pass's displacement field under the correction kept: `displacement_{pass}.npy`
+/// (shape `(2, rows, columns)`: `dx`, `dy` in metres) and `displacement_{pass}.tiff` (the
+/// same as two float pages with the pixel size).
+fn write_displacement_fields(
+    dir: &Path,
+    pair: &ScanPair,
+    analysis: &Analysis,
+) -> Result<Vec<String>> {
+    let geometry = pair.geometry();
+    let pitch = [geometry.pitch_x(), geometry.pitch_y()];
+    let mut names = Vec::new();
+    for pass in &analysis.passes {
+        let field = dhct_distortion::displacement_field(&analysis.dhct.model, geometry, pass.pass);
+        let stem = format!("displacement_{}", pass.pass);
+        write_atomically(&dir.join(format!("{stem}.npy")), |w| {
+            dhct_sm4_io::npy::write_stack(&[&field.dx_m, &field.dy_m], w)
+        })?;
+        let dx = ImageChannel::new(format!("{stem} dx"), "m", field.dx_m);
+        let dy = ImageChannel::new(format!("{stem} dy"), "m", field.dy_m);
+        write_atomically(&dir.join(format!("{stem}.tiff")), |w| {
+            dhct_sm4_io::tiff_file::write_f32_pages_with_pixel_size(&[&dx, &dy], pitch, w)
+        })?;
+        names.extend([format!("{stem}.npy"), format!("{stem}.tiff")]);
+    }
+    Ok(names)
 }
 
 /// A one-screen text summary.

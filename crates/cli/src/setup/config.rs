@@ -71,6 +71,9 @@ pub struct CorrectConfig {
     pub plane_group: Option<PlaneGroup>,
     /// Colour map of the pictures.
     pub colormap: Option<Colormap>,
+    /// Also write the displacement field of each pass (`displacement_{pass}.npy` and
+    /// `.tiff`: per pixel, where the tip really was relative to the controller, metres).
+    pub displacement: Option<bool>,
     /// The channel to analyse, by name (case-insensitive; a whole name first, else a part
     /// of one); default: the topography.
     pub channel: Option<String>,
@@ -155,6 +158,7 @@ impl CorrectConfig {
             mask_polygon,
             plane_group,
             colormap,
+            displacement,
             channel
         );
         if let Some(pipeline) = other.pipeline {

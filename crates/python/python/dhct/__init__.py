@@ -72,7 +72,7 @@ _GEOMETRY = {
 }
 
 #: `correct` options that are config keys of the same name.
-_PLAIN = ("polarity", "plane_group", "colormap", "mask_polygon")
+_PLAIN = ("polarity", "plane_group", "colormap", "mask_polygon", "displacement")
 
 _OPTIONS = (
     ("retrace", "config", "calibrate", "trust_inputs", "pipeline", "progress")
@@ -199,7 +199,8 @@ def correct(
     ``retrace`` (a second file holding the retrace, with a path input), ``config`` (a TOML
     config such as a written config.toml; the options given replace its values),
     ``calibrate``, ``trust_inputs``, ``polarity`` ("bright"/"dark"), ``plane_group``
-    ("p3m1", ...), ``colormap``, ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
+    ("p3m1", ...), ``colormap``, ``displacement`` (True: :meth:`Result.write` also writes
+    each pass's displacement field), ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
     dict shaped like the config's [pipeline] table, e.g.
     ``{"features": {"min_relative_height": 0.5}}``), the geometry ``pitch`` (metres),
     ``pixel_period``, ``line_time``, ``turnaround`` (seconds), ``fast``, ``slow``, and

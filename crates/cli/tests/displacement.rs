@@ -1,0 +1,91 @@
+//! `dhct correct --displacement`: each pass's displacement field, written as NPY
+//! (2 × rows × columns, metres) and as a two-page float TIFF, agrees with the corrected
+//! positions of the features: a feature's raw position plus the field at its pixel is where
+//! `features.csv` puts it.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::correct;
+
+fn example() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/simulated_graphite.sm4")
+}
+
+/// The `(pages, rows, columns)` array of an NPY stack dhct wrote.
+fn read_stack(bytes: &[u8]) -> ((usize, usize, usize), Vec<f64>) {
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+    let shape = header.split("'shape': (").nth(1).unwrap();
+    let dims: Vec<usize> = shape
+        .split(')')
+        .next()
+        .unwrap()
+        .split(',')
+        .filter_map(|d| d.trim().parse().ok())
+        .collect();
+    let data = bytes[10 + header_len..]
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    ((dims[0], dims[1], dims[2]), data)
+}
+
+#[test]
+fn the_displacement_field_moves_each_feature_to_its_corrected_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = correct(&example(), &["--displacement"], &out);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("features.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (pass, x_px, y_px, x_m, y_m, cx, cy) = (
+        col("pass"),
+        col("x_px"),
+        col("y_px"),
+        col("x_m"),
+        col("y_m"),
+        col("corrected_x_m"),
+        col("corrected_y_m"),
+    );
+    for name in ["trace", "retrace"] {
+        assert!(out.join(format!("displacement_{name}.tiff")).exists());
+        let bytes = std::fs::read(out.join(format!("displacement_{name}.npy"))).unwrap();
+        let ((pages, rows, columns), data) = read_stack(&bytes);
+        assert_eq!((pages, rows, columns), (2, 256, 256));
+        let at = |page: usize, r: usize, c: usize| data[(page * rows + r) * columns + c];
+        let mut checked = 0;
+        let mut worst: f64 = 0.0;
+        for line in csv.lines().skip(1) {
+            let v: Vec<&str> = line.split(',').collect();
+            if v[pass] != name || v[cx].is_empty() {
+                continue;
+            }
+            let num = |i: usize| v[i].parse::<f64>().unwrap();
+            let (x, y) = (num(x_px), num(y_px));
+            if x < 0.0 || y < 0.0 || x >= (columns - 1) as f64 || y >= (rows - 1) as f64 {
+                continue;
+            }
+            // The field interpolated (bilinearly) at the feature's position.
+            let (c, r) = (x.floor() as usize, y.floor() as usize);
+            let (fx, fy) = (x - c as f64, y - r as f64);
+            let field = |page: usize| {
+                (1.0 - fy) * ((1.0 - fx) * at(page, r, c) + fx * at(page, r, c + 1))
+                    + fy * ((1.0 - fx) * at(page, r + 1, c) + fx * at(page, r + 1, c + 1))
+            };
+            let ex = num(x_m) + field(0) - num(cx);
+            let ey = num(y_m) + field(1) - num(cy);
+            worst = worst.max(ex.hypot(ey));
+            checked += 1;
+        }
+        assert!(checked > 100, "{name}: {checked} features");
+        assert!(worst < 1e-12, "{name}: worst {worst:e} m");
+    }
+}
