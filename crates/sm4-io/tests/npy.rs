@@ -299,7 +299,7 @@ fn a_stack_is_one_three_dimensional_array_in_page_order() {
         .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
         .collect();
     assert_eq!(data, [0., 1., 2., 3., 4., 5., -0., -1., -2., -3., -4., -5.]);
-    assert!((10 + header_len) % 64 == 0);
+    assert!((10 + header_len).is_multiple_of(64));
     let odd = Array2::<f64>::zeros((3, 2));
     assert!(npy::write_stack(&[&a, &odd], &mut Vec::new()).is_err());
 }
