@@ -290,3 +290,13 @@ def test_progress_true_reports_each_stage_on_stderr_or_tqdm(scan, capsys):
     err = capsys.readouterr().err
     # Either tqdm's bar or one line per stage: both name the stages.
     assert "finding and fitting features" in err or "stage" in err, err
+
+
+def test_displacement_fields_are_written_when_asked(example, tmp_path):
+    written = dhct.correct(example, displacement=True).write(tmp_path / "o")
+    for name in ("trace", "retrace"):
+        assert f"displacement_{name}.npy" in written["outputs"]
+        field = np.load(tmp_path / "o" / f"displacement_{name}.npy")
+        assert field.shape == (2, 256, 256)
+        # Drift moves the tip by up to nanometres over the frame, never by a micrometre.
+        assert 1e-12 < np.abs(field).max() < 1e-6
