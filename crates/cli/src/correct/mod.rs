@@ -288,7 +288,18 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
             } else {
                 String::new()
             };
-            format!("{} {} ({} indexed{raised})", p.pass, p.features, p.indexed)
+            let outside = if p.outside_frame > 0 {
+                format!(
+                    "; {} outside the frame after correction, not in the corrected image",
+                    p.outside_frame
+                )
+            } else {
+                String::new()
+            };
+            format!(
+                "{} {} ({} indexed{raised}{outside})",
+                p.pass, p.features, p.indexed
+            )
         })
         .collect();
     s.push_str(&calibration_lines(summary));

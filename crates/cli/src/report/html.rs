@@ -81,8 +81,18 @@ fn summary_section(html: &mut Html, summary: &RunSummary) {
         .passes
         .iter()
         .map(|p| {
+            let outside = if p.outside_frame > 0 {
+                format!(
+                    "; {} ({:.1} %) lie outside the frame after correction and are cropped \
+                     from the corrected image, though kept in features.csv",
+                    p.outside_frame,
+                    100.0 * p.outside_frame as f64 / p.features.max(1) as f64
+                )
+            } else {
+                String::new()
+            };
             format!(
-                "{} in the {} image ({} indexed)",
+                "{} in the {} image ({} indexed{outside})",
                 p.features, p.pass, p.indexed
             )
         })

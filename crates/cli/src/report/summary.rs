@@ -46,6 +46,9 @@ pub struct PassCounts {
     pub local_distortions: usize,
     /// Features indexed to a lattice site.
     pub indexed: usize,
+    /// Features whose corrected position lies outside the frame: the corrected image
+    /// (cropped to the raw frame) does not show them; `features.csv` keeps them.
+    pub outside_frame: usize,
     /// Factor per axis `[x, y]` by which the features' fitted 1σ were raised because the
     /// pixel noise is correlated (1 for white noise).
     pub correlated_noise_factor: [f64; 2],
@@ -308,6 +311,17 @@ pub fn goodness(analysis: &Analysis) -> Goodness {
     }
 }
 
+/// The features of `p` whose corrected position lies outside its frame (pixel centres at
+/// whole output pixels, so the frame spans `[-0.5, n - 0.5]`).
+fn outside_frame(p: &dhct_pipeline::PassOutput) -> usize {
+    let (rows, columns) = p.corrected_image.dim();
+    let inside = |v: f64, n: usize| v >= -0.5 && v <= n as f64 - 0.5;
+    p.corrected
+        .iter()
+        .filter(|f| !(inside(f.x_px, columns) && inside(f.y_px, rows)))
+        .count()
+}
+
 /// The counts of one image.
 fn pass_counts(analysis: &Analysis, p: &dhct_pipeline::PassOutput) -> PassCounts {
     let dhct = analysis.dhct.passes.iter().find(|d| d.pass == p.pass);
@@ -319,6 +333,7 @@ fn pass_counts(analysis: &Analysis, p: &dhct_pipeline::PassOutput) -> PassCounts
         selected_for_model: dhct.map(|d| d.used_selection().selected.len()).unwrap_or(0),
         local_distortions: dhct.map(|d| d.local.len()).unwrap_or(0),
         indexed: p.indices.iter().flatten().count(),
+        outside_frame: outside_frame(p),
         correlated_noise_factor: p.features.correlated_noise_factor,
         line_levelling: p.features.line_levelling.clone(),
         exclusions: dhct
