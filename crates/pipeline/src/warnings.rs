@@ -293,7 +293,14 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
-            "do not interpret them separately; the correction uses only their combinations",
+            if pairs.iter().all(|p| drift_family(&p.first, &p.second)) {
+                "expected and harmless on one frame: over a single frame a drift velocity, its \
+                 acceleration and the creep look alike, and the correction uses only their \
+                 combination; do not read them separately (a sequence of frames or a longer \
+                 frame tells them apart)"
+            } else {
+                "do not interpret them separately; the correction uses only their combinations"
+            },
         ));
     }
     warnings.extend(uncertain(&model.parameters));
@@ -413,6 +420,21 @@ fn how_far_off(lattice: &dyn Lattice, c: &CorrectedImageCheck) -> String {
         lattice.name(),
         c.angle_error_deg
     )
+}
+
+/// Whether two parameters are drift terms of one axis, or one of them and the creep's
+/// `t0`: their near-degeneracy is the nature of a single frame, not a fault.
+fn drift_family(a: &str, b: &str) -> bool {
+    let axis = |p: &str| match p {
+        "v_x" | "a_x" | "C_x" => Some('x'),
+        "v_y" | "a_y" | "C_y" => Some('y'),
+        "t0" => Some('t'),
+        _ => None,
+    };
+    match (axis(a), axis(b)) {
+        (Some(x), Some(y)) => x == y || x == 't' || y == 't',
+        _ => false,
+    }
 }
 
 /// Corrected images whose lattice, measured by FFT, is not the lattice given.
@@ -677,6 +699,10 @@ mod tests {
             ]
         );
         assert!(warnings[1].message.contains("v_x–C_x"));
+        // A drift/creep pair is the nature of one frame, and said so.
+        assert!(warnings[1].what_to_do.contains("expected and harmless"));
+        assert!(drift_family("v_y", "t0") && !drift_family("v_x", "k"));
+        assert!(!drift_family("v_x", "v_y"));
         let listed = &warnings[2].message;
         assert!(listed.contains("C_x") && listed.contains("undetermined"));
         assert!(listed.contains("a_x") && !listed.contains("v_x"));

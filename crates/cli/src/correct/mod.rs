@@ -315,6 +315,11 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
             crate::units::value_with_sigma(p.value, p.sigma, &p.unit)
         );
     }
+    if let Some(words) =
+        crate::report::summary::hysteresis_words(&summary.model.hysteresis, &summary.geometry)
+    {
+        let _ = writeln!(s, "hysteresis: {words}");
+    }
     for r in &summary.regions {
         let _ = writeln!(
             s,
@@ -364,8 +369,9 @@ fn calibration_lines(summary: &RunSummary) -> String {
             let c = &found.calibration;
             let _ = writeln!(
                 s,
-                "calibration: x scale {:.4} ± {:.4}, y scale {:.4} ± {:.4}, shear {:.2}° ± {:.2}° \
-                 (apparent / true length, from the lattice)",
+                "raw lattice against the named one: x {:.4} ± {:.4}, y {:.4} ± {:.4}, shear \
+                 {:.2}° ± {:.2}° (apparent / true length: the file's pixel-size error and the \
+                 drift, creep and hysteresis together; the model separates them)",
                 c.scale[0],
                 c.scale_sigma[0],
                 c.scale[1],

@@ -206,10 +206,13 @@ fn calibration_section(html: &mut Html, summary: &RunSummary) {
     };
     html.element(
         "p",
-        "Measured from the Fourier transform of each image before anything else, in the \
-         file's units; the scales are apparent over true lengths (1 = the file's pixel size is \
-         right). A pixel-size error along the slow axis and a constant slow drift look the \
-         same in one frame.",
+        "Measured from the Fourier transform of each raw image before anything else, in the \
+         file's units: the raw lattice against the lattice named, as apparent over true \
+         lengths. These numbers hold the file's pixel-size error and the distortion by drift, \
+         creep and hysteresis together; the model below separates them, and the corrected \
+         images' check shows what is left. 1, 1 and 0° mean the raw image already has the \
+         lattice's size and shape. A pixel-size error along the slow axis and a constant \
+         slow drift look the same in one frame.",
     );
     let mut rows: Vec<(String, String)> = found
         .passes
@@ -239,7 +242,17 @@ fn calibration_section(html: &mut Html, summary: &RunSummary) {
                 degrees(c.shear_sigma_deg, 2)
             ),
         ),
-        ("lattice rotation".into(), degrees(c.rotation_deg, 2)),
+        (
+            "lattice rotation".into(),
+            format!(
+                "{} (modulo the lattice's {})",
+                degrees(
+                    super::summary::within_period(c.rotation_deg, summary.rotation_period_deg),
+                    2
+                ),
+                degrees(summary.rotation_period_deg, 0)
+            ),
+        ),
     ]);
     for a in &summary.affine_baseline {
         rows.push((
@@ -371,6 +384,11 @@ fn model_section(html: &mut Html, summary: &RunSummary) {
         .map(|p| vec![p.name.clone(), value_with_sigma(p.value, p.sigma, &p.unit)])
         .collect();
     html.table(&["parameter", "value ± 1σ"], &rows);
+    if let Some(words) =
+        super::summary::hysteresis_words(&summary.model.hysteresis, &summary.geometry)
+    {
+        html.element("p", &format!("Hysteresis: {words}."));
+    }
     let gf = &summary.goodness;
     let drift = |k: usize| {
         format!(

@@ -204,6 +204,46 @@ impl RouteSummary {
     }
 }
 
+/// `angle_deg` reduced into `(−period/2, period/2]` (degrees): a lattice turned by its own
+/// symmetry rotation is the same lattice.
+pub fn within_period(angle_deg: f64, period_deg: f64) -> f64 {
+    if !(period_deg.is_finite() && period_deg > 0.0) {
+        return angle_deg;
+    }
+    let r = angle_deg.rem_euclid(period_deg);
+    if r > period_deg / 2.0 {
+        r - period_deg
+    } else {
+        r
+    }
+}
+
+/// The hysteresis in words: the law and the apparent fast-axis scale `S` (apparent over true
+/// length) at the first pixel, mid-line and the last pixel; `None` without hysteresis.
+pub fn hysteresis_words(law: &dhct_scan::HysteresisLaw, geometry: &ScanGeometry) -> Option<String> {
+    use dhct_scan::HysteresisLaw;
+    if *law == HysteresisLaw::none() {
+        return None;
+    }
+    let form = match law {
+        HysteresisLaw::Power { .. } => "S = k·τ^n, τ in seconds since the line start",
+        HysteresisLaw::Quartic { .. } => "the paper's quartic in τ over the line time",
+        HysteresisLaw::Exponential { .. } => "S = 1 + A·exp(−τ/τ_h)",
+    };
+    let (first, last) = (
+        0.5 * geometry.pixel_period(),
+        geometry.line_scan_time() - 0.5 * geometry.pixel_period(),
+    );
+    Some(format!(
+        "the image is stretched along the fast axis by S = {:.4} at the first pixel, {:.4} \
+         mid-line and {:.4} at the last (apparent over true length: the tip lags behind the \
+         controller where S > 1; {form}; 1 = no hysteresis)",
+        law.scale(first),
+        law.scale(0.5 * (first + last)),
+        law.scale(last)
+    ))
+}
+
 /// Everything numeric of a run (`model.json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct RunSummary {
@@ -220,6 +260,9 @@ pub struct RunSummary {
     pub lattice_assumed: bool,
     /// The lattice's nearest-neighbour distance, metres.
     pub nearest_neighbour_distance_m: f64,
+    /// The rotation (degrees) that maps the lattice onto itself: its rotation in an image is
+    /// known modulo this (60 for hexagonal, 90 for square).
+    pub rotation_period_deg: f64,
     /// The input's scan geometry.
     pub geometry: ScanGeometry,
     /// The model the correction used: the drift/creep/hysteresis model, or the affine map
@@ -396,6 +439,7 @@ pub fn summarise(
         input,
         retrace_input,
         lattice: lattice.name().to_string(),
+        rotation_period_deg: lattice.bond_direction_period().to_degrees(),
         lattice_assumed: false,
         nearest_neighbour_distance_m: lattice.nearest_neighbour_distance(),
         geometry: geometry.clone(),
