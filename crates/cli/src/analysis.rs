@@ -4,7 +4,7 @@
 //! line and Python render in their own terms. Nothing here writes a file: `correct`
 //! writes the outputs, `diagnose` adds the diagnosis.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
@@ -41,6 +41,9 @@ pub struct Corrected {
     pub analysis: Analysis,
     /// The content of `model.json` (`outputs` and `write_s` are filled when written).
     pub summary: RunSummary,
+    /// The files the scan was read from (input, and the retrace's own file), when it came
+    /// from files: the other channels are read from them again.
+    pub source: Option<(PathBuf, Option<PathBuf>)>,
 }
 
 /// Why an analysis stopped, by which stage refused (the message is the command line's).
@@ -165,6 +168,7 @@ pub fn analyse(
         mask,
         analysis,
         summary,
+        source: None,
     })
 }
 
@@ -180,6 +184,7 @@ pub fn analyse_file(
     let start = Instant::now();
     let pair = read_pair(input, retrace, &config.geometry, config.channel.as_deref())?;
     let read_s = start.elapsed().as_secs_f64();
+    let source = (input.to_path_buf(), retrace.map(Path::to_path_buf));
     analyse(
         AnalyseRequest {
             pair,
@@ -198,6 +203,10 @@ pub fn analyse_file(
         }
         e @ CorrectError::Analysis(_) => anyhow::anyhow!(e.render(Spelling::CommandLine))
             .context(format!("analysing {}", input.display())),
+    })
+    .map(|corrected| Corrected {
+        source: Some(source),
+        ..corrected
     })
 }
 

@@ -249,6 +249,11 @@ struct CorrectArgs {
     /// cividis, greys.
     #[arg(long, value_parser = parse_colormap)]
     colormap: Option<dhct_sm4_io::png_file::Colormap>,
+    /// `all`: also correct every other image channel of the file (current, dI/dV, ...) with
+    /// the model fitted on the analysed channel: corrected_{channel}_{trace,retrace}.tiff
+    /// and .gsf, with the pixel size and the channel's unit.
+    #[arg(long, value_parser = parse_channels)]
+    channels: Option<correct::ChannelSet>,
     /// Also write each pass's displacement field: displacement_trace.npy (shape 2 × rows ×
     /// columns: dx, dy in metres, where the tip really was relative to the controller) and
     /// displacement_trace.tiff (the same as two float pages with the pixel size).
@@ -282,6 +287,7 @@ impl CorrectArgs {
             plane_group: self.plane_group,
             colormap: self.colormap,
             displacement: self.displacement.then_some(true),
+            channels: self.channels,
             geometry: self.geometry.overrides(),
             overwrite: self.overwrite,
             ..correct::CorrectConfig::default()
@@ -302,6 +308,15 @@ fn parse_polarity(text: &str) -> Result<dhct_features::Polarity, String> {
         "bright" => Ok(dhct_features::Polarity::Bright),
         "dark" => Ok(dhct_features::Polarity::Dark),
         _ => Err(format!("'{text}' is not a polarity (use bright or dark)")),
+    }
+}
+
+fn parse_channels(text: &str) -> Result<correct::ChannelSet, String> {
+    match text.trim().to_ascii_lowercase().as_str() {
+        "all" => Ok(correct::ChannelSet::All),
+        other => Err(format!(
+            "'{other}' is not a channel set: use all (the analysed channel is --channel)"
+        )),
     }
 }
 

@@ -21,8 +21,8 @@ use crate::report::figures::{FigureInputs, make_figures};
 pub use crate::report::summary::RunSummary;
 use crate::report::{html, write_bytes, write_figure_files};
 pub use crate::setup::{
-    CorrectConfig, Length, MeasuredNnError, Resolved, build_lattice, load_mask, read_pair, resolve,
-    with_measured_nn,
+    ChannelSet, CorrectConfig, Length, MeasuredNnError, Resolved, build_lattice, load_mask,
+    read_pair, resolve, with_measured_nn,
 };
 use feature_table::write_features_csv;
 
@@ -127,6 +127,9 @@ fn write_into(
                     let mut written = write_data_images(dir, pair, analysis)?;
                     if config.displacement == Some(true) {
                         written.extend(write_displacement_fields(dir, pair, analysis)?);
+                    }
+                    if config.channels == Some(ChannelSet::All) {
+                        written.extend(write_other_channels(dir, corrected)?);
                     }
                     Ok::<_, anyhow::Error>(written)
                 },
@@ -245,6 +248,100 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             Ok(name.clone())
         })
         .collect()
+}
+
+/// Every other image channel of the source file(s), corrected with the model kept:
+/// `corrected_{channel}_{pass}.tiff` (float, pixel size, unit) and `.gsf`. Channels of
+/// another size than the analysed one are left out with a note on stderr.
+fn write_other_channels(dir: &Path, corrected: &Corrected) -> Result<Vec<String>> {
+    let Some((input, retrace)) = &corrected.source else {
+        anyhow::bail!("channels = all needs the scan's file: the other channels are read from it");
+    };
+    let analysed = corrected.pair.images().next().map(|(_, c)| c.name.clone());
+    let geometry = corrected.pair.geometry();
+    let pitch = [geometry.pitch_x(), geometry.pitch_y()];
+    let file = dhct_sm4_io::read_path_with_limits(
+        input,
+        &corrected.config.geometry,
+        &crate::read_limits::get(),
+    )
+    .with_context(|| format!("cannot read {} again for its channels", input.display()))?;
+    let mut names = Vec::new();
+    let mut used: Vec<String> = Vec::new();
+    for other in &file.pairs {
+        let Some((_, first)) = other.images().next() else {
+            continue;
+        };
+        if Some(&first.name) == analysed.as_ref() {
+            continue;
+        }
+        let pair = crate::setup::read_pair(
+            input,
+            retrace.as_deref(),
+            &corrected.config.geometry,
+            Some(&first.name),
+        )?;
+        if (pair.geometry().columns(), pair.geometry().rows())
+            != (geometry.columns(), geometry.rows())
+        {
+            eprintln!(
+                "note: channel {} is {} x {} px, not the analysed {} x {}: not corrected",
+                first.name,
+                pair.geometry().columns(),
+                pair.geometry().rows(),
+                geometry.columns(),
+                geometry.rows()
+            );
+            continue;
+        }
+        let stem = unique_stem(&first.name, &mut used);
+        for (pass, image) in pair.images() {
+            let z = dhct_distortion::correct_image(
+                &corrected.analysis.dhct.model,
+                geometry,
+                pass,
+                &image.z,
+            )?;
+            let channel = ImageChannel::new(image.name.clone(), image.unit.clone(), z);
+            let base = format!("corrected_{stem}_{pass}");
+            write_atomically(&dir.join(format!("{base}.tiff")), |w| {
+                dhct_sm4_io::tiff_file::write_f32_with_pixel_size(&channel, pitch, w)
+            })?;
+            write_atomically(&dir.join(format!("{base}.gsf")), |w| {
+                dhct_sm4_io::gsf::write_pass(&channel, geometry, pass, w)
+            })?;
+            names.extend([format!("{base}.tiff"), format!("{base}.gsf")]);
+        }
+    }
+    Ok(names)
+}
+
+/// A file-name-safe stem for channel `name` (letters, digits, `-`, `_`; others become
+/// `_`), made unique among `used`.
+fn unique_stem(name: &str, used: &mut Vec<String>) -> String {
+    let base: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let base = if base.is_empty() {
+        "channel".to_string()
+    } else {
+        base
+    };
+    let mut stem = base.clone();
+    let mut k = 2;
+    while used.contains(&stem) {
+        stem = format!("{base}_{k}");
+        k += 1;
+    }
+    used.push(stem.clone());
+    stem
 }
 
 /// Each pass's displacement field under the correction kept: `displacement_{pass}.npy`

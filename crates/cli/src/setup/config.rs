@@ -71,6 +71,9 @@ pub struct CorrectConfig {
     pub plane_group: Option<PlaneGroup>,
     /// Colour map of the pictures.
     pub colormap: Option<Colormap>,
+    /// `all`: also correct every other image channel of the file with the model fitted on
+    /// the analysed one (`corrected_{channel}_{pass}.tiff` and `.gsf`).
+    pub channels: Option<ChannelSet>,
     /// Also write the displacement field of each pass (`displacement_{pass}.npy` and
     /// `.tiff`: per pixel, where the tip really was relative to the controller, metres).
     pub displacement: Option<bool>,
@@ -159,6 +162,7 @@ impl CorrectConfig {
             plane_group,
             colormap,
             displacement,
+            channels,
             channel
         );
         if let Some(pipeline) = other.pipeline {
@@ -272,6 +276,14 @@ fn edit_distance(a: &str, b: &str) -> usize {
         }
     }
     row[b.len()]
+}
+
+/// Which image channels are corrected besides the analysed one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ChannelSet {
+    /// Every image channel of the file.
+    All,
 }
 
 /// Why the lattice and constant given cannot be combined, in quantities (the front ends

@@ -12,7 +12,9 @@ use dhct_distortion::mask::{polygon_mask, read_mask};
 use dhct_scan::{ScanPair, ScanPass};
 use ndarray::Array2;
 
-pub use config::{CorrectConfig, LatticeChoiceError, Length, build_lattice, pipeline_table};
+pub use config::{
+    ChannelSet, CorrectConfig, LatticeChoiceError, Length, build_lattice, pipeline_table,
+};
 pub use inputs::{
     CALIBRATE_PITCH_TOLERANCE, MeasuredNnError, PRESET_PITCH_TOLERANCE, Resolved, resolve,
     with_measured_nn,

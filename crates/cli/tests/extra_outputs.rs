@@ -1,7 +1,7 @@
-//! `dhct correct --displacement`: each pass's displacement field, written as NPY
-//! (2 × rows × columns, metres) and as a two-page float TIFF, agrees with the corrected
-//! positions of the features: a feature's raw position plus the field at its pixel is where
-//! `features.csv` puts it.
+//! The outputs asked for beside the default ones: `--displacement` (each pass's
+//! displacement field, NPY 2 × rows × columns in metres and a two-page float TIFF, which
+//! moves a feature's raw position to its corrected one) and `--channels all` (every other
+//! image channel corrected with the one model).
 
 mod common;
 
@@ -87,5 +87,76 @@ fn the_displacement_field_moves_each_feature_to_its_corrected_position() {
         }
         assert!(checked > 100, "{name}: {checked} features");
         assert!(worst < 1e-12, "{name}: worst {worst:e} m");
+    }
+}
+
+/// `--channels all`: every other image channel of a Nanonis file (current, lock-in, counter)
+/// is corrected with the model fitted on the topography: the same pixels are mapped (the
+/// same no-data pattern as the corrected topography, pass by pass), the values are the
+/// channel's own, and each file keeps the channel's unit.
+#[test]
+fn every_channel_is_corrected_with_the_one_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let input = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/real/hbn_defect_nanonis_2nm.sxm");
+    let args = [
+        "--lattice",
+        "hexagonal",
+        "--nn",
+        "2.504A",
+        "--polarity",
+        "dark",
+        "--channels",
+        "all",
+    ];
+    let output = correct(&input, &args, &out);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let read = |name: &str| {
+        let file = dhct_sm4_io::read_path(&out.join(name)).unwrap();
+        file.pairs[0].images().next().unwrap().1.clone()
+    };
+    let raw = dhct_sm4_io::read_path(&input).unwrap();
+    for pass in ["trace", "retrace"] {
+        let z = read(&format!("corrected_{pass}.gsf"));
+        for channel in ["Current", "LI_Demod_1_X", "LI_Demod_1_Y", "Counter_1"] {
+            assert!(
+                out.join(format!("corrected_{channel}_{pass}.tiff"))
+                    .exists()
+            );
+            let other = read(&format!("corrected_{channel}_{pass}.gsf"));
+            assert_eq!(other.z.dim(), z.z.dim());
+            let same_gaps =
+                z.z.iter()
+                    .zip(other.z.iter())
+                    .all(|(a, b)| a.is_nan() == b.is_nan());
+            assert!(same_gaps, "{channel} {pass}: not the topography's mapping");
+            let source = raw
+                .pairs
+                .iter()
+                .find(|p| p.images().next().unwrap().1.name.replace(' ', "_") == channel)
+                .unwrap();
+            let values = source.images().next().unwrap().1;
+            assert_eq!(other.unit, values.unit, "{channel}");
+            let (lo, hi) = values
+                .z
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                    (l.min(v), h.max(v))
+                });
+            let span = hi - lo;
+            assert!(
+                other
+                    .z
+                    .iter()
+                    .filter(|v| v.is_finite())
+                    .all(|&v| v >= lo - 0.5 * span && v <= hi + 0.5 * span),
+                "{channel} {pass}: values not the channel's"
+            );
+        }
     }
 }
