@@ -3,6 +3,7 @@
 //! package `dhct`) resolve options and write outputs exactly as the command line does.
 
 pub mod analysis;
+pub mod apply;
 pub mod batch;
 pub mod correct;
 pub mod diagnose;

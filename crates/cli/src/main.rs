@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use dhct_cli::{batch, correct, diagnose, info, lattice_check, simulate, units};
+use dhct_cli::{apply, batch, correct, diagnose, info, lattice_check, simulate, units};
 use dhct_scan::ScanDirection;
 use dhct_sm4_io::GeometryOverrides;
 
@@ -153,6 +153,27 @@ enum Command {
         json: bool,
         #[command(flatten)]
         geometry: GeometryArgs,
+    },
+    /// Apply a model `dhct correct` fitted (its model.json) to another file recorded in the
+    /// same frame and timing (a channel saved on its own, a repeated export): write its
+    /// corrected trace and retrace (TIFF with pixel size, GSF) into OUTDIR. A file whose
+    /// size, pixel size, timing or scan directions differ is refused, naming what differs.
+    Apply {
+        /// The model.json of a `dhct correct` run.
+        model: PathBuf,
+        /// The file to correct.
+        input: PathBuf,
+        /// A separate file holding its retrace, if any.
+        retrace: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The channel to correct (default: the topography).
+        #[arg(long)]
+        channel: Option<String>,
+        /// Replace an earlier run's output folder.
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Check a lattice against the contract every lattice keeps (neighbour shells and
     /// counts, the neighbour window, the plane group's metric and motif symmetry about its
@@ -448,6 +469,22 @@ fn main() -> ExitCode {
             json,
             geometry,
         } => info::run(file, &geometry.overrides(), *json),
+        Command::Apply {
+            model,
+            input,
+            retrace,
+            output,
+            channel,
+            overwrite,
+        } => apply::run(&apply::ApplyRequest {
+            model,
+            input,
+            retrace: retrace.as_deref(),
+            channel: channel.as_deref(),
+            output,
+            overwrite: *overwrite,
+        })
+        .map(|written| println!("wrote {} into {}", written.join(", "), output.display())),
         Command::Lattice {
             action: LatticeAction::Check { lattice, nn },
         } => nn

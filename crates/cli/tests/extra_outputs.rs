@@ -160,3 +160,56 @@ fn every_channel_is_corrected_with_the_one_model() {
         }
     }
 }
+
+/// `dhct apply MODEL.json FILE`: the model applied to the file it was fitted on writes the
+/// same corrected images as `dhct correct`, byte for byte; a file of another scan is
+/// refused, naming what differs.
+#[test]
+fn a_saved_model_applies_to_a_file_of_the_same_scan_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    assert!(correct(&example(), &[], &out).status.success());
+    let applied = dir.path().join("applied");
+    let run = common::dhct()
+        .arg("apply")
+        .arg(out.join("model.json"))
+        .arg(example())
+        .arg("-o")
+        .arg(&applied)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for name in [
+        "corrected_trace.gsf",
+        "corrected_trace.tiff",
+        "corrected_retrace.gsf",
+        "corrected_retrace.tiff",
+    ] {
+        assert_eq!(
+            std::fs::read(applied.join(name)).unwrap(),
+            std::fs::read(out.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    let other =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/hopg_graphiteterrace.spm");
+    let refused = common::dhct()
+        .arg("apply")
+        .arg(out.join("model.json"))
+        .arg(other)
+        .arg("-o")
+        .arg(dir.path().join("refused"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("columns is 512") && stderr.contains("256"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("refused").exists());
+}

@@ -302,7 +302,8 @@ fn write_other_channels(dir: &Path, corrected: &Corrected) -> Result<Vec<String>
                 pass,
                 &image.z,
             )?;
-            let channel = ImageChannel::new(image.name.clone(), image.unit.clone(), z);
+            let channel =
+                ImageChannel::new(format!("{} (corrected)", image.name), image.unit.clone(), z);
             let base = format!("corrected_{stem}_{pass}");
             write_atomically(&dir.join(format!("{base}.tiff")), |w| {
                 dhct_sm4_io::tiff_file::write_f32_with_pixel_size(&channel, pitch, w)
