@@ -77,28 +77,43 @@ pub fn run(request: &ApplyRequest) -> Result<Vec<String>> {
 
 /// An error naming the first way `file`'s scan differs from the `model`'s.
 fn same_scan(model: &ScanGeometry, file: &ScanGeometry) -> Result<()> {
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs()).max(1e-300);
+    // Relative agreement to 1e-6, and a floor for quantities that may be zero.
+    let same = |m: f64, f: f64, floor: f64| (m - f).abs() <= 1e-6 * m.abs().max(f.abs()) + floor;
     let numbers = [
-        ("columns", model.columns() as f64, file.columns() as f64, ""),
-        ("rows", model.rows() as f64, file.rows() as f64, ""),
-        ("pixel size x", model.pitch_x(), file.pitch_x(), " m"),
-        ("pixel size y", model.pitch_y(), file.pitch_y(), " m"),
+        (
+            "columns",
+            model.columns() as f64,
+            file.columns() as f64,
+            "",
+            0.0,
+        ),
+        ("rows", model.rows() as f64, file.rows() as f64, "", 0.0),
+        ("pixel size x", model.pitch_x(), file.pitch_x(), " m", 0.0),
+        ("pixel size y", model.pitch_y(), file.pitch_y(), " m", 0.0),
         (
             "pixel period",
             model.pixel_period(),
             file.pixel_period(),
             " s",
+            0.0,
         ),
         (
             "turnaround",
             model.turnaround_time(),
             file.turnaround_time(),
             " s",
+            1e-9,
         ),
-        ("scan angle", model.scan_angle(), file.scan_angle(), " rad"),
+        (
+            "scan angle",
+            model.scan_angle(),
+            file.scan_angle(),
+            " rad",
+            1e-9,
+        ),
     ];
-    for (what, m, f, unit) in numbers {
-        if !close(m, f) && !(m == 0.0 && f.abs() < 1e-12) {
+    for (what, m, f, unit, floor) in numbers {
+        if !same(m, f, floor) {
             bail!(
                 "the file's {what} is {f}{unit} but the model was fitted on a scan with {m}{unit}: \
                  a model applies only to a file recorded in the same frame and timing"
