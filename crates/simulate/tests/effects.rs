@@ -660,7 +660,7 @@ fn raster_and_ground_truth_agree_under_combined_effects() {
 }
 
 #[test]
-fn with_parameters_round_trips_every_effect() {
+fn every_effect_keeps_the_effect_contract() {
     let effects: Vec<Box<dyn Effect>> = vec![
         Box::new(ThermalDrift {
             velocity_m_per_s: [1e-12, 2e-12],
@@ -747,5 +747,46 @@ fn with_parameters_round_trips_every_effect() {
             shifted
         );
         assert!(effect.with_parameters(&parameters[1..]).is_err());
+        displaces_finitely_and_rebuilds_from_its_config(effect.as_ref());
+    }
+}
+
+/// The rest of the contract every effect keeps: a finite displacement at every pixel of a
+/// frame in both passes, the same displacement from the effect rebuilt from its config
+/// entry, and a config entry that survives JSON.
+fn displaces_finitely_and_rebuilds_from_its_config(effect: &dyn Effect) {
+    let geometry = dhct_scan::ScanGeometry::new(
+        16,
+        12,
+        1e-10,
+        1e-10,
+        1e-3,
+        dhct_scan::ScanDirection::Right,
+        dhct_scan::ScanDirection::Down,
+    )
+    .unwrap();
+    let config = effect.config();
+    let json = serde_json::to_string(&config).unwrap();
+    let back: EffectConfig = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, config, "{}", effect.name());
+    let rebuilt = config.build("effects[0]").unwrap();
+    for pass in [ScanPass::Trace, ScanPass::Retrace] {
+        for r in 0..12 {
+            for c in 0..16 {
+                let at = AcquisitionContext::at_pixel(&geometry, pass, c as f64, r as f64, 1e-10);
+                let d = effect.displacement(&at);
+                assert!(
+                    d.iter().all(|v| v.is_finite()),
+                    "{} at {c}, {r}",
+                    effect.name()
+                );
+                assert_eq!(
+                    rebuilt.displacement(&at),
+                    d,
+                    "{} at {c}, {r}",
+                    effect.name()
+                );
+            }
+        }
     }
 }
