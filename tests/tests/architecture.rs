@@ -135,3 +135,79 @@ fn the_architecture_diagram_is_the_workspace_graph() {
          {BEGIN}\n{expected}{END}"
     );
 }
+
+/// GitHub's anchor of a heading: lower case, spaces to `-`, punctuation dropped.
+fn anchor(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter_map(|c| match c {
+            ' ' => Some('-'),
+            c if c.is_alphanumeric() || c == '-' || c == '_' => Some(c),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Every `[text](target)` link target of a markdown text.
+fn links(text: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find("](") {
+        rest = &rest[i + 2..];
+        if let Some(end) = rest.find(')') {
+            found.push(rest[..end].to_string());
+        }
+    }
+    found
+}
+
+#[test]
+fn the_readme_is_short_lists_every_crate_and_its_links_resolve() {
+    let root = root();
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let lines = readme.lines().count();
+    assert!(lines <= 250, "README.md has {lines} lines (at most 250)");
+    for name in dependencies().keys() {
+        let folder = name.trim_start_matches("dhct-");
+        assert!(
+            readme.contains(&format!("`crates/{folder}`")),
+            "README.md's crate table does not list crates/{folder} ({name})"
+        );
+    }
+    let mut documents = vec![root.join("README.md")];
+    documents.extend(
+        std::fs::read_dir(root.join("docs"))
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "md")),
+    );
+    let mut broken = Vec::new();
+    for doc in &documents {
+        let text = std::fs::read_to_string(doc).unwrap();
+        let headings: Vec<String> = text
+            .lines()
+            .filter(|l| l.starts_with('#'))
+            .map(|l| anchor(l.trim_start_matches('#')))
+            .collect();
+        for target in links(&text) {
+            if target.starts_with("http") || target.contains(' ') {
+                continue;
+            }
+            let (path, fragment) = target.split_once('#').unwrap_or((&target, ""));
+            if path.is_empty() {
+                if !headings.iter().any(|h| h == fragment) {
+                    broken.push(format!("{}: #{fragment}", doc.display()));
+                }
+                continue;
+            }
+            let resolved = doc.parent().unwrap().join(path);
+            if !resolved.exists() {
+                broken.push(format!("{}: {target}", doc.display()));
+            }
+        }
+    }
+    assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
+}
