@@ -117,3 +117,53 @@ fn lattice_check_describes_a_good_file_and_names_a_broken_rule() {
         "{stderr}"
     );
 }
+
+/// Five lattice files, each breaking one rule of the contract: `dhct lattice check` stops
+/// with exit 1 and names that rule.
+#[test]
+fn lattice_check_names_the_rule_each_broken_file_breaks() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "name = \"broken\"\nlength_unit = \"A\"\n";
+    let cases = [
+        (
+            "metric",
+            "a1 = [2.46, 0.0]\na2 = [1.25, 2.14]\nplane_group = \"p6mm\"\n\
+             [[motif]]\nfractional = [0.0, 0.0]\n",
+            "needs |a1| = |a2|",
+        ),
+        (
+            "symmetry",
+            "a1 = [2.46, 0.0]\na2 = [1.23, 2.130422]\nplane_group = \"p6mm\"\n\
+             [[motif]]\nfractional = [0.0, 0.0]\n[[motif]]\nfractional = [0.333333, 0.333333]\n",
+            "does not have plane group p6mm about the symmetry origin",
+        ),
+        (
+            "coincident",
+            "a1 = [3.0, 0.0]\na2 = [0.0, 3.0]\nplane_group = \"p1\"\n\
+             [[motif]]\nfractional = [0.0, 0.0]\n[[motif]]\nfractional = [1.0, 1.0]\n",
+            "coincide",
+        ),
+        (
+            "parallel",
+            "a1 = [3.0, 0.0]\na2 = [3.0, 0.01]\nplane_group = \"p1\"\n\
+             [[motif]]\nfractional = [0.0, 0.0]\n",
+            "nearly parallel",
+        ),
+        (
+            "empty",
+            "a1 = [3.0, 0.0]\na2 = [0.0, 3.0]\nplane_group = \"p1\"\nmotif = []\n",
+            "the motif is empty",
+        ),
+    ];
+    for (name, body, rule) in cases {
+        let path = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&path, format!("{head}{body}")).unwrap();
+        let output = common::dhct()
+            .args(["lattice", "check", path.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{name}: {stderr}");
+        assert!(stderr.contains(rule), "{name}: {stderr}");
+    }
+}
