@@ -46,12 +46,22 @@ fn scan_pair(scan: &Scan, config: &CorrectConfig) -> PyResult<ScanPair> {
 
 /// The pair to analyse and its label in the summary: a `Scan`, or a file read as `dhct
 /// correct` reads it (with an optional retrace file).
+/// The pair to analyse, its labels, the reading time, and the files it came from (when it
+/// did: `channels="all"` reads the other channels from them).
+type InputPair = (
+    ScanPair,
+    String,
+    Option<String>,
+    f64,
+    Option<(PathBuf, Option<PathBuf>)>,
+);
+
 fn input_pair(
     py: Python<'_>,
     source: &Bound<'_, PyAny>,
     retrace: Option<PathBuf>,
     config: &CorrectConfig,
-) -> PyResult<(ScanPair, String, Option<String>, f64)> {
+) -> PyResult<InputPair> {
     if let Ok(scan) = source.cast::<Scan>() {
         let scan = scan.get();
         if retrace.is_some() {
@@ -64,7 +74,8 @@ fn input_pair(
             .path
             .as_ref()
             .map_or_else(|| "<arrays>".to_string(), |p| p.display().to_string());
-        return Ok((scan_pair(scan, config)?, label, None, 0.0));
+        let files = scan.path.clone().map(|p| (p, None));
+        return Ok((scan_pair(scan, config)?, label, None, 0.0, files));
     }
     let path: PathBuf = source.extract().map_err(|_| {
         OptionError::new_err("the input must be a dhct.Scan or a path (str or os.PathLike)")
@@ -81,8 +92,9 @@ fn input_pair(
         })
         .map_err(|e| to_py::<ReadError>(&e))?;
     let label = path.display().to_string();
-    let retrace_label = retrace.map(|p| p.display().to_string());
-    Ok((pair, label, retrace_label, start.elapsed().as_secs_f64()))
+    let retrace_label = retrace.as_ref().map(|p| p.display().to_string());
+    let read_s = start.elapsed().as_secs_f64();
+    Ok((pair, label, retrace_label, read_s, Some((path, retrace))))
 }
 
 /// Runs the analysis without the GIL; `progress` (a callable taking the stage's
@@ -132,7 +144,7 @@ pub fn correct(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Correction> {
     let config = build_config(options_json, config_path)?;
-    let (pair, input, retrace, read_s) = input_pair(py, source, retrace, &config)?;
+    let (pair, input, retrace, read_s, files) = input_pair(py, source, retrace, &config)?;
     let mask = mask.map(|m| m.as_array().to_owned());
     let shape = (pair.geometry().rows(), pair.geometry().columns());
     if let Some(m) = &mask
@@ -155,7 +167,10 @@ pub fn correct(
         read_s,
     };
     Ok(Correction {
-        inner: run_detached(py, request, progress)?,
+        inner: Corrected {
+            source: files,
+            ..run_detached(py, request, progress)?
+        },
     })
 }
 

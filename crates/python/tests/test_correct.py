@@ -1,6 +1,7 @@
 """dhct.correct: the same model as `dhct correct`, arrays and columns, write, errors."""
 
 import json
+from pathlib import Path
 import subprocess
 import threading
 
@@ -300,3 +301,12 @@ def test_displacement_fields_are_written_when_asked(example, tmp_path):
         assert field.shape == (2, 256, 256)
         # Drift moves the tip by up to nanometres over the frame, never by a micrometre.
         assert 1e-12 < np.abs(field).max() < 1e-6
+
+
+def test_every_channel_is_written_when_asked(tmp_path):
+    path = Path(__file__).resolve().parents[3] / "tests/data/real/hbn_defect_nanonis_2nm.sxm"
+    result = dhct.correct(path, lattice="hexagonal", nn="2.504A", polarity="dark", channels="all")
+    written = result.write(tmp_path / "o")
+    for channel in ("Current", "LI_Demod_1_X", "Counter_1"):
+        for name in ("trace", "retrace"):
+            assert f"corrected_{channel}_{name}.tiff" in written["outputs"]

@@ -72,7 +72,7 @@ _GEOMETRY = {
 }
 
 #: `correct` options that are config keys of the same name.
-_PLAIN = ("polarity", "plane_group", "colormap", "mask_polygon", "displacement")
+_PLAIN = ("polarity", "plane_group", "colormap", "mask_polygon", "displacement", "channels")
 
 _OPTIONS = (
     ("retrace", "config", "calibrate", "trust_inputs", "pipeline", "progress")
@@ -200,7 +200,8 @@ def correct(
     config such as a written config.toml; the options given replace its values),
     ``calibrate``, ``trust_inputs``, ``polarity`` ("bright"/"dark"), ``plane_group``
     ("p3m1", ...), ``colormap``, ``displacement`` (True: :meth:`Result.write` also writes
-    each pass's displacement field), ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
+    each pass's displacement field), ``channels`` ("all": :meth:`Result.write` also writes
+    every other channel of the file, corrected with the same model), ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
     dict shaped like the config's [pipeline] table, e.g.
     ``{"features": {"min_relative_height": 0.5}}``), the geometry ``pitch`` (metres),
     ``pixel_period``, ``line_time``, ``turnaround`` (seconds), ``fast``, ``slow``, and
