@@ -118,7 +118,7 @@ impl U16Scale {
 /// `f32`, NaN kept), with the name and unit in `ImageDescription`. The file carries no pixel
 /// size (see [`write_f32_with_pixel_size`]).
 pub fn write_f32<W: Write>(channel: &ImageChannel, w: &mut W) -> Result<(), WriteError> {
-    write_f32_tagged(channel, None, w)
+    write_f32_pages(&[channel], None, w)
 }
 
 /// [`write_f32`] with the physical pixel size `pitch_m` (x, y; metres per pixel) stored so
@@ -133,11 +133,7 @@ pub fn write_f32_with_pixel_size<W: Write>(
     pitch_m: [f64; 2],
     w: &mut W,
 ) -> Result<(), WriteError> {
-    let resolution = [
-        pixels_per_centimetre(pitch_m[0])?,
-        pixels_per_centimetre(pitch_m[1])?,
-    ];
-    write_f32_tagged(channel, Some(resolution), w)
+    write_f32_pages_with_pixel_size(&[channel], pitch_m, w)
 }
 
 /// The TIFF rational nearest to `1 / pitch` in pixels per centimetre (numerator and
@@ -175,14 +171,6 @@ pub fn write_f32_pages_with_pixel_size<W: Write>(
         pixels_per_centimetre(pitch_m[1])?,
     ];
     write_f32_pages(pages, Some(resolution), w)
-}
-
-fn write_f32_tagged<W: Write>(
-    channel: &ImageChannel,
-    resolution: Option<[Rational; 2]>,
-    w: &mut W,
-) -> Result<(), WriteError> {
-    write_f32_pages(&[channel], resolution, w)
 }
 
 fn write_f32_pages<W: Write>(
