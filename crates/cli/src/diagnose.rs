@@ -1,6 +1,5 @@
 //! `dhct diagnose`: where the fitted DHCT model and the image disagree, which unmodelled
-//! effect explains it and how far the gap shrinks (dhct-diagnose); `--validate` runs the
-//! withheld-effect validation. The same section is added to `dhct correct --diagnose`'s
+//! effect explains it and how far the gap shrinks (dhct-diagnose). The same section is added to `dhct correct --diagnose`'s
 //! report.
 
 use std::io::Write as _;
@@ -8,8 +7,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_diagnose::{
-    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ResidualImage,
-    ValidationOptions, VerdictKind, diagnose_with_model, pair_views, validate,
+    Bin, DiagnoseOptions, DiagnosisReport, FloorEstimate, GapLocation, ResidualImage, VerdictKind,
+    diagnose_with_model, pair_views,
 };
 use dhct_distortion::PassInput;
 use dhct_features::FeatureSet;
@@ -598,28 +597,4 @@ pub fn run_file(
             target.join("diagnosis.html").display()
         ))
     }
-}
-
-/// `dhct diagnose --validate`: the withheld-effect validation.
-pub fn run_validation(seeds: Option<usize>, output: Option<&Path>, json: bool) -> Result<()> {
-    let mut options = ValidationOptions::default();
-    if let Some(n) = seeds {
-        options.truncate_seeds(n);
-    }
-    let report = validate(&options);
-    if let Some(dir) = output {
-        let staged = StagedOutput::prepare(dir, false)?;
-        let text = serde_json::to_string_pretty(&report)?;
-        write_bytes(&staged.path().join("validation.json"), text.as_bytes())?;
-        staged.commit()?;
-    }
-    if json {
-        write_stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
-    } else {
-        write_stdout(&report.to_string())?;
-    }
-    if !report.accepted() {
-        anyhow::bail!("the validation missed its acceptance targets (see the table above)");
-    }
-    Ok(())
 }

@@ -121,24 +121,16 @@ enum Command {
     /// Diagnose the sim-to-real gap of the correction `correct` makes (the same pipeline,
     /// options and mask): where it and the image disagree (in time, fast-line phase, space,
     /// trace vs retrace), which unmodelled effect explains it and how far the gap shrinks
-    /// once it is added; writes diagnosis.json and diagnosis.html into OUTDIR. With
-    /// --validate, runs the withheld-effect validation on simulated scans instead.
+    /// once it is added; writes diagnosis.json and diagnosis.html into OUTDIR. (Its
+    /// validation on simulated scans: `cargo run --release -p dhct-validation`.)
     Diagnose {
-        /// The image file (not with --validate).
-        #[arg(required_unless_present = "validate")]
-        input: Option<PathBuf>,
+        /// The image file.
+        input: PathBuf,
         /// A separate file holding the retrace image.
         retrace: Option<PathBuf>,
         /// Output directory.
-        #[arg(short, long, required_unless_present = "validate")]
-        output: Option<PathBuf>,
-        /// Run the validation: simulate scans with one effect (and none, and two) withheld
-        /// from the model, diagnose them, print the confusion matrix and the table.
-        #[arg(long, conflicts_with = "input")]
-        validate: bool,
-        /// With --validate: at most this many seeds per case (quicker, less certain).
-        #[arg(long, requires = "validate")]
-        seeds: Option<usize>,
+        #[arg(short, long)]
+        output: PathBuf,
         #[command(flatten)]
         options: CorrectArgs,
     },
@@ -427,23 +419,10 @@ fn main() -> ExitCode {
             input,
             retrace,
             output,
-            validate,
-            seeds,
             options,
-        } => {
-            if *validate {
-                diagnose::run_validation(*seeds, output.as_deref(), options.json)
-            } else {
-                match (input, output) {
-                    (Some(input), Some(output)) => options.config().and_then(|config| {
-                        diagnose::run_file(input, retrace.as_deref(), output, config, options.json)
-                    }),
-                    _ => Err(anyhow::anyhow!(
-                        "give an input file and -o OUTDIR, or --validate"
-                    )),
-                }
-            }
-        }
+        } => options.config().and_then(|config| {
+            diagnose::run_file(input, retrace.as_deref(), output, config, options.json)
+        }),
         Command::Batch {
             inputs,
             output,

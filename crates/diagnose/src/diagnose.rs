@@ -9,21 +9,21 @@ use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
-use crate::base::{BaseChoice, DECISIVE_BIC, chi2_and_bic, choose_base};
-use crate::candidates::{Candidate, creep_t0_bounds};
-use crate::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
-use crate::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
-use crate::heights::HeightView;
-use crate::location::locate;
-use crate::model::{GlobalModel, LatticeParams, Term, sim_term};
-use crate::noise::{NoiseFloor, estimate, robust_sigma};
-use crate::report::{
+use crate::evidence::heights::HeightView;
+use crate::evidence::location::locate;
+use crate::evidence::noise::{NoiseFloor, estimate, robust_sigma};
+use crate::model::base::{BaseChoice, DECISIVE_BIC, chi2_and_bic, choose_base};
+use crate::model::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
+use crate::model::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
+use crate::model::global::{GlobalModel, LatticeParams, Term, sim_term};
+use crate::model::timing_gain::whitened;
+use crate::report::diagnosis::{
     AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
     NEAR_TIE_FRACTION, Shrink,
 };
-use crate::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
-use crate::timing_gain::whitened;
-use crate::verdict::{VerdictKind, decide};
+use crate::report::verdict::{VerdictKind, decide};
+use crate::search::candidates::{Candidate, creep_t0_bounds};
+use crate::search::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

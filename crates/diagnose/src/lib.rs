@@ -30,8 +30,9 @@
 //! 6. **Shrink** ([`Shrink`]): gap/noise before, after the top effect, after the set,
 //!    with the added effects' parameters and uncertainties.
 //!
-//! [`validate`] runs the whole procedure on simulated scans with one effect withheld (and
-//! on effect-free and two-effect scans) and tabulates identification and shrink.
+//! The `dhct-validation` crate (not published) runs the whole procedure on simulated scans
+//! with one effect withheld (and on effect-free and two-effect scans) and tabulates
+//! identification and shrink; its sets are data (`crates/validation/sets.toml`).
 //!
 //! # Frames and units
 //!
@@ -43,79 +44,95 @@
 //! # Example
 //!
 //! ```no_run
-//! use dhct_diagnose::{DiagnoseOptions, diagnose, synth};
+//! use dhct_diagnose::{DiagnoseOptions, diagnose};
+//! use dhct_distortion::PassInput;
+//! use dhct_features::{FeatureOptions, find_features_in_pair};
 //! use dhct_lattice::Hexagonal;
+//! use dhct_simulate::{Simulation, presets};
 //!
-//! // A simulated scan with a tip change the base model does not know about.
-//! let case = synth::ValidationCase::single(
-//!     dhct_diagnose::Candidate::TipChange,
-//!     1,
-//!     synth::ValidationSet::Tuned,
-//! );
-//! let scan = synth::simulate_positions(&case.config, 2e-12, 7).unwrap();
-//! let report = diagnose(&scan.inputs(), &scan.geometry,
-//!                       &Hexagonal::graphite(), &DiagnoseOptions::default()).unwrap();
-//! println!("{report}");
-//! assert_eq!(report.top(), Some(dhct_diagnose::Candidate::TipChange));
+//! // A simulated graphite pair; any scan with its features found will do.
+//! let output = Simulation::from_config(&presets::ci_small()).unwrap().run().unwrap();
+//! let options = FeatureOptions::for_neighbour_distance(1.42e-10);
+//! let sets = find_features_in_pair(&output.pair, &options).unwrap();
+//! let inputs = [0, 1].map(|k| PassInput { features: &sets[k].features, mask: None });
+//! let report = diagnose(&inputs, output.pair.geometry(), &Hexagonal::graphite(),
+//!                       &DiagnoseOptions::default()).unwrap();
+//! println!("{report}"); // the verdict, where the gap lies, which effect explains it
 //! ```
 
-mod along_line;
-mod base;
-mod candidates;
-mod data;
+// The steps, one folder each: the model and its fit; the search for effects; the evidence
+// read from the positions; the view of the images; the report and its verdict.
 mod diagnose;
 mod error;
-mod fit;
-mod heights;
-mod image_residual;
-mod line_departures;
-mod location;
-mod model;
-mod noise;
-mod pair_images;
-mod pass_phases;
-mod report;
-mod select;
-mod spectrum;
-mod sub_feature;
-pub mod synth;
-mod terms;
-mod timing_gain;
-mod validate;
-mod verdict;
 
-pub use along_line::{
-    ALONG_LINE_FALSE_ALARM, AlongLinePeak, LATTICE_LINE_RATIO, LatticeSideband, MIN_SHARED_EXCESS,
-};
-pub use base::{BaseChoice, LawScore, PassLevelling};
-pub use candidates::Candidate;
-pub use data::{MIN_FEATURES, Observation};
+/// The position-level model: observations, displacement terms, the base law, the fit.
+mod model {
+    pub(crate) mod base;
+    pub(crate) mod data;
+    pub(crate) mod fit;
+    pub(crate) mod global;
+    pub(crate) mod terms;
+    pub(crate) mod timing_gain;
+}
+
+/// The search for effects: candidates, their scores and the greedy selection.
+mod search {
+    pub(crate) mod candidates;
+    pub(crate) mod select;
+}
+
+/// What the positions show: the noise floor, where the gap lies, its spectrum, heights.
+mod evidence {
+    pub(crate) mod heights;
+    pub(crate) mod location;
+    pub(crate) mod noise;
+    pub(crate) mod spectrum;
+}
+
+/// What only the images show: residual images, line departures, the lines' spectrum and
+/// its phases, the slices below one feature.
+mod image_view {
+    pub(crate) mod along_line;
+    pub(crate) mod image_residual;
+    pub(crate) mod line_departures;
+    pub(crate) mod pair_images;
+    pub(crate) mod pass_phases;
+    pub(crate) mod sub_feature;
+}
+
+/// The serialisable report and its verdict.
+mod report {
+    pub(crate) mod diagnosis;
+    pub(crate) mod verdict;
+}
+
 pub use diagnose::{DiagnoseOptions, diagnose, diagnose_with_model};
 pub use error::DiagnoseError;
-pub use fit::FittedParameter;
-pub use heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
-pub use image_residual::{
+pub use evidence::heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
+pub use evidence::location::{Bin, ChangePoint, GapLocation};
+pub use evidence::noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
+pub use evidence::spectrum::{SpectralPeak, Spectrum};
+pub use image_view::along_line::{
+    ALONG_LINE_FALSE_ALARM, AlongLinePeak, LATTICE_LINE_RATIO, LatticeSideband, MIN_SHARED_EXCESS,
+};
+pub use image_view::image_residual::{
     EXCESS_LINE_FACTOR, EXCESS_LINE_SPREADS, FAST_PHASE_BINS, LINE_JITTER_EVIDENCE,
     LINE_TILT_EVIDENCE, LineWindow, PassResidual, ResidualImage,
 };
-pub use location::{Bin, ChangePoint, GapLocation};
-pub use noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
-pub use pair_images::{pair_views, sub_feature_view_of_pair, with_pair_views};
-pub use pass_phases::{MIN_PHASE_AGREEMENT, MIN_STEADINESS, PHASE_MARGIN, PassPhases};
-pub use report::{
-    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
-    NEAR_TIE_FRACTION, Shrink,
-};
-pub use select::{CandidateScore, CvScheme, SelectionOptions};
-pub use spectrum::{SpectralPeak, Spectrum};
-pub use sub_feature::{
+pub use image_view::pair_images::{pair_views, sub_feature_view_of_pair, with_pair_views};
+pub use image_view::pass_phases::{MIN_PHASE_AGREEMENT, MIN_STEADINESS, PHASE_MARGIN, PassPhases};
+pub use image_view::sub_feature::{
     ACROSS_SCATTER_LIMIT, MAX_SCATTER_LEFT, MIN_PASS_AGREEMENT, MIN_PERIODS_PER_LINE_ACROSS,
     OUTLIER_READING, PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView,
     sub_feature_view,
 };
-pub use validate::{
-    ABSORBED_VISIBILITY, CaseKind, CaseResult, SetReport, SetSeeds, SetSummary, ValidationOptions,
-    ValidationReport, rendered_held_out, second_rendered_held_out, third_rendered_held_out,
-    validate,
+pub use model::base::{BaseChoice, LawScore, PassLevelling};
+pub use model::data::{MIN_FEATURES, Observation};
+pub use model::fit::FittedParameter;
+pub use report::diagnosis::{
+    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
+    NEAR_TIE_FRACTION, Shrink,
 };
-pub use verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};
+pub use report::verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};
+pub use search::candidates::Candidate;
+pub use search::select::{CandidateScore, CvScheme, SelectionOptions};

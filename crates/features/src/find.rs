@@ -9,14 +9,14 @@ use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
-use crate::lattice_levels::{
+use crate::levelling::lattice_levels::{
     lattice_line_levels, levels_as_recorded, replace_line_levels, subtract_line_levels,
 };
-use crate::line_relevel::{WindowPixels, relevel, window_pixels};
+use crate::levelling::line_relevel::{WindowPixels, relevel, window_pixels};
+use crate::levelling::preprocess::{correct_lines_in_place, sign_flattened_in_place};
+use crate::levelling::removed_levels::{RemovedLevels, drop_on_steps};
 use crate::ncc::NccPlan;
 use crate::noise_correlation::measured_centre_variance_ratio;
-use crate::preprocess::{correct_lines_in_place, sign_flattened_in_place};
-use crate::removed_levels::{RemovedLevels, drop_on_steps};
 use crate::watershed::{MAX_WATERSHED_PIXELS, Region, watershed_regions};
 use crate::{
     Feature, FeatureError, FeatureOptions, FeatureSet, FitStatus, Kernel, KernelChoice,
@@ -611,7 +611,7 @@ const LEVEL_TOLERANCE: f64 = 0.04;
 const MAX_LEVEL_ROUNDS: usize = 3;
 
 /// The lines are levelled only when their levels vary from line to line by more than this
-/// many times what pixel noise alone gives ([`crate::lattice_levels::LineLevels`]).
+/// many times what pixel noise alone gives ([`crate::levelling::lattice_levels::LineLevels`]).
 /// Measured: 0.9–1.6 on clean simulations, 18–111 on the real HOPG, Pb/Pt(111) and TiSe₂
 /// files.
 const OFFSET_EVIDENCE: f64 = 4.0;
@@ -620,7 +620,7 @@ const OFFSET_EVIDENCE: f64 = 4.0;
 /// against the lattice modelled around the correlation's peaks, fits the regions, then
 /// levels again around the fitted centres and refits until those levels move by less than
 /// [`LEVEL_TOLERANCE`] of the pixel noise (at most [`MAX_LEVEL_ROUNDS`] times;
-/// [`crate::lattice_levels`]). When the first
+/// [`crate::levelling::lattice_levels`]). When the first
 /// levels show no line offsets beyond pixel noise ([`OFFSET_EVIDENCE`]) the lines are
 /// left as recorded. Returns the image the final fits saw and the fits.
 fn level_against_lattice(
@@ -710,7 +710,7 @@ fn is_usable(status: FitStatus) -> bool {
 }
 
 /// Moves the usable fits' centres for the scan-line levels fitted jointly with them
-/// ([`crate::line_relevel`]).
+/// ([`crate::levelling::line_relevel`]).
 fn relevel_fits(
     kept: &[Region],
     fits: &mut [(GaussianFit, usize)],

@@ -41,16 +41,20 @@ mod feature;
 mod find;
 mod gaussian_fit;
 mod kernel;
-mod lattice_levels;
-mod line_level;
-mod line_levelling;
-mod line_relevel;
-mod line_steps;
+/// Before the fits: the background and the scan lines' levels (median, tapered, against the
+/// lattice's own picture, with steps), refitted with the features, and what was removed.
+mod levelling {
+    pub(crate) mod lattice_levels;
+    pub(crate) mod line_level;
+    pub(crate) mod line_levelling;
+    pub(crate) mod line_relevel;
+    pub(crate) mod line_steps;
+    pub(crate) mod preprocess;
+    pub(crate) mod removed_levels;
+}
 mod ncc;
 mod noise_correlation;
 mod options;
-mod preprocess;
-mod removed_levels;
 mod watershed;
 
 pub use correlate::{Correlator, RealSpectrum, correlate_same};
@@ -64,13 +68,13 @@ pub use find::{
 };
 pub use gaussian_fit::{FitLimits, FitShape, FitStatus, GaussianFit, fit_gaussian};
 pub use kernel::Kernel;
-pub use lattice_levels::lattice_model_image;
-pub use line_level::{line_taper, tapered_line_level, tapered_line_level_with};
-pub use line_levelling::LineLevelling;
-pub use ncc::{NccPlan, normalised_cross_correlation};
-pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
-pub use preprocess::{
+pub use levelling::lattice_levels::lattice_model_image;
+pub use levelling::line_level::{line_taper, tapered_line_level, tapered_line_level_with};
+pub use levelling::line_levelling::LineLevelling;
+pub use levelling::preprocess::{
     correct_lines, correct_lines_in_place, remove_background, remove_background_in_place,
     sign_flattened_in_place, signed_flattened, subtract_polynomial, subtract_polynomial_in_place,
 };
+pub use ncc::{NccPlan, normalised_cross_correlation};
+pub use options::{Background, FeatureOptions, KernelChoice, LineCorrection, Polarity};
 pub use watershed::{MAX_WATERSHED_PIXELS, NO_BASIN, Region, basin_labels, watershed_regions};

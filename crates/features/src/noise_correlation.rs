@@ -9,7 +9,7 @@
 //! together and shifts its centre across the lines far more than white noise of the same
 //! variance would.
 //!
-//! The noise is what the lattice model leaves ([`crate::lattice_levels`]): the image
+//! The noise is what the lattice model leaves ([`crate::levelling::lattice_levels`]): the image
 //! minus the measured atom placed at every fitted centre. That model is one average atom,
 //! so where distortion changes the atoms' shape the residual also holds that change; the
 //! residual at a place minus the residual at the same place of the neighbouring cell
@@ -30,7 +30,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use ndarray::{ArrayView2, s};
 
 use crate::gaussian_fit::GaussianFit;
-use crate::lattice_levels::lattice_residual;
+use crate::levelling::lattice_levels::lattice_residual;
 
 /// The ratio is measured on the central block of the image at most this many px on a
 /// side (it is one number per axis; a larger image only costs time).

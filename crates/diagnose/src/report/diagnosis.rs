@@ -1,0 +1,466 @@
+//! The serialisable diagnosis report and its text form.
+
+use std::fmt;
+
+use dhct_scan::ScanPass;
+use serde::{Deserialize, Serialize};
+
+use crate::evidence::location::GapLocation;
+use crate::evidence::noise::NoiseFloor;
+use crate::model::base::{BaseChoice, DECISIVE_BIC, LawScore};
+use crate::model::fit::FittedParameter;
+use crate::report::verdict::{Verdict, VerdictKind, names};
+use crate::search::candidates::Candidate;
+use crate::search::select::CandidateScore;
+
+/// Size of a gap relative to the noise floor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GapSummary {
+    /// RMS residual per axis, metres.
+    pub rms_m: [f64; 2],
+    /// `√(χ²/2N)`: RMS residual in units of the noise floor (1 = at the floor).
+    pub gap_to_noise: f64,
+    /// `Σ (r_x/σ_x)² + (r_y/σ_y)²`.
+    pub chi2: f64,
+    /// χ² over the degrees of freedom `2N − p`.
+    pub chi2_per_dof: f64,
+    /// `2N − p`.
+    pub dof: usize,
+}
+
+impl GapSummary {
+    pub(crate) fn of(residuals: &[[f64; 2]], sigma: [f64; 2], parameters: usize) -> GapSummary {
+        let n = residuals.len().max(1) as f64;
+        let mut sq = [0.0; 2];
+        let mut chi2 = 0.0;
+        for r in residuals {
+            sq[0] += r[0] * r[0] / n;
+            sq[1] += r[1] * r[1] / n;
+            chi2 += (r[0] / sigma[0]).powi(2) + (r[1] / sigma[1]).powi(2);
+        }
+        let dof = (2 * residuals.len()).saturating_sub(parameters).max(1);
+        GapSummary {
+            rms_m: [sq[0].sqrt(), sq[1].sqrt()],
+            gap_to_noise: (chi2 / (2.0 * n)).sqrt(),
+            chi2,
+            chi2_per_dof: chi2 / dof as f64,
+            dof,
+        }
+    }
+}
+
+/// A fitted position-level model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelSummary {
+    /// Terms, in order (e.g. `thermal-drift`, `creep`, `fast-hysteresis`, `tip-change`).
+    pub terms: Vec<String>,
+    /// Every term parameter with its 1σ uncertainty (SI, the simulator's names).
+    pub parameters: Vec<FittedParameter>,
+    /// Lattice origin, metres (sample frame).
+    pub lattice_origin_m: [f64; 2],
+    /// Lattice rotation, radians.
+    pub lattice_angle_rad: f64,
+    /// Lattice scales `[s_x, s_y]` (1 = nominal; fixed unless `fit_lattice_scale`).
+    pub lattice_scale: [f64; 2],
+    /// Its gap.
+    pub gap: GapSummary,
+}
+
+/// One greedy round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GreedyRound {
+    /// Every candidate's score, best first (passing ones first).
+    pub scores: Vec<CandidateScore>,
+    /// The effect added in this round, if any passed.
+    pub accepted: Option<Candidate>,
+}
+
+/// An effect added to the model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AddedEffect {
+    /// Which.
+    pub candidate: Candidate,
+    /// Grid shape it started from.
+    pub shape: String,
+    /// Its fitted parameters with uncertainties (SI).
+    pub parameters: Vec<FittedParameter>,
+    /// Gap after adding it (and everything before it).
+    pub gap_after: GapSummary,
+    /// Other candidates of its round, refitted and passing, whose χ² reduction comes
+    /// within [`NEAR_TIE_FRACTION`] of its own: they explain the positions about as well,
+    /// so the data do not tell them apart from it.
+    #[serde(default)]
+    pub about_as_good: Vec<Candidate>,
+}
+
+/// Each alternative with its BIC against the chosen one, e.g. `power ΔBIC 0.0, cubic ΔBIC 6.2`.
+fn bic_scores(scores: &[LawScore]) -> String {
+    scores
+        .iter()
+        .map(|l| format!("{} ΔBIC {:.1}", l.law, l.delta_bic))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// How close (as a fraction of the accepted effect's χ² reduction) another candidate's
+/// reduction must come to be reported as explaining the positions about as well. A few per
+/// cent of the effect is what the base model's own misfit (a hysteresis law or creep form
+/// that is close but not the scan's) shifts between similar candidates: on the validation
+/// scans, the exponential and second creep events differ by 0.5–5 % and either can win,
+/// and an x-only piezo non-linearity against an asymmetric hysteresis by 0.5–1.5 %.
+pub const NEAR_TIE_FRACTION: f64 = 0.05;
+
+/// How far the gap shrinks (gap/noise ratios).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Shrink {
+    /// Base model (position-level fit).
+    pub before: f64,
+    /// The top-ranked candidate of round 1 (whether or not accepted).
+    pub top: Option<Candidate>,
+    /// Gap with it.
+    pub after_top: Option<f64>,
+    /// After the accepted greedy set.
+    pub after_greedy: f64,
+}
+
+/// One feature's residuals, for plots.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FeatureResidual {
+    /// Input set and index of the feature.
+    pub set: usize,
+    /// Index within its set.
+    pub index: usize,
+    /// Its pass.
+    pub pass: ScanPass,
+    /// Seconds since frame start.
+    pub time_s: f64,
+    /// Seconds since line start.
+    pub line_time_s: f64,
+    /// Measured controller position, metres.
+    pub controller_m: [f64; 2],
+    /// Controller-frame gap of the DHCT sim, `measured − predicted`, metres.
+    pub dhct_gap_m: [f64; 2],
+    /// Residual of the position-level base fit, metres.
+    pub base_m: [f64; 2],
+    /// Residual of the final model, metres.
+    pub final_m: [f64; 2],
+    /// Rejected as an outlier (not used in the fits).
+    pub outlier: bool,
+}
+
+/// Everything the diagnosis found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisReport {
+    /// The verdict: `no_gap`, `explained`, `partly_explained` or `unexplained`.
+    pub verdict: VerdictKind,
+    /// The verdict's numbers (gap before/after in units of the floor, the named effects,
+    /// where the remaining gap lies) and its plain-words summary.
+    pub verdict_details: Verdict,
+    /// The base model's hysteresis law as the data chose it, with every law's BIC.
+    pub base_choice: BaseChoice,
+    /// Features given.
+    pub features_in: usize,
+    /// Features indexed and used.
+    pub features_used: usize,
+    /// Features not indexed (or too far from any lattice site).
+    pub unindexed: usize,
+    /// Features whose fit residual is far above the others' (not used).
+    #[serde(default)]
+    pub poor_fits: usize,
+    /// Features dropped as outliers of the base fit.
+    pub outliers: usize,
+    /// The noise floor.
+    pub noise: NoiseFloor,
+    /// Gap of the base DHCT sim (local-distortion fit, controller frame).
+    pub dhct: GapSummary,
+    /// The position-level base model (drift + creep + hysteresis + lattice).
+    pub base: ModelSummary,
+    /// Where the base gap lies.
+    pub location: Option<GapLocation>,
+    /// The greedy rounds.
+    pub rounds: Vec<GreedyRound>,
+    /// Effects added, in order (none when the verdict is `no_gap`).
+    pub added: Vec<AddedEffect>,
+    /// With `no_gap`: effects the selection still found significant, below the floor (not
+    /// findings), in order.
+    #[serde(default)]
+    pub below_floor: Vec<AddedEffect>,
+    /// Gap before and after.
+    pub shrink: Shrink,
+    /// The final model.
+    pub final_model: ModelSummary,
+    /// Where the final gap lies.
+    pub final_location: Option<GapLocation>,
+    /// Per-feature residuals.
+    pub residuals: Vec<FeatureResidual>,
+    /// The image view below one feature (slice displacements), when the images were
+    /// given ([`DiagnosisReport::with_sub_feature_view`]).
+    #[serde(default)]
+    pub sub_feature: Option<crate::SubFeatureView>,
+    /// What only the height tells (terraces, feature heights and their changes): none of
+    /// it moves a feature, so none of it is a scan distortion.
+    #[serde(default)]
+    pub heights: Option<crate::HeightView>,
+    /// The final model rendered forward and compared with each image, pixel by pixel
+    /// (empty when the images were not given; [`crate::pair_views`]).
+    #[serde(default)]
+    pub image_residual: Vec<crate::PassResidual>,
+}
+
+impl DiagnosisReport {
+    /// The effects added, in order.
+    pub fn identified(&self) -> Vec<Candidate> {
+        self.added.iter().map(|a| a.candidate).collect()
+    }
+
+    /// The top-ranked candidate of the first round, if it passed.
+    pub fn top(&self) -> Option<Candidate> {
+        self.added.first().map(|a| a.candidate)
+    }
+
+    /// JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    }
+}
+
+fn pm(v: f64) -> String {
+    format!("{:.2}", v * 1e12)
+}
+
+/// `rms x × y pm, gap/noise, χ²/dof` of a gap.
+fn gap_line(s: &GapSummary) -> String {
+    format!(
+        "rms {} × {} pm, gap/noise {:.2}, χ²/dof {:.2}",
+        pm(s.rms_m[0]),
+        pm(s.rms_m[1]),
+        s.gap_to_noise,
+        s.chi2_per_dof
+    )
+}
+
+impl fmt::Display for DiagnosisReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.write_overview(f)?;
+        self.write_base(f)?;
+        if let Some(loc) = &self.location {
+            write_location(f, loc)?;
+        }
+        self.write_rounds(f)?;
+        self.write_added(f)?;
+        if !self.below_floor.is_empty() {
+            let listed: Vec<Candidate> = self.below_floor.iter().map(|a| a.candidate).collect();
+            writeln!(
+                f,
+                "below the floor (significant, not findings): {}",
+                names(&listed)
+            )?;
+        }
+        self.write_shrink(f)
+    }
+}
+
+impl DiagnosisReport {
+    /// The verdict, the feature counts and the noise floor (pm).
+    fn write_overview(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "verdict: {} — {}",
+            self.verdict.name(),
+            self.verdict_details.summary
+        )?;
+        if let Some(view) = &self.sub_feature {
+            writeln!(f, "{}", view.describe())?;
+        }
+        writeln!(
+            f,
+            "features: {} in, {} used, {} not indexed, {} poorly fitted, {} outliers",
+            self.features_in, self.features_used, self.unindexed, self.poor_fits, self.outliers
+        )?;
+        let n = &self.noise;
+        writeln!(
+            f,
+            "noise floor: {} × {} pm ({}); localisation {}; successive differences {}; \
+             trace/retrace {} (an upper bound only)",
+            pm(n.sigma_m[0]),
+            pm(n.sigma_m[1]),
+            n.source.describe(),
+            n.localisation.describe(),
+            n.successive_differences.describe(),
+            n.trace_retrace.describe(),
+        )?;
+        if let Some(h) = &self.heights {
+            writeln!(
+                f,
+                "heights (z only: they move no feature, so they are no scan distortion): {}",
+                h.describe()
+            )?;
+        }
+        for p in &self.image_residual {
+            writeln!(
+                f,
+                "image minus the final model rendered with the measured atom, {}",
+                p.describe()
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The DHCT sim's gap, the base hysteresis law and creep form chosen, each image's line
+    /// levelling and the base fit's gap.
+    fn write_base(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "DHCT sim gap (controller frame): {}",
+            gap_line(&self.dhct)
+        )?;
+        writeln!(
+            f,
+            "base hysteresis law (BIC): {} ({})",
+            self.base_choice.hysteresis_law,
+            bic_scores(&self.base_choice.hysteresis)
+        )?;
+        writeln!(
+            f,
+            "base creep form (BIC):     {} ({})",
+            self.base_choice.creep_form,
+            bic_scores(&self.base_choice.creep)
+        )?;
+        if let Some(d) = self.base_choice.creep_form_whole_model_delta_bic {
+            let other = self
+                .base_choice
+                .creep
+                .iter()
+                .filter(|c| c.law != "log")
+                .min_by(|a, b| a.bic.total_cmp(&b.bic))
+                .map_or("other", |c| c.law.as_str());
+            writeln!(
+                f,
+                "  with the effects each form's selection named, the whole model with the {other} \
+                 form has ΔBIC {d:.1} against the log form's ({})",
+                if d >= 0.0 {
+                    "the log form's is better: it is kept"
+                } else if d > -DECISIVE_BIC {
+                    "not decisive: the log form is kept"
+                } else {
+                    "decisive: it is kept"
+                }
+            )?;
+        }
+        for p in &self.base_choice.line_levelling {
+            writeln!(f, "line levelling, {}: {}", p.pass, p.levelling)?;
+        }
+        writeln!(
+            f,
+            "base position-level fit:        {}",
+            gap_line(&self.base.gap)
+        )
+    }
+
+    /// One table per greedy round: every candidate's scores.
+    fn write_rounds(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (k, r) in self.rounds.iter().enumerate() {
+            writeln!(
+                f,
+                "round {}: {:<22} {:>9} {:>9} {:>8} {:>6} pass",
+                k + 1,
+                "candidate",
+                "Δχ²",
+                "ΔBIC",
+                "CV ratio",
+                "refit"
+            )?;
+            for s in &r.scores {
+                writeln!(
+                    f,
+                    "         {:<22} {:>9.1} {:>9.1} {:>8.4} {:>6} {}",
+                    s.candidate.name(),
+                    s.delta_chi2,
+                    s.delta_bic,
+                    s.cv_ratio,
+                    if s.refitted { "yes" } else { "no" },
+                    if s.passes { "yes" } else { "no" }
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Each effect added, with the gap after it and its parameters.
+    fn write_added(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for a in &self.added {
+            writeln!(
+                f,
+                "added {} ({}): {}",
+                a.candidate,
+                a.shape,
+                gap_line(&a.gap_after)
+            )?;
+            if !a.about_as_good.is_empty() {
+                writeln!(
+                    f,
+                    "    about as good (χ² reduction within {:.0} %, not told apart): {}",
+                    100.0 * NEAR_TIE_FRACTION,
+                    names(&a.about_as_good)
+                )?;
+            }
+            for p in &a.parameters {
+                match p.sigma {
+                    Some(s) => writeln!(f, "    {} = {:.4e} ± {:.1e}", p.name, p.value, s)?,
+                    None => writeln!(f, "    {} = {:.4e} (fixed)", p.name, p.value)?,
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Gap/noise before, after the top candidate and after the greedy set (last line, no
+    /// newline).
+    fn write_shrink(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = &self.shrink;
+        writeln!(
+            f,
+            "gap/noise: before {:.2}, after top ({}) {}, after greedy set {:.2}",
+            s.before,
+            s.top.map_or("—".to_string(), |c| c.to_string()),
+            s.after_top.map_or("—".to_string(), |v| format!("{v:.2}")),
+            s.after_greedy
+        )
+    }
+}
+
+/// Where the base gap concentrates: the hottest bins, the strongest spectral peak, the
+/// jumps (pm, Hz, s).
+fn write_location(f: &mut fmt::Formatter<'_>, loc: &GapLocation) -> fmt::Result {
+    writeln!(f, "where the base gap concentrates:")?;
+    for b in loc.hot_spots.iter().take(6) {
+        writeln!(
+            f,
+            "  {:<28} n={:<5} χ²/dof {:.2} (z {:.1}), mean ({}, {}) pm",
+            b.label,
+            b.count,
+            b.chi2_per_dof,
+            b.excess_z,
+            pm(b.mean_m[0]),
+            pm(b.mean_m[1])
+        )?;
+    }
+    if let Some(p) = loc.spectrum.peaks.first() {
+        writeln!(
+            f,
+            "  strongest spectral peak {:.4} Hz, power {:.1}, false-alarm p {:.2e}",
+            p.frequency_hz, p.power, p.false_alarm_probability
+        )?;
+    }
+    for c in &loc.change_points {
+        writeln!(
+            f,
+            "  jump at {:.2} s: ({}, {}) pm, statistic {:.0}",
+            c.time_s,
+            pm(c.jump_m[0]),
+            pm(c.jump_m[1]),
+            c.statistic
+        )?;
+    }
+    Ok(())
+}
