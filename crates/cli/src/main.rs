@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use dhct_cli::{apply, batch, correct, diagnose, info, lattice_check, simulate, units};
+use dhct_app::{apply, batch, correct, diagnose, info, lattice_check, simulate, units};
 use dhct_scan::ScanDirection;
 use dhct_sm4_io::GeometryOverrides;
 
@@ -386,7 +386,7 @@ fn parse_direction(text: &str) -> Result<ScanDirection, String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let defaults = dhct_sm4_io::ReadLimits::default();
-    dhct_cli::read_limits::set(dhct_sm4_io::ReadLimits {
+    dhct_app::read_limits::set(dhct_sm4_io::ReadLimits {
         max_bytes: cli.max_read_bytes.unwrap_or(defaults.max_bytes),
         max_pixels: cli.max_read_pixels.unwrap_or(defaults.max_pixels),
     });

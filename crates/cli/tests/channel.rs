@@ -80,14 +80,14 @@ fn an_unknown_channel_exits_1_listing_the_channels_in_every_command() {
 fn a_named_channel_is_the_one_analysed() {
     let overrides = dhct_sm4_io::GeometryOverrides::default();
     let file = createc();
-    let current = dhct_cli::correct::read_pair(&file, None, &overrides, Some("CURRENT")).unwrap();
+    let current = dhct_app::correct::read_pair(&file, None, &overrides, Some("CURRENT")).unwrap();
     assert_eq!(current.name(), "Current");
     assert_eq!(current.trace().unwrap().unit, "A");
-    let default = dhct_cli::correct::read_pair(&file, None, &overrides, None).unwrap();
+    let default = dhct_app::correct::read_pair(&file, None, &overrides, None).unwrap();
     assert_eq!(default.name(), "Z");
     // The retrace file's image comes from the same channel.
     let paired =
-        dhct_cli::correct::read_pair(&file, Some(&file), &overrides, Some("current")).unwrap();
+        dhct_app::correct::read_pair(&file, Some(&file), &overrides, Some("current")).unwrap();
     assert_eq!(
         paired.retrace().unwrap().z,
         current.retrace().unwrap().z,

@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-use dhct_cli::flags::{ALL_INPUTS, flag};
+use dhct_app::flags::{ALL_INPUTS, flag};
 
 #[test]
 fn every_input_a_warning_names_is_an_option_of_correct() {

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use dhct_cli::correct as cli;
-use dhct_cli::correct::{AnalyseRequest, CorrectConfig, CorrectError, Corrected};
-use dhct_cli::hints::Spelling;
+use dhct_app::correct as cli;
+use dhct_app::correct::{AnalyseRequest, CorrectConfig, CorrectError, Corrected};
+use dhct_app::hints::Spelling;
 use dhct_pipeline::Stage;
 use dhct_scan::{ScanPair, ScanPass};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray2};
@@ -377,7 +377,7 @@ impl Correction {
     /// writes as diagnosis.json), as JSON text.
     fn diagnose_json(&self, py: Python<'_>) -> PyResult<String> {
         let c = &self.inner;
-        let report = py.detach(|| dhct_cli::diagnose::diagnosis_of(c));
+        let report = py.detach(|| dhct_app::diagnose::diagnosis_of(c));
         report
             .map(|(r, _)| r.to_json())
             .map_err(|e| to_py::<AnalysisError>(&e))
