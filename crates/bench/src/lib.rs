@@ -14,6 +14,7 @@ pub mod determinism;
 pub mod machine;
 pub mod measure;
 pub mod real_corpus;
+pub mod real_diagnosis;
 pub mod regularity;
 pub mod robustness;
 pub mod scenario;

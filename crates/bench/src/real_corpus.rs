@@ -117,6 +117,8 @@ pub struct FileResult {
     /// The passes dhct itself flagged as off or unchecked (`corrected_image_off`,
     /// `corrected_image_unchecked`).
     pub flagged: Vec<String>,
+    /// The file read, when it was found.
+    pub input: Option<PathBuf>,
 }
 
 /// The judgement of one corrected image.
@@ -144,9 +146,13 @@ pub fn run_file(file: &CorpusFile, root: &Path, dhct: &Path, out: &Path) -> File
         model_vs_affine_m: None,
         passes: Vec::new(),
         flagged: Vec::new(),
+        input: None,
     };
     let input = match locate(file, root) {
-        Ok(path) => path,
+        Ok(path) => {
+            result.input = Some(path.clone());
+            path
+        }
         Err(why) => {
             result.verdict = Verdict::Missing(why);
             return result;

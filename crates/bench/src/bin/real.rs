@@ -3,8 +3,12 @@
 //! ```sh
 //! cargo build --release -p dhct-cli
 //! DHCT_REAL_DATA=../shared/data cargo run --release -p dhct-bench --bin real -- \
-//!     [--corpus tests/data/real/corpus.toml] [--dhct target/release/dhct] [--out DIR]
+//!     [--corpus tests/data/real/corpus.toml] [--dhct target/release/dhct] [--out DIR] [--diagnose]
 //! ```
+//!
+//! With `--diagnose`, every file dhct corrected is also diagnosed (`dhct diagnose` with the
+//! same arguments): the verdict, the gap against the noise floor before and after the
+//! effects named, and where what remains lies.
 //!
 //! Prints one row per file: right / refused (with the reason) / wrong, the correction kept
 //! (drift model or affine) with both lattice-fit rms deviations, the corrected lattice's
@@ -17,6 +21,7 @@
 use std::path::PathBuf;
 
 use dhct_bench::real_corpus::{Corpus, FileResult, Verdict, run_file};
+use dhct_bench::real_diagnosis::diagnose_file;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -49,8 +54,10 @@ fn main() {
         );
         std::process::exit(2);
     }
+    let diagnose = args.iter().any(|a| a == "--diagnose");
     let mut wrong = 0;
     let mut counts = [0usize; 5];
+    let mut verdicts = std::collections::BTreeMap::<String, usize>::new();
     for (i, file) in corpus.file.iter().enumerate() {
         let result = run_file(file, &root, &dhct, &out.join(format!("{i:02}")));
         counts[match result.verdict {
@@ -64,6 +71,19 @@ fn main() {
             wrong += 1;
         }
         print_row(file.name.as_str(), file.periods_across, &result);
+        let corrected = !matches!(result.verdict, Verdict::Refused(_) | Verdict::Missing(_));
+        if diagnose
+            && corrected
+            && let Some(input) = &result.input
+        {
+            let dir = out.join(format!("{i:02}-diagnosis"));
+            let outcome = diagnose_file(&dhct, input, &result.args, &root, &dir);
+            *verdicts.entry(print_diagnosis(&outcome)).or_default() += 1;
+        }
+    }
+    if diagnose {
+        let tally: Vec<String> = verdicts.iter().map(|(v, n)| format!("{n} {v}")).collect();
+        println!("diagnosed: {}", tally.join(", "));
     }
     println!(
         "\n{} right, {} with a pass dhct flagged as off, {} refused, {} wrong, {} missing",
@@ -104,5 +124,37 @@ fn print_row(name: &str, periods: f64, r: &FileResult) {
             periods(p.raw_non_affine),
             periods(p.corrected_non_affine)
         );
+    }
+}
+
+/// Prints what `dhct diagnose` said of a file; returns its verdict.
+fn print_diagnosis(
+    outcome: &Result<dhct_bench::real_diagnosis::DiagnosisOutcome, String>,
+) -> String {
+    match outcome {
+        Ok(d) => {
+            let list = |v: &[String]| {
+                if v.is_empty() {
+                    "none".to_string()
+                } else {
+                    v.join(", ")
+                }
+            };
+            println!(
+                "    diagnosis: {}; gap {:.2} → {:.2} × floor ({:.1} × {:.1} pm); effects: {}; remaining: {}",
+                d.verdict,
+                d.gap_before,
+                d.gap_after,
+                d.floor_m[0] * 1e12,
+                d.floor_m[1] * 1e12,
+                list(&d.effects),
+                list(&d.remaining)
+            );
+            d.verdict.clone()
+        }
+        Err(why) => {
+            println!("    diagnosis refused: {why}");
+            "refused".to_string()
+        }
     }
 }
