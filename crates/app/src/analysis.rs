@@ -213,7 +213,7 @@ pub fn analyse_file(
 /// The name of the file the retrace came from: the one given, or the NPY retrace paired
 /// with an NPY trace through their sidecars.
 fn retrace_name(input: &Path, retrace: Option<&Path>) -> Option<String> {
-    let paired = || match dhct_sm4_io::npy::other_pass_file(input) {
+    let paired = || match dhct_sm4_io::npy_sidecar::other_pass_file(input) {
         Some((path, ScanPass::Retrace)) => Some(path),
         _ => None,
     };

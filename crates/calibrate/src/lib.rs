@@ -42,6 +42,7 @@
 
 mod basis;
 mod check;
+mod decompose;
 mod error;
 mod matching;
 mod measure;

@@ -17,6 +17,7 @@ use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::basis::propagate;
+use crate::decompose::{rq, singular_values};
 use crate::measure::{LatticeMeasurement, real_basis};
 use crate::named_fit::{MapBounds, NamedFit, SpectrumWindow, UnexplainedPeak, file_map, fit_named};
 
@@ -214,25 +215,6 @@ impl LatticeMatch {
     }
 }
 
-/// Singular values `(s1 ≥ s2)` of a 2 × 2 matrix.
-pub(crate) fn singular_values(a: &Matrix2<f64>) -> (f64, f64) {
-    let ata = a.transpose() * a;
-    let (t, d) = (ata.trace(), ata.determinant());
-    let root = (0.25 * t * t - d).max(0.0).sqrt();
-    ((0.5 * t + root).sqrt(), (0.5 * t - root).max(0.0).sqrt())
-}
-
-/// `A = K·Q` with `K` upper triangular (positive diagonal) and `Q` a rotation; needs
-/// `det A > 0`. Returns `(K, rotation angle of Q in radians)`.
-pub(crate) fn rq(a: &Matrix2<f64>) -> (Matrix2<f64>, f64) {
-    let ky = a[(1, 0)].hypot(a[(1, 1)]);
-    let row2 = Vector2::new(a[(1, 0)], a[(1, 1)]) / ky;
-    let row1 = Vector2::new(row2.y, -row2.x);
-    let top = Vector2::new(a[(0, 0)], a[(0, 1)]);
-    let k = Matrix2::new(top.dot(&row1), top.dot(&row2), 0.0, ky);
-    (k, row2.x.atan2(row2.y))
-}
-
 /// The lattice's translation cell as columns: what the image's spectrum shows (the
 /// primitive cell of a centred lattice, not its conventional one).
 fn lattice_matrix(lattice: &dyn Lattice) -> Matrix2<f64> {
@@ -390,25 +372,4 @@ fn shells(
             shell.snr.iter().copied().fold(0.0, f64::max) >= 20.0 && top >= 1e-3 * strongest;
     }
     result
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn rq_splits_scale_shear_and_rotation() {
-        let k = Matrix2::new(1.2, 0.1, 0.0, 0.8);
-        let angle = 0.3f64;
-        let q = Matrix2::new(angle.cos(), -angle.sin(), angle.sin(), angle.cos());
-        let (found, rotation) = rq(&(k * q));
-        assert!((found - k).abs().max() < 1e-12, "{found}");
-        assert!((rotation - angle).abs() < 1e-12);
-    }
-
-    #[test]
-    fn singular_values_of_a_stretch() {
-        let (s1, s2) = singular_values(&Matrix2::new(0.0, 3.0, -2.0, 0.0));
-        assert!((s1 - 3.0).abs() < 1e-12 && (s2 - 2.0).abs() < 1e-12);
-    }
 }

@@ -130,8 +130,8 @@ pub(crate) struct MapShape {
 
 impl MapShape {
     pub(crate) fn of(a: &Matrix2<f64>) -> MapShape {
-        let (k, _) = crate::matching::rq(a);
-        let (s1, s2) = crate::matching::singular_values(a);
+        let (k, _) = crate::decompose::rq(a);
+        let (s1, s2) = crate::decompose::singular_values(a);
         MapShape {
             scale: [k[(0, 0)], k[(1, 1)]],
             shear_deg: (k[(0, 1)] / k[(1, 1)]).atan().to_degrees(),

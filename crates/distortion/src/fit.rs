@@ -13,30 +13,15 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use crate::hysteresis_problem::HysteresisChoice;
 use crate::hysteresis_problem::{HysteresisData, HysteresisProblem, hysteresis_law};
 use crate::model::{
     Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
 };
+use crate::secant::{secant, secant_offsets};
 use crate::{DistortionError, LocalDistortion};
 use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
 use dhct_numerics::robust::{huber_weights, mad_sigma_about};
-
-/// Which hysteresis law to fit.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum HysteresisChoice {
-    /// No hysteresis (`S ≡ 1`).
-    None,
-    /// The paper's quartic in `τ/τ_s`; `τ_s` defaults to the line scan time.
-    Quartic {
-        /// `τ_s`, seconds; `None` = line scan time.
-        time_scale_s: Option<f64>,
-    },
-    /// The Matlab power law `S = k·τ^n`.
-    Power,
-    /// `S = 1 + A·exp(−τ/τ_h)`.
-    Exponential,
-}
 
 /// Options of [`fit_model`]; [`FitOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -82,31 +67,6 @@ impl Default for FitOptions {
             secant: true,
         }
     }
-}
-
-/// Each local distortion's neighbour time offsets (`of` picks frame or line times) when
-/// the secant form is used, else none (the derivative at the feature's own time).
-pub(crate) fn secant_offsets<'a>(
-    local: &'a [LocalDistortion],
-    secant_mode: bool,
-    of: impl Fn(&'a LocalDistortion) -> &'a [f64],
-) -> Vec<&'a [f64]> {
-    local
-        .iter()
-        .map(|l| if secant_mode { of(l) } else { &[] })
-        .collect()
-}
-
-/// `Σ Δ·(g(x+Δ) − g(x)) / Σ Δ²`: the least-squares slope of `g` through the point `x` over
-/// the offsets `Δ`; the derivative (central difference) when there are no offsets.
-pub(crate) fn secant<G: Fn(f64) -> f64>(g: G, x: f64, offsets: &[f64]) -> f64 {
-    let denominator: f64 = offsets.iter().map(|d| d * d).sum();
-    if offsets.is_empty() || denominator <= 0.0 {
-        let h = 1e-6 * x.abs().max(1e-6);
-        return (g(x + h) - g(x - h)) / (2.0 * h);
-    }
-    let g0 = g(x);
-    offsets.iter().map(|d| d * (g(x + d) - g0)).sum::<f64>() / denominator
 }
 
 /// Minimum number of local distortions for the drift fit.

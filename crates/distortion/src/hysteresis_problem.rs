@@ -7,11 +7,29 @@
 
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::LocalDistortion;
-use crate::fit::{HysteresisChoice, secant, secant_offsets};
 use crate::model::HysteresisLaw;
+use crate::secant::{secant, secant_offsets};
 use dhct_numerics::lm::Residuals;
+
+/// Which hysteresis law to fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum HysteresisChoice {
+    /// No hysteresis (`S ≡ 1`).
+    None,
+    /// The paper's quartic in `τ/τ_s`; `τ_s` defaults to the line scan time.
+    Quartic {
+        /// `τ_s`, seconds; `None` = line scan time.
+        time_scale_s: Option<f64>,
+    },
+    /// The Matlab power law `S = k·τ^n`.
+    Power,
+    /// `S = 1 + A·exp(−τ/τ_h)`.
+    Exponential,
+}
 
 /// Residuals (and Jacobian rows) computed per chunk in parallel; each depends on its own
 /// entry only, so the result does not depend on the thread count.

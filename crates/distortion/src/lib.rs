@@ -63,6 +63,7 @@ pub mod model;
 pub mod neighbours;
 pub mod registration;
 pub mod route_choice;
+mod secant;
 mod seed;
 
 pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sample_positions};

@@ -293,7 +293,7 @@ pub fn register(
         });
     }
     let passes = features.iter().map(|f| f.pass_index + 1).max().unwrap_or(1);
-    let features = &crate::route_choice::thin(features, MAX_FITTED);
+    let features = &thin(features, MAX_FITTED);
     let problem = RegistrationProblem::new(features, geometry, passes, options.hysteresis);
     let corrected: Vec<[f64; 2]> = features
         .iter()
@@ -572,4 +572,10 @@ fn robust_fit(
     };
     let fit = fit_residuals(problem, problem.rows(), &fit.params, &weights, &once).unwrap_or(fit);
     Ok((fit, weights))
+}
+
+/// Every `k`-th item so that at most `most` remain (all when fewer).
+pub(crate) fn thin<T: Clone>(items: &[T], most: usize) -> Vec<T> {
+    let stride = items.len().div_ceil(most.max(1)).max(1);
+    items.iter().step_by(stride).cloned().collect()
 }

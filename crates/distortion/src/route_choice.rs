@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::fit::{FitOptions, fit_model};
 use crate::registration::{
-    RegisteredFeature, Registration, StartQuality, deviations, place_lattice, register,
+    RegisteredFeature, Registration, StartQuality, deviations, place_lattice, register, thin,
 };
 use crate::{DistortionError, DistortionModel, LocalDistortion};
 
@@ -186,12 +186,6 @@ fn held_out_squares(
         .iter()
         .map(|d| (d[0] * d[0] + d[1] * d[1]).min(cap2))
         .sum()
-}
-
-/// Every `k`-th item so that at most `most` remain (all when fewer).
-pub(crate) fn thin<T: Clone>(items: &[T], most: usize) -> Vec<T> {
-    let stride = items.len().div_ceil(most.max(1)).max(1);
-    items.iter().step_by(stride).cloned().collect()
 }
 
 #[cfg(test)]

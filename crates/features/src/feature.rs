@@ -241,10 +241,7 @@ impl FeatureSet {
     pub fn write_csv<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
         writeln!(w, "{CSV_HEADER}")?;
         for f in &self.features {
-            let pass = match f.pass {
-                ScanPass::Trace => "trace",
-                ScanPass::Retrace => "retrace",
-            };
+            let pass = f.pass.name();
             let status = serde_json::to_value(f.status)
                 .ok()
                 .and_then(|v| v.as_str().map(str::to_owned))

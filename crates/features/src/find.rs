@@ -865,10 +865,7 @@ fn check_found(
     options: &FeatureOptions,
     rejected: &[RejectedCandidate],
 ) -> Result<(), FeatureError> {
-    let pass_name = match pass {
-        ScanPass::Trace => "trace",
-        ScanPass::Retrace => "retrace",
-    };
+    let pass_name = pass.name();
     if features.is_empty() {
         return Err(FeatureError::NoFeatures {
             pass: pass_name,

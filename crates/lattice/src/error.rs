@@ -1,6 +1,7 @@
 use thiserror::Error;
 
 use crate::PlaneGroup;
+use crate::plane_group::UnknownPlaneGroup;
 
 /// Why a lattice definition is unusable.
 #[derive(Debug, Error)]
@@ -162,10 +163,8 @@ pub enum LatticeError {
     #[error("unknown length unit '{0}' (use m, nm, A or pm)")]
     UnknownUnit(String),
     /// An unknown plane group.
-    #[error(
-        "unknown plane group '{0}' (use one of the 17 wallpaper groups, e.g. p3m1, p6mm, p4mm)"
-    )]
-    UnknownPlaneGroup(String),
+    #[error(transparent)]
+    UnknownPlaneGroup(#[from] UnknownPlaneGroup),
     /// The file cannot be parsed.
     #[error("cannot parse lattice file: {0}")]
     Parse(String),

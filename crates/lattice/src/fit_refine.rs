@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 
 use crate::Lattice;
-use crate::fit::{
+use crate::fit_result::{
     IndexedPoint, IndexedPosition, LatticeFit, MAX_GAUSS_NEWTON_ITERATIONS, lattice_vector,
     nearest_site, transform,
 };

@@ -37,6 +37,7 @@ pub mod catalogue;
 mod error;
 mod fit;
 mod fit_refine;
+mod fit_result;
 mod metric;
 mod motif;
 mod neighbours;
@@ -58,7 +59,7 @@ pub use fit::{
 };
 pub use motif::MotifSite;
 pub use neighbours::{DEFAULT_SHELL_TOLERANCE, MAX_NEIGHBOUR_WINDOW};
-pub use plane_group::PlaneGroup;
+pub use plane_group::{PlaneGroup, UnknownPlaneGroup};
 pub use presets::{
     CentredRectangular, Hexagonal, Honeycomb, Kagome, Oblique, Rectangular, SI111_7X7_A, Square,
 };

@@ -1,7 +1,5 @@
 use serde::{Deserialize, Serialize};
 
-use crate::LatticeError;
-
 /// The 17 plane (wallpaper) groups, in International (Hermann–Mauguin) short notation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
@@ -112,19 +110,24 @@ impl std::fmt::Display for PlaneGroup {
     }
 }
 
+/// A plane-group symbol that is not one of the 17 wallpaper groups.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown plane group '{0}' (use one of the 17 wallpaper groups, e.g. p3m1, p6mm, p4mm)")]
+pub struct UnknownPlaneGroup(pub String);
+
 impl std::str::FromStr for PlaneGroup {
-    type Err = LatticeError;
+    type Err = UnknownPlaneGroup;
     fn from_str(text: &str) -> Result<Self, Self::Err> {
         let wanted = text.trim().to_ascii_lowercase();
         PlaneGroup::ALL
             .into_iter()
             .find(|g| g.symbol() == wanted)
-            .ok_or_else(|| LatticeError::UnknownPlaneGroup(text.to_string()))
+            .ok_or_else(|| UnknownPlaneGroup(text.to_string()))
     }
 }
 
 impl TryFrom<String> for PlaneGroup {
-    type Error = LatticeError;
+    type Error = UnknownPlaneGroup;
     fn try_from(text: String) -> Result<Self, Self::Error> {
         text.parse()
     }

@@ -41,14 +41,13 @@ mod error;
 mod options;
 mod region_fit;
 mod regions;
+mod results;
+mod stage;
 mod unit_cells;
 mod warnings;
 
 pub use affine::AffineComparison;
-pub use analysis::{
-    Analysis, CorrectionSource, FeatureIndex, PassOutput, RegionFit, SkippedRegion, Stage,
-    StageTimings, UnitCellAnalysis,
-};
+pub use analysis::{Analysis, CorrectionSource};
 pub use calibration::{
     CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CalibrationOptions,
     CorrectedImageCheck,
@@ -56,6 +55,8 @@ pub use calibration::{
 pub use error::PipelineError;
 pub use options::{CellSelection, PipelineOptions, RegionOptions, UnitCellOptions};
 pub use regions::label_regions;
+pub use results::{FeatureIndex, PassOutput, RegionFit, SkippedRegion, UnitCellAnalysis};
+pub use stage::{Stage, StageTimings};
 pub use warnings::{
     CALIBRATION_WARNING, DEVIATION_WARNING, INDEXED_WARNING, SCALE_WARNING, UserInput, Warning,
     WarningCode,

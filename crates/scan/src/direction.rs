@@ -77,13 +77,18 @@ pub enum ScanPass {
 impl ScanPass {
     /// Both passes, trace first.
     pub const BOTH: [ScanPass; 2] = [ScanPass::Trace, ScanPass::Retrace];
+
+    /// `"trace"` or `"retrace"` (file names, channel names, messages).
+    pub fn name(self) -> &'static str {
+        match self {
+            ScanPass::Trace => "trace",
+            ScanPass::Retrace => "retrace",
+        }
+    }
 }
 
 impl std::fmt::Display for ScanPass {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            ScanPass::Trace => "trace",
-            ScanPass::Retrace => "retrace",
-        })
+        f.write_str(self.name())
     }
 }

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use dhct_simulate::effects::{FastScanHysteresis, HeightCoupling, LogCreep, TipChange, Vibration};
 use dhct_simulate::{
     EffectConfig, HysteresisLaw, LatticeConfig, Region, SecondDomain, Simulation, SimulationConfig,
-    StepEdge, output::write_png, pass_name, presets,
+    StepEdge, output::write_png, presets,
 };
 
 /// 256 × 256 px over 8 nm of a hexagonal lattice (a = 0.5 nm), 50 nm/s, no noise.
@@ -104,7 +104,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for config in fig3 {
         let output = Simulation::from_config(&config)?.run()?;
         for (pass, image) in output.pair.images() {
-            let path = out.join(format!("{}-{}.png", config.name, pass_name(pass)));
+            let path = out.join(format!("{}-{}.png", config.name, pass.name()));
             write_png(&path, image)?;
             println!("{}", path.display());
         }

@@ -66,5 +66,5 @@ pub use effects::{AcquisitionContext, Effect, EffectConfig, HeightEffect, Hyster
 pub use error::SimulationError;
 pub use output::SimulationOutput;
 pub use region::Region;
-pub use simulation::{CHANNEL_NAME, Simulation, pass_name};
+pub use simulation::{CHANNEL_NAME, Simulation};
 pub use truth::{DisplacementField, FeatureAcquisition, FeatureTruth, GroundTruth};

@@ -10,7 +10,6 @@ use dhct_sm4_io::png_file::Colormap;
 use dhct_sm4_io::{WriteError, gsf, npy, png_file, sm4, write_atomically};
 
 use crate::config::OutputFormat;
-use crate::simulation::pass_name;
 use crate::{GroundTruth, SimulationError};
 
 /// File name of the ground truth.
@@ -65,7 +64,7 @@ impl SimulationOutput {
                 }
                 OutputFormat::Gsf => {
                     for (pass, image) in self.pair.images() {
-                        let path = dir.join(format!("{}.gsf", pass_name(pass)));
+                        let path = dir.join(format!("{}.gsf", pass.name()));
                         write_atomically(&path, |w| {
                             gsf::write_pass(image, self.pair.geometry(), pass, w)
                         })?;
@@ -74,13 +73,13 @@ impl SimulationOutput {
                 }
                 OutputFormat::Npy => {
                     for (pass, image) in self.pair.images() {
-                        let path = dir.join(format!("{}.npy", pass_name(pass)));
+                        let path = dir.join(format!("{}.npy", pass.name()));
                         write_atomically(&path, |w| npy::write(image, w))?;
                         written.push(path);
                         // NPY has no place for the pixel size, unit and directions.
                         let sidecar =
                             npy::Sidecar::new(image, self.pair.geometry(), pass, Vec::new());
-                        let path = dir.join(format!("{}.json", pass_name(pass)));
+                        let path = dir.join(format!("{}.json", pass.name()));
                         write_atomically(&path, |w| {
                             serde_json::to_writer_pretty(&mut *w, &sidecar)
                                 .map_err(|e| WriteError::Stream(std::io::Error::other(e)))?;
@@ -92,7 +91,7 @@ impl SimulationOutput {
                 }
                 OutputFormat::Png => {
                     for (pass, image) in self.pair.images() {
-                        let path = dir.join(format!("{}.png", pass_name(pass)));
+                        let path = dir.join(format!("{}.png", pass.name()));
                         write_png(&path, image)?;
                         written.push(path);
                     }
@@ -103,7 +102,7 @@ impl SimulationOutput {
             for (component, channel) in [("dx", &field.dx), ("dy", &field.dy)] {
                 let path = dir.join(format!(
                     "displacement_{}_{component}.npy",
-                    pass_name(field.pass)
+                    field.pass.name()
                 ));
                 write_atomically(&path, |w| npy::write(channel, w))?;
                 written.push(path);

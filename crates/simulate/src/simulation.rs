@@ -137,8 +137,8 @@ impl Simulation {
             .zip(fields)
             .map(|(pass, (dx, dy))| DisplacementField {
                 pass,
-                dx: ImageChannel::new(format!("dx {}", pass_name(pass)), "m", dx),
-                dy: ImageChannel::new(format!("dy {}", pass_name(pass)), "m", dy),
+                dx: ImageChannel::new(format!("dx {}", pass.name()), "m", dx),
+                dy: ImageChannel::new(format!("dy {}", pass.name()), "m", dy),
             })
             .collect();
         let truth = GroundTruth {
@@ -155,13 +155,5 @@ impl Simulation {
             displacement,
         };
         Ok(SimulationOutput { pair, truth })
-    }
-}
-
-/// "trace" or "retrace".
-pub fn pass_name(pass: ScanPass) -> &'static str {
-    match pass {
-        ScanPass::Trace => "trace",
-        ScanPass::Retrace => "retrace",
     }
 }

@@ -131,7 +131,7 @@ pub enum ReadError {
     },
     /// A geometry override is out of range.
     #[error("invalid scan geometry option: {0}")]
-    BadOverride(crate::overrides::OverrideRangeError),
+    BadOverride(OverrideRangeError),
     /// The header describes a scan geometry that is not valid.
     #[error("{format} file describes an invalid scan: {source}", format = .format.name())]
     Geometry {
@@ -205,4 +205,20 @@ pub enum WriteError {
         /// The encoder's error.
         reason: String,
     },
+}
+
+/// An override outside its plausible range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{key} = {value:e} {unit} is outside the accepted range {low:e}..={high:e} {unit}")]
+pub struct OverrideRangeError {
+    /// The option's name (`pitch_x`, `pixel_period`, ...).
+    pub key: &'static str,
+    /// The value given.
+    pub value: f64,
+    /// Its unit.
+    pub unit: &'static str,
+    /// Smallest accepted value.
+    pub low: f64,
+    /// Largest accepted value.
+    pub high: f64,
 }

@@ -473,14 +473,7 @@ pub fn write_pass<W: Write>(
     if !title.is_empty() {
         line("Title", title);
     }
-    line(
-        "DHCT_Pass",
-        match pass {
-            ScanPass::Trace => "trace",
-            ScanPass::Retrace => "retrace",
-        }
-        .to_string(),
-    );
+    line("DHCT_Pass", pass.name().to_string());
     line("DHCT_PixelPeriod", format!("{:e}", geometry.pixel_period()));
     line(
         "DHCT_TurnaroundTime",

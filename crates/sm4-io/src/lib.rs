@@ -47,7 +47,7 @@ pub mod matrix;
 pub mod nanoscope;
 pub mod nid;
 pub mod npy;
-mod npy_sidecar;
+pub mod npy_sidecar;
 mod overrides;
 mod placeholders;
 pub mod png_file;
@@ -61,9 +61,9 @@ use std::path::Path;
 pub use atomic::write_atomically;
 pub use detect::detect_format;
 pub use dhct_scan::{FileFormat, ScanFile};
-pub use error::{ReadError, WriteError};
+pub use error::{OverrideRangeError, ReadError, WriteError};
 pub use limits::{MAX_TEXT_FILE_BYTES, ReadLimits, check_regular_file, read_regular_text};
-pub use overrides::{GeometryOverrides, OverrideRangeError};
+pub use overrides::GeometryOverrides;
 pub use placeholders::{
     ASSUMED_PITCH, ASSUMED_PIXEL_PERIOD, ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY,
     PLAUSIBLE_LINE_TIME_S, PLAUSIBLE_PITCH_M, PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD,

@@ -41,7 +41,6 @@ use ndarray::{Array2, ShapeBuilder};
 
 use crate::bytes::{ByteReader, checked_data_len};
 use crate::limits::{Budget, ReadLimits};
-pub use crate::npy_sidecar::{other_pass_file, paired_trace};
 use crate::{ReadError, ScanFile, WriteError};
 
 const FORMAT: FileFormat = FileFormat::Npy;

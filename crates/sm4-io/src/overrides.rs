@@ -1,27 +1,11 @@
 use dhct_scan::{GeometryError, ScanDirection, ScanFile, ScanGeometry, ScanPair, ValueSource};
 use serde::{Deserialize, Serialize};
 
-use crate::ReadError;
 use crate::placeholders::{
     ASSUMED_SCALE_KEY, ASSUMED_TIMING_KEY, PLAUSIBLE_LINE_TIME_S, PLAUSIBLE_PITCH_M,
     PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_TURNAROUND_S, plausible,
 };
-
-/// An override outside its plausible range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{key} = {value:e} {unit} is outside the accepted range {low:e}..={high:e} {unit}")]
-pub struct OverrideRangeError {
-    /// The option's name (`pitch_x`, `pixel_period`, ...).
-    pub key: &'static str,
-    /// The value given.
-    pub value: f64,
-    /// Its unit.
-    pub unit: &'static str,
-    /// Smallest accepted value.
-    pub low: f64,
-    /// Largest accepted value.
-    pub high: f64,
-}
+use crate::{OverrideRangeError, ReadError};
 
 /// Geometry values given by the user (command line, config or API) that replace or supply
 /// what a file says. Unset fields keep the file's values.

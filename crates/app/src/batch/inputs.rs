@@ -108,7 +108,7 @@ impl Found {
             self.scans.iter().map(|s| canonical(&s.path)).collect();
         let mut kept = Vec::with_capacity(self.scans.len());
         for scan in std::mem::take(&mut self.scans) {
-            match dhct_sm4_io::npy::paired_trace(&scan.path) {
+            match dhct_sm4_io::npy_sidecar::paired_trace(&scan.path) {
                 Some(trace) if scans.contains(&canonical(&trace)) => self.skipped.push(Skipped {
                     note: format!(
                         "the retrace of {} (their sidecars pair them): corrected with it",
