@@ -83,3 +83,15 @@ pub enum CalibrationError {
         at_given: String,
     },
 }
+
+impl From<crate::spectrum::SpectrumError> for CalibrationError {
+    fn from(e: crate::spectrum::SpectrumError) -> Self {
+        use crate::spectrum::SpectrumError;
+        match e {
+            SpectrumError::ImageTooSmall { columns, rows } => {
+                CalibrationError::ImageTooSmall { columns, rows }
+            }
+            SpectrumError::Unusable(reason) => CalibrationError::NoLattice { reason },
+        }
+    }
+}

@@ -44,6 +44,7 @@ mod basis;
 mod check;
 mod decompose;
 mod error;
+mod image_lattice;
 mod matching;
 mod measure;
 mod named_fit;
@@ -52,15 +53,15 @@ mod structure;
 
 pub use check::{CheckOptions, SLOW_AXIS_SLACK, STRETCHED_MATCH, check_inputs};
 pub use error::CalibrationError;
+pub use image_lattice::{ImageLattice, LatticeMeasurement, LatticeShape, Reflection, length};
 pub use matching::{Calibration, LatticeMatch, ShellCheck, match_lattice};
 pub use measure::{
-    ImageLattice, LatticeMeasurement, LatticeShape, MAX_MEASURED_SIDE, MIN_BINNED_NN_PX,
-    Reflection, binning_factor, length, measure_lattice, measure_lattice_binned,
+    MAX_MEASURED_SIDE, MIN_BINNED_NN_PX, binning_factor, measure_lattice, measure_lattice_binned,
 };
 pub use named_fit::{
     MIN_EXPLAINED_FRACTION, MIN_PRIMARY_COVERAGE, MapBounds, STRONG_POWER_FRACTION, UnexplainedPeak,
 };
-pub use spectrum::{Peak, PowerSpectrum};
+pub use spectrum::{Peak, PowerSpectrum, SpectrumError};
 
 use dhct_lattice::Lattice;
 use dhct_scan::{ScanPair, ScanPass};

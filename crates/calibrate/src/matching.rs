@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::basis::propagate;
 use crate::decompose::{rq, singular_values};
-use crate::measure::{LatticeMeasurement, real_basis};
+use crate::image_lattice::{LatticeMeasurement, real_basis};
 use crate::named_fit::{MapBounds, NamedFit, SpectrumWindow, UnexplainedPeak, file_map, fit_named};
 
 /// How the file's frame relates to the sample's, measured against a known lattice.

@@ -24,7 +24,7 @@ use nalgebra::{Matrix2, Matrix4, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::basis::{position_sigma, refine};
-use crate::measure::real_basis;
+use crate::image_lattice::real_basis;
 use crate::spectrum::Peak;
 use crate::structure::{amplitude, structure_factor};
 

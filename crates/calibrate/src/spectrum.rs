@@ -13,7 +13,21 @@ use dhct_scan::Axis;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
-use crate::CalibrationError;
+/// Why an image has no usable spectrum (the calibration reports it as its own error).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpectrumError {
+    /// Fewer than 16 pixels along an axis.
+    #[error("{columns} × {rows} pixels is too small for a spectrum")]
+    ImageTooSmall {
+        /// Image columns, pixels.
+        columns: usize,
+        /// Image rows, pixels.
+        rows: usize,
+    },
+    /// No pixel can be used, or the image cannot be levelled: why, in words.
+    #[error("{0}")]
+    Unusable(String),
+}
 
 /// Peaks closer to the origin than this (bins) are ignored: a period of more than a
 /// third of the image is no lattice.
@@ -81,10 +95,10 @@ impl PowerSpectrum {
         z: ArrayView2<f64>,
         mask: Option<&Array2<bool>>,
         fast_axis: Axis,
-    ) -> Result<PowerSpectrum, CalibrationError> {
+    ) -> Result<PowerSpectrum, SpectrumError> {
         let (rows, columns) = z.dim();
         if rows < 16 || columns < 16 {
-            return Err(CalibrationError::ImageTooSmall { columns, rows });
+            return Err(SpectrumError::ImageTooSmall { columns, rows });
         }
         let prepared = prepare(z, mask)?;
         let spectrum = RealSpectrum::of(
@@ -314,24 +328,19 @@ fn median(mut values: Vec<f64>) -> f64 {
 }
 
 /// Levels, clips and windows `z`; pixels left out become 0.
-fn prepare(
-    z: ArrayView2<f64>,
-    mask: Option<&Array2<bool>>,
-) -> Result<Array2<f64>, CalibrationError> {
+fn prepare(z: ArrayView2<f64>, mask: Option<&Array2<bool>>) -> Result<Array2<f64>, SpectrumError> {
     let (rows, columns) = z.dim();
     let use_pixel = |r: usize, c: usize| z[[r, c]].is_finite() && mask.is_none_or(|m| m[[r, c]]);
     let levelled = Array2::from_shape_fn((rows, columns), |(r, c)| {
         if use_pixel(r, c) { z[[r, c]] } else { f64::NAN }
     });
     if !levelled.iter().any(|v| v.is_finite()) {
-        return Err(CalibrationError::NoLattice {
-            reason: "no finite pixel is inside the mask".into(),
-        });
+        return Err(SpectrumError::Unusable(
+            "no finite pixel is inside the mask".into(),
+        ));
     }
-    let levelled =
-        subtract_polynomial(&levelled, 1, None).map_err(|e| CalibrationError::NoLattice {
-            reason: format!("the image could not be levelled: {e}"),
-        })?;
+    let levelled = subtract_polynomial(&levelled, 1, None)
+        .map_err(|e| SpectrumError::Unusable(format!("the image could not be levelled: {e}")))?;
     let limit = 6.0 * robust_sigma(&levelled);
     let hann = |n: usize| -> Vec<f64> {
         (0..n)

@@ -6,7 +6,7 @@
 use dhct_lattice::Lattice;
 use nalgebra::{Matrix2, Vector2};
 
-use crate::measure::real_basis;
+use crate::image_lattice::real_basis;
 
 /// Width σ of a feature as a fraction of the nearest-neighbour distance when the lattice
 /// does not say (the DHCT kernel).

@@ -17,10 +17,8 @@ use crate::model::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepar
 use crate::model::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::model::global::{GlobalModel, LatticeParams, Term, sim_term};
 use crate::model::timing_gain::whitened;
-use crate::report::diagnosis::{
-    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
-    NEAR_TIE_FRACTION, Shrink,
-};
+use crate::report::diagnosis::{DiagnosisReport, GreedyRound, ModelSummary};
+use crate::report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRACTION, Shrink};
 use crate::report::verdict::{VerdictKind, decide};
 use crate::search::candidates::{Candidate, creep_t0_bounds};
 use crate::search::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};

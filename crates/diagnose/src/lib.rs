@@ -95,6 +95,7 @@ mod image_view {
     pub(crate) mod along_line;
     pub(crate) mod image_residual;
     pub(crate) mod line_departures;
+    pub(crate) mod line_spectrum;
     pub(crate) mod pair_images;
     pub(crate) mod pass_phases;
     pub(crate) mod sub_feature;
@@ -103,7 +104,9 @@ mod image_view {
 /// The serialisable report and its verdict.
 mod report {
     pub(crate) mod diagnosis;
+    pub(crate) mod gap;
     pub(crate) mod verdict;
+    pub(crate) mod with_views;
 }
 
 pub use diagnose::{DiagnoseOptions, diagnose, diagnose_with_model};
@@ -111,7 +114,7 @@ pub use error::DiagnoseError;
 pub use evidence::heights::{HEIGHT_CHANGE_MIN, HEIGHT_CHANGE_Z, HeightChange, HeightView};
 pub use evidence::location::{Bin, ChangePoint, GapLocation};
 pub use evidence::noise::{FloorEstimate, FloorSource, FloorUnavailable, NoiseFloor};
-pub use evidence::spectrum::{SpectralPeak, Spectrum};
+pub use evidence::spectrum::{SIGNIFICANT_FALSE_ALARM, SpectralPeak, Spectrum};
 pub use image_view::along_line::{
     ALONG_LINE_FALSE_ALARM, AlongLinePeak, LATTICE_LINE_RATIO, LatticeSideband, MIN_SHARED_EXCESS,
 };
@@ -123,16 +126,13 @@ pub use image_view::pair_images::{pair_views, sub_feature_view_of_pair, with_pai
 pub use image_view::pass_phases::{MIN_PHASE_AGREEMENT, MIN_STEADINESS, PHASE_MARGIN, PassPhases};
 pub use image_view::sub_feature::{
     ACROSS_SCATTER_LIMIT, MAX_SCATTER_LEFT, MIN_PASS_AGREEMENT, MIN_PERIODS_PER_LINE_ACROSS,
-    OUTLIER_READING, PassImage, SIGNIFICANT_FALSE_ALARM, SliceVibration, SubFeatureView,
-    sub_feature_view,
+    OUTLIER_READING, PassImage, SliceVibration, SubFeatureView, sub_feature_view,
 };
 pub use model::base::{BaseChoice, LawScore, PassLevelling};
 pub use model::data::{MIN_FEATURES, Observation};
 pub use model::fit::FittedParameter;
-pub use report::diagnosis::{
-    AddedEffect, DiagnosisReport, FeatureResidual, GapSummary, GreedyRound, ModelSummary,
-    NEAR_TIE_FRACTION, Shrink,
-};
+pub use report::diagnosis::{DiagnosisReport, GreedyRound, ModelSummary};
+pub use report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRACTION, Shrink};
 pub use report::verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};
 pub use search::candidates::Candidate;
 pub use search::select::{CandidateScore, CvScheme, SelectionOptions};

@@ -434,7 +434,7 @@ mod tests {
                     fit_sigma_m: [fit_sigma_m; 2],
                     indices: (n, m, 0),
                     lattice_vector_m: [u * 1e-11, v * 1e-11],
-                    whitening: crate::model::timing_gain::IDENTITY,
+                    whitening: crate::model::data::NO_WHITENING,
                 });
             }
         }

@@ -309,6 +309,9 @@ pub(crate) fn spectrum(observations: &[Observation], weighted: &[f64]) -> Spectr
     }
 }
 
+/// The false-alarm probability below which a slice-level vibration is reported as found.
+pub const SIGNIFICANT_FALSE_ALARM: f64 = 1e-3;
+
 #[cfg(test)]
 mod tests {
     use super::*;

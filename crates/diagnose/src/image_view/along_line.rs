@@ -22,9 +22,11 @@
 
 use dhct_numerics::robust::{finite_median, mad_sigma_about};
 use realfft::RealFftPlanner;
-use realfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
+use crate::image_view::line_spectrum::{
+    MIN_RUN_FRACTION_OF_LINE, longest_finite_run, windowed_spectrum,
+};
 use crate::image_view::pass_phases::PassPhases;
 
 /// The false-alarm probability below which an along-line peak is reported as found.
@@ -38,9 +40,6 @@ pub const MIN_SHARED_EXCESS: f64 = 0.25;
 const LEVEL_WIDTH: usize = 24;
 /// Fewest bins a side's level is taken over.
 const MIN_LEVEL_BINS: usize = 4;
-/// A line whose longest run of modelled pixels is shorter than its length over this is
-/// left out.
-pub(crate) const MIN_RUN_FRACTION_OF_LINE: usize = 4;
 
 /// The strongest peak of the lines' mean power spectrum.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -138,7 +137,7 @@ impl AlongLinePeak {
             "strongest peak {:.1} Hz, {:.1} × its level, amplitude {}, {what}",
             self.frequency_hz,
             self.power_over_level,
-            crate::image_view::image_residual::z_value(self.amplitude, unit),
+            z_value(self.amplitude, unit),
         );
         if let Some(side) = &self.sideband_of {
             s.push_str(&format!(
@@ -269,24 +268,6 @@ impl LinesSpectrum {
     }
 }
 
-/// The longest run of consecutive finite values.
-pub(crate) fn longest_finite_run(values: &[f64]) -> std::ops::Range<usize> {
-    let (mut best, mut start) = (0..0, None);
-    for (i, v) in values.iter().chain([&f64::NAN]).enumerate() {
-        match (v.is_finite(), start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                if i - s > best.len() {
-                    best = s..i;
-                }
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    best
-}
-
 /// The strongest peak of the residual lines' mean power spectrum `residual` over its
 /// level, judged against the `model_lines`' spectrum (the same lines of the rendered
 /// model; `pixel_period` seconds per pixel). `None` when the lines are too short or too
@@ -342,31 +323,6 @@ pub(crate) fn along_line_peak(
         phases: None,
         other_pass_power_over_level: None,
     })
-}
-
-/// The spectrum of `line`'s values in `run` (finite), Hann-windowed over the run and
-/// zero elsewhere (so that phases refer to the line's first pixel), scaled by `n/m` (`m`
-/// the run's length): a sinusoid's peak is the same however long the run.
-pub(crate) fn windowed_spectrum(
-    fft: &dyn realfft::RealToComplex<f64>,
-    line: &[f64],
-    run: std::ops::Range<usize>,
-    n: usize,
-) -> Option<Vec<Complex<f64>>> {
-    let m = run.len();
-    let values = &line[run.clone()];
-    let mean = values.iter().sum::<f64>() / m as f64;
-    let mut input = fft.make_input_vec();
-    for (i, (slot, v)) in input[run].iter_mut().zip(values).enumerate() {
-        let w = (std::f64::consts::PI * (i as f64 + 0.5) / m as f64)
-            .sin()
-            .powi(2);
-        *slot = (v - mean) * w;
-    }
-    let mut output = fft.make_output_vec();
-    fft.process(&mut input, &mut output).ok()?;
-    let scale = n as f64 / m as f64;
-    Some(output.into_iter().map(|c| c * scale).collect())
 }
 
 /// The power over its level of the lines' mean `spectrum` within one bin of `k` (the
@@ -432,6 +388,15 @@ fn refined_bin(power: &[f64], k: usize) -> f64 {
         return k as f64;
     }
     k as f64 + (0.5 * (a - c) / denominator).clamp(-0.5, 0.5)
+}
+
+/// `value` in `unit`, picometres when the unit is metres.
+pub(crate) fn z_value(value: f64, unit: &str) -> String {
+    if unit == "m" {
+        format!("{:.2} pm", value * 1e12)
+    } else {
+        format!("{value:.3e} {unit}")
+    }
 }
 
 #[cfg(test)]

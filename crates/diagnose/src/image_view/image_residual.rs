@@ -30,12 +30,12 @@ use dhct_scan::{ScanGeometry, ScanPass};
 use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
-use crate::FeatureResidual;
 use crate::image_view::along_line::{
-    AlongLinePeak, LinesSpectrum, along_line_peak, power_over_level_near,
+    AlongLinePeak, LinesSpectrum, along_line_peak, power_over_level_near, z_value,
 };
 use crate::image_view::line_departures::{line_shifts, line_tilt_evidence};
 use crate::image_view::pass_phases::pass_phases;
+use crate::report::gap::FeatureResidual;
 
 /// Bins of the fast phase τ/T.
 pub const FAST_PHASE_BINS: usize = 16;
@@ -187,15 +187,6 @@ impl PassResidual {
             ));
         }
         s
-    }
-}
-
-/// `value` in `unit`, picometres when the unit is metres.
-pub(crate) fn z_value(value: f64, unit: &str) -> String {
-    if unit == "m" {
-        format!("{:.2} pm", value * 1e12)
-    } else {
-        format!("{value:.3e} {unit}")
     }
 }
 
@@ -446,33 +437,4 @@ fn excess_windows(
     windows.sort_by(|a, b| b.lines.cmp(&a.lines).then(a.start_s.total_cmp(&b.start_s)));
     windows.truncate(MAX_WINDOWS);
     (count, windows)
-}
-
-impl crate::DiagnosisReport {
-    /// The report with the residual images' summaries; a height signal found along the
-    /// lines is named in the verdict's words as what it is (z only: the verdict's kind is
-    /// about scan distortions and stays as it is).
-    pub fn with_image_residual(mut self, passes: Vec<PassResidual>) -> Self {
-        let found: Vec<String> = passes
-            .iter()
-            .filter_map(|p| {
-                let peak = p.along_line.as_ref().filter(|peak| peak.is_found())?;
-                Some(format!(
-                    "{} {:.1} Hz ({})",
-                    p.pass,
-                    peak.frequency_hz,
-                    z_value(peak.amplitude, &p.z_unit)
-                ))
-            })
-            .collect();
-        if !found.is_empty() {
-            self.verdict_details.summary.push_str(&format!(
-                " The image also holds a height signal along the lines that moves no feature \
-                 ({}): electrical pickup or a vibration in z, not a scan distortion.",
-                found.join(", ")
-            ));
-        }
-        self.image_residual = passes;
-        self
-    }
 }

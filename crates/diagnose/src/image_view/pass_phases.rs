@@ -5,7 +5,7 @@ use realfft::RealFftPlanner;
 use realfft::num_complex::Complex;
 use serde::{Deserialize, Serialize};
 
-use crate::image_view::along_line::{
+use crate::image_view::line_spectrum::{
     MIN_RUN_FRACTION_OF_LINE, longest_finite_run, windowed_spectrum,
 };
 

@@ -24,8 +24,8 @@ use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::evidence::spectrum::{
-    LevelWindow, false_alarm_probability, local_maxima, local_noise_levels, periodogram_at,
-    tail_false_alarm_probability,
+    LevelWindow, SIGNIFICANT_FALSE_ALARM, false_alarm_probability, local_maxima,
+    local_noise_levels, periodogram_at, tail_false_alarm_probability,
 };
 
 /// One pass's image as the feature fits saw it but with each line's level kept
@@ -131,9 +131,6 @@ pub const MIN_PERIODS_PER_LINE_ACROSS: f64 = 1.0;
 fn measured() -> bool {
     true
 }
-
-/// The false-alarm probability below which a slice-level vibration is reported as found.
-pub const SIGNIFICANT_FALSE_ALARM: f64 = 1e-3;
 
 /// Slices spanning fewer pixels than this are not measured.
 const MIN_SLICE_PIXELS: usize = 5;
@@ -709,45 +706,6 @@ impl SubFeatureView {
             ),
         }
     }
-}
-
-impl crate::DiagnosisReport {
-    /// Adds the image view below one feature. A vibration found there is one of the named
-    /// effects: a verdict of `no_gap` becomes `explained` and names the vibration first
-    /// (what the positions added there stayed within the floor), and the verdict's words
-    /// lead with it (the position gap numbers are unchanged: the positions do not see it).
-    pub fn with_sub_feature_view(mut self, view: SubFeatureView) -> Self {
-        if view.vibration_found {
-            let v = &mut self.verdict_details;
-            let vibration = crate::Candidate::Vibration;
-            if v.kind == crate::VerdictKind::NoGap {
-                v.kind = crate::VerdictKind::Explained;
-                v.effects.retain(|c| *c != vibration);
-                v.effects.insert(0, vibration);
-                v.summary = format!(
-                    "Explained {}. The feature positions alone: {}",
-                    view.describe(),
-                    v.summary
-                );
-            } else {
-                if !v.effects.contains(&vibration) {
-                    v.effects.push(vibration);
-                }
-                v.summary = format!("{}. {}", capitalised(&view.describe()), v.summary);
-            }
-            self.verdict = v.kind;
-        }
-        self.sub_feature = Some(view);
-        self
-    }
-}
-
-fn capitalised(text: &str) -> String {
-    let mut chars = text.chars();
-    chars
-        .next()
-        .map(|c| c.to_uppercase().chain(chars).collect())
-        .unwrap_or_default()
 }
 
 #[cfg(test)]

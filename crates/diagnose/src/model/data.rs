@@ -396,7 +396,18 @@ impl<'a> BaseStage<'a> {
             fit_sigma_m: [sigma(f.x_sigma_px, px), sigma(f.y_sigma_px, py)],
             indices: (p.n, p.m, p.site),
             lattice_vector_m: [x.x, x.y],
-            whitening: crate::model::timing_gain::IDENTITY,
+            whitening: NO_WHITENING,
         }
     }
+}
+
+/// The identity: residuals compared with the fits' 1σ as they are.
+pub(crate) const NO_WHITENING: [[f64; 2]; 2] = [[1.0, 0.0], [0.0, 1.0]];
+
+/// `w·v`: a residual `v` whitened by an observation's 2 × 2 matrix `w` (rows).
+pub(crate) fn whiten(w: &[[f64; 2]; 2], v: [f64; 2]) -> [f64; 2] {
+    [
+        w[0][0] * v[0] + w[0][1] * v[1],
+        w[1][0] * v[0] + w[1][1] * v[1],
+    ]
 }

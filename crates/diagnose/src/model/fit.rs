@@ -11,9 +11,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::DiagnoseError;
-use crate::model::data::Observation;
+use crate::model::data::{Observation, whiten};
 use crate::model::global::{GlobalModel, Transform, term_displacements};
-use crate::model::timing_gain;
 
 /// A fitted model with what the ranking needs.
 #[derive(Debug, Clone)]
@@ -100,7 +99,7 @@ pub(crate) fn jacobian(
             .iter()
             .enumerate()
         {
-            let dsite = timing_gain::apply(&o.whitening, *dsite);
+            let dsite = whiten(&o.whitening, *dsite);
             j[(2 * i, column + k)] = -dsite[0] / sigma[0];
             j[(2 * i + 1, column + k)] = -dsite[1] / sigma[1];
         }

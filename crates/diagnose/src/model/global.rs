@@ -19,8 +19,7 @@ use dhct_scan::ScanGeometry;
 use dhct_simulate::{AcquisitionContext, Effect, EffectConfig};
 use nalgebra::Vector2;
 
-use crate::model::data::Observation;
-use crate::model::timing_gain;
+use crate::model::data::{Observation, whiten};
 
 /// A displacement term of the model: the simulator's [`Effect`]s (wrapped by [`SimEffect`])
 /// and the diagnosis's own extra terms ([`crate::model::terms`]).
@@ -272,7 +271,7 @@ pub(crate) fn term_displacements(
         .iter()
         .map(|o| {
             let d = effect.displacement(&context(geometry, o));
-            timing_gain::apply(&o.whitening, [d.x, d.y])
+            whiten(&o.whitening, [d.x, d.y])
         })
         .collect()
 }
@@ -350,7 +349,7 @@ impl GlobalModel {
             .map(|o| {
                 let site = self.lattice.site(o.lattice_vector_m);
                 let r = [o.controller_m[0] - site[0], o.controller_m[1] - site[1]];
-                timing_gain::apply(&o.whitening, r)
+                whiten(&o.whitening, r)
             })
             .collect();
         for term in &self.terms {

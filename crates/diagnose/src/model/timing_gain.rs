@@ -16,7 +16,7 @@
 
 use dhct_scan::ScanGeometry;
 
-use crate::model::data::Observation;
+use crate::model::data::{NO_WHITENING, Observation};
 use crate::model::global::{GlobalModel, context};
 
 /// Position step of the central difference, pixels.
@@ -26,17 +26,6 @@ const STEP_PX: f64 = 0.05;
 /// over, or one that jumps within the step, e.g. at a tip change) is not inverted: that
 /// feature keeps `W = I`.
 const DETERMINANT_RANGE: (f64, f64) = (0.25, 4.0);
-
-/// The identity: residuals compared with the fits' 1σ as they are.
-pub(crate) const IDENTITY: [[f64; 2]; 2] = [[1.0, 0.0], [0.0, 1.0]];
-
-/// `w·v` for a 2 × 2 matrix `w` (rows).
-pub(crate) fn apply(w: &[[f64; 2]; 2], v: [f64; 2]) -> [f64; 2] {
-    [
-        w[0][0] * v[0] + w[0][1] * v[1],
-        w[1][0] * v[0] + w[1][1] * v[1],
-    ]
-}
 
 /// `o` seen `step_px` pixels further along controller axis `axis`, with the acquisition
 /// times its new position gets (changed by the geometry's timing, whatever their origin).
@@ -66,7 +55,7 @@ fn displacement(model: &GlobalModel, geometry: &ScanGeometry, o: &Observation) -
 /// `G⁻¹` at `o` for `model`, or the identity where `G` is not safely invertible.
 fn whitening(model: &GlobalModel, geometry: &ScanGeometry, o: &Observation) -> [[f64; 2]; 2] {
     let pitch = [geometry.pitch_x(), geometry.pitch_y()];
-    let mut g = IDENTITY;
+    let mut g = NO_WHITENING;
     for axis in 0..2 {
         let plus = displacement(model, geometry, &moved(geometry, o, axis, STEP_PX));
         let minus = displacement(model, geometry, &moved(geometry, o, axis, -STEP_PX));
@@ -76,7 +65,7 @@ fn whitening(model: &GlobalModel, geometry: &ScanGeometry, o: &Observation) -> [
     }
     let det = g[0][0] * g[1][1] - g[0][1] * g[1][0];
     if !(det.is_finite() && (DETERMINANT_RANGE.0..=DETERMINANT_RANGE.1).contains(&det)) {
-        return IDENTITY;
+        return NO_WHITENING;
     }
     [
         [g[1][1] / det, -g[0][1] / det],

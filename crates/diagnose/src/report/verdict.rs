@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::evidence::location::{Bin, GapLocation};
 use crate::evidence::noise::FloorSource;
-use crate::report::diagnosis::AddedEffect;
+use crate::report::gap::AddedEffect;
 use crate::search::candidates::Candidate;
 
 /// A gap at most this many times the noise floor counts as closed.
@@ -222,7 +222,7 @@ impl Verdict {
                  {:.0} %): the data do not tell them apart.",
                 others.join(" or "),
                 a.candidate,
-                100.0 * crate::NEAR_TIE_FRACTION
+                100.0 * crate::report::gap::NEAR_TIE_FRACTION
             ));
         }
     }

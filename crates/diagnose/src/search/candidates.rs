@@ -287,7 +287,7 @@ pub(crate) fn proposals(candidate: Candidate, ctx: &Context) -> Vec<Proposal> {
                 ctx.residuals,
                 5,
                 MIN_VIBRATION_CYCLES,
-                crate::SIGNIFICANT_FALSE_ALARM,
+                crate::evidence::spectrum::SIGNIFICANT_FALSE_ALARM,
             );
             peaks
                 .into_iter()
