@@ -253,10 +253,23 @@ fn correct(
     root: &Path,
     out: &Path,
 ) -> Result<(), String> {
+    run_dhct(dhct, "correct", input, args, root, out)
+}
+
+/// `dhct SUBCOMMAND INPUT -o OUT ARGS` from `root` into a fresh `out`; `Err(stderr)` on
+/// failure.
+pub(crate) fn run_dhct(
+    dhct: &Path,
+    subcommand: &str,
+    input: &Path,
+    args: &[String],
+    root: &Path,
+    out: &Path,
+) -> Result<(), String> {
     let _ = std::fs::remove_dir_all(out);
     let output = Command::new(dhct)
         .current_dir(root)
-        .arg("correct")
+        .arg(subcommand)
         .arg(input)
         .arg("-o")
         .arg(out)
@@ -270,7 +283,7 @@ fn correct(
     }
 }
 
-fn first_error_line(stderr: &str) -> String {
+pub(crate) fn first_error_line(stderr: &str) -> String {
     stderr
         .lines()
         .find(|l| l.starts_with("error"))

@@ -3,7 +3,8 @@
 //! where what remains lies, and the residual's size against the noise floor.
 
 use std::path::Path;
-use std::process::Command;
+
+use crate::real_corpus::{first_error_line, run_dhct};
 
 /// What the diagnosis said of one file (read from its `diagnosis.json`).
 #[derive(Debug, Clone, PartialEq)]
@@ -33,21 +34,8 @@ pub fn diagnose_file(
     root: &Path,
     out: &Path,
 ) -> Result<DiagnosisOutcome, String> {
-    let _ = std::fs::remove_dir_all(out);
-    let output = Command::new(dhct)
-        .current_dir(root)
-        .arg("diagnose")
-        .arg(input)
-        .arg("-o")
-        .arg(out)
-        .args(args)
-        .output()
-        .map_err(|e| format!("{}: {e}", dhct.display()))?;
-    if !output.status.success() {
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        let line = stderr.lines().find(|l| l.starts_with("error"));
-        return Err(line.unwrap_or("refused without a message").to_string());
-    }
+    run_dhct(dhct, "diagnose", input, args, root, out)
+        .map_err(|stderr| first_error_line(&stderr))?;
     let text = std::fs::read_to_string(out.join("diagnosis.json"))
         .map_err(|e| format!("diagnosis.json: {e}"))?;
     let report: serde_json::Value =
