@@ -71,8 +71,7 @@ enum Command {
     /// corrected images (TIFF, GSF, PNG), features.csv, model.json, unit-cell images and a
     /// self-contained report.html into OUTDIR.
     Correct {
-        /// The image file (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF, Createc DAT, Omicron
-        /// MATRIX, WSxM).
+        /// The image file (any format read: see `dhct --help`).
         input: PathBuf,
         /// A separate file holding the retrace image, if the input has none.
         retrace: Option<PathBuf>,
@@ -134,9 +133,8 @@ enum Command {
         #[command(flatten)]
         options: CorrectArgs,
     },
-    /// Show the channels, sizes, scan geometry and timing of an STM file
-    /// (RHK SM4, Nanonis SXM, ISO 28600, GSF, NPY, TIFF, Createc DAT, Omicron MATRIX, WSxM;
-    /// detected from content).
+    /// Show the channels, sizes, scan geometry and timing of an STM file (any format read,
+    /// detected from content: see `dhct --help`).
     Info {
         /// The file to describe.
         file: PathBuf,
@@ -384,7 +382,7 @@ fn parse_direction(text: &str) -> Result<ScanDirection, String> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = parse_command_line();
     let defaults = dhct_sm4_io::ReadLimits::default();
     dhct_app::read_limits::set(dhct_sm4_io::ReadLimits {
         max_bytes: cli.max_read_bytes.unwrap_or(defaults.max_bytes),
@@ -510,4 +508,16 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// The command line, with the formats read listed in `--help` from the one table in the
+/// code (`FileFormat::ALL`).
+fn parse_command_line() -> Cli {
+    use clap::{CommandFactory, FromArgMatches};
+    let formats = format!(
+        "Formats read (detected from content): {}.",
+        dhct_scan::FileFormat::read_list()
+    );
+    let matches = Cli::command().after_help(formats).get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }

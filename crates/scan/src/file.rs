@@ -39,6 +39,48 @@ pub enum FileFormat {
 }
 
 impl FileFormat {
+    /// Every format, in the order `dhct --help` and the README list them.
+    pub const ALL: [FileFormat; 14] = [
+        FileFormat::RhkSm4,
+        FileFormat::RhkSm3,
+        FileFormat::NanonisSxm,
+        FileFormat::Iso28600,
+        FileFormat::Gsf,
+        FileFormat::Npy,
+        FileFormat::Tiff,
+        FileFormat::Gwyddion,
+        FileFormat::NanosurfNid,
+        FileFormat::Nanoscope,
+        FileFormat::CreatecDat,
+        FileFormat::OmicronMatrix,
+        FileFormat::Wsxm,
+        FileFormat::Png,
+    ];
+
+    /// Whether dhct reads files of this format (every one but PNG, which holds no
+    /// physical heights).
+    pub fn is_read(self) -> bool {
+        self != FileFormat::Png
+    }
+
+    /// Whether dhct writes files of this format.
+    pub fn is_written(self) -> bool {
+        matches!(
+            self,
+            FileFormat::RhkSm4
+                | FileFormat::Gsf
+                | FileFormat::Npy
+                | FileFormat::Tiff
+                | FileFormat::Png
+        )
+    }
+
+    /// The names of the formats dhct reads, comma-separated, in [`FileFormat::ALL`]'s order.
+    pub fn read_list() -> String {
+        let read = FileFormat::ALL.into_iter().filter(|f| f.is_read());
+        read.map(FileFormat::name).collect::<Vec<_>>().join(", ")
+    }
+
     /// A short human-readable name.
     pub fn name(self) -> &'static str {
         match self {
