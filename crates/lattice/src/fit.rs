@@ -22,8 +22,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::fit_refine::{refine, reindex};
-pub use crate::fit_result::{IndexedPoint, LatticeFit};
-use crate::fit_result::{IndexedPosition, lattice_vector, nearest_site, transform};
+use crate::fit_result::{IndexedPosition, LatticeFit, lattice_vector, nearest_site, transform};
 use crate::{Lattice, estimate_rotation};
 
 /// Why a lattice could not be fitted.

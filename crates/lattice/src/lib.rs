@@ -54,9 +54,9 @@ pub use appearance::FeatureAppearance;
 pub use catalogue::{CATALOGUE, CatalogueEntry, CatalogueLattice};
 pub use error::LatticeError;
 pub use fit::{
-    AngularDistribution, IndexedPoint, LatticeFit, LatticeFitError, LatticeFitOptions,
-    angular_distribution, fit_lattice,
+    AngularDistribution, LatticeFitError, LatticeFitOptions, angular_distribution, fit_lattice,
 };
+pub use fit_result::{IndexedPoint, LatticeFit};
 pub use motif::MotifSite;
 pub use neighbours::{DEFAULT_SHELL_TOLERANCE, MAX_NEIGHBOUR_WINDOW};
 pub use plane_group::{PlaneGroup, UnknownPlaneGroup};

@@ -7,6 +7,7 @@
 //! cargo run --release -p dhct-validation -- --seeds 1 --json report.json
 //! ```
 
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -71,9 +72,8 @@ fn run(args: Args) -> Result<bool, Box<dyn std::error::Error>> {
         }
     }
     if let Some(path) = &args.json {
-        let staged = path.with_extension("json.partial");
-        std::fs::write(&staged, serde_json::to_string_pretty(&report)?)?;
-        std::fs::rename(&staged, path)?;
+        let text = serde_json::to_string_pretty(&report)?;
+        dhct_sm4_io::write_atomically(path, |w| w.write_all(text.as_bytes()).map_err(Into::into))?;
     }
     Ok(report.accepted())
 }

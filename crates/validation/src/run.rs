@@ -45,9 +45,7 @@ impl ValidationOptions {
         }
         self.mixture_seeds.truncate(n);
     }
-}
 
-impl ValidationOptions {
     /// The sweep of `catalogue`: its plan and the sets named (every set with `sweep = true`
     /// when `names` is empty).
     pub fn of_catalogue(catalogue: &Catalogue, names: &[&str]) -> Result<Self, SetError> {
