@@ -113,7 +113,8 @@ pub enum ReadError {
     },
     /// The content matches no supported format.
     #[error(
-        "unrecognised file format: expected RHK SM4 or SM3, Nanonis SXM, ISO 28600, Gwyddion GSF or GWY, Nanosurf NID, Bruker Nanoscope, Createc DAT, Omicron MATRIX, WSxM, NumPy NPY or TIFF content"
+        "unrecognised file format: expected the content of one of {formats}",
+        formats = FileFormat::read_list()
     )]
     UnknownFormat,
     /// A file that the format reads together with this one is missing.
