@@ -5,7 +5,7 @@ use std::io::Write;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
-use crate::{FitStatus, LineLevelling};
+use crate::{FeatureRow, FitStatus, LineLevelling};
 
 /// One fitted feature. Positions are in the controller frame of its image (display
 /// orientation; x = column, y = row; metres = px · pitch).
@@ -221,10 +221,6 @@ fn unit_factors() -> [f64; 2] {
     [1.0; 2]
 }
 
-/// Column names of [`FeatureSet::write_csv`].
-pub const CSV_HEADER: &str = "id,pass,x_px,y_px,x_m,y_m,x_sigma_px,y_sigma_px,sigma_major_px,\
-sigma_minor_px,theta_rad,amplitude,height,z0,removed_level,residual_rms,pixel_count,ncc_peak,status,fit_iterations,time_s,line_time_s";
-
 impl FeatureSet {
     /// Counts of rejected candidates by reason.
     pub fn rejection_counts(&self) -> RejectionCounts {
@@ -237,40 +233,15 @@ impl FeatureSet {
         writeln!(w)
     }
 
-    /// Writes the features as CSV with a header line ([`CSV_HEADER`]).
-    pub fn write_csv<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
-        writeln!(w, "{CSV_HEADER}")?;
+    /// Writes the features as CSV, one [`FeatureRow`] each, with a header line (the
+    /// correction and lattice columns empty: this crate does not place features).
+    pub fn write_csv<W: Write>(&self, w: W) -> std::io::Result<()> {
+        let mut writer = csv::Writer::from_writer(w);
         for f in &self.features {
-            let pass = f.pass.name();
-            let status = serde_json::to_value(f.status)
-                .ok()
-                .and_then(|v| v.as_str().map(str::to_owned))
-                .unwrap_or_default();
-            writeln!(
-                w,
-                "{},{pass},{},{},{:e},{:e},{},{},{},{},{},{:e},{:e},{:e},{:e},{:e},{},{},{status},{},{},{}",
-                f.id,
-                f.x_px,
-                f.y_px,
-                f.x_m,
-                f.y_m,
-                f.x_sigma_px,
-                f.y_sigma_px,
-                f.sigma_major_px,
-                f.sigma_minor_px,
-                f.theta_rad,
-                f.amplitude,
-                f.height,
-                f.z0,
-                f.removed_level,
-                f.residual_rms,
-                f.pixel_count,
-                f.ncc_peak,
-                f.fit_iterations,
-                f.time_s,
-                f.line_time_s
-            )?;
+            writer
+                .serialize(FeatureRow::of(f))
+                .map_err(std::io::Error::other)?;
         }
-        Ok(())
+        writer.flush()
     }
 }

@@ -45,6 +45,20 @@ pub enum FitStatus {
     ConvergedCircular,
 }
 
+impl FitStatus {
+    /// The status as written in tables and JSON (`converged`, `iteration-limit`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            FitStatus::Converged => "converged",
+            FitStatus::IterationLimit => "iteration-limit",
+            FitStatus::CentreOnBound => "centre-on-bound",
+            FitStatus::BadShape => "bad-shape",
+            FitStatus::Failed => "failed",
+            FitStatus::ConvergedCircular => "converged-circular",
+        }
+    }
+}
+
 /// Bounds and limits of a fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FitLimits {

@@ -38,6 +38,7 @@
 mod correlate;
 mod error;
 mod feature;
+mod feature_row;
 mod find;
 mod gaussian_fit;
 mod kernel;
@@ -60,8 +61,9 @@ mod watershed;
 pub use correlate::{Correlator, RealSpectrum, correlate_same};
 pub use error::FeatureError;
 pub use feature::{
-    CSV_HEADER, Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
+    Feature, FeatureSet, RejectedCandidate, Rejection, RejectionCounts, StageTimings,
 };
+pub use feature_row::{Cell, FeatureIndex, FeaturePlacement, FeatureRow};
 pub use find::{
     PARALLEL_PASSES_MAX_PIXELS, find_features, find_features_and_correlation,
     find_features_in_pair, find_features_in_pair_and_correlation,

@@ -2,6 +2,7 @@
 //! each feature's site, the unit cells.
 
 use dhct_distortion::{CorrectedFeature, Rdf};
+pub use dhct_features::FeatureIndex;
 use dhct_features::FeatureSet;
 use dhct_lattice::{AngularDistribution, LatticeFit, PlaneGroup};
 use dhct_scan::ScanPass;
@@ -29,21 +30,6 @@ pub struct PassOutput {
     pub indices: Vec<Option<FeatureIndex>>,
     /// RDF of the corrected features, on the bins of the raw RDF.
     pub rdf_corrected: Option<Rdf>,
-}
-
-/// A feature's lattice site and its deviation from it (sample frame).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FeatureIndex {
-    /// Region (index into [`Analysis::regions`]).
-    pub region: usize,
-    /// Cell index along a1.
-    pub n: i64,
-    /// Cell index along a2.
-    pub m: i64,
-    /// Motif site.
-    pub site: usize,
-    /// Corrected position − fitted site, metres.
-    pub deviation_m: [f64; 2],
 }
 
 /// The lattice fit of one mask region (one domain).

@@ -6,8 +6,10 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use dhct_app::correct as cli;
+use dhct_app::correct::feature_table::feature_row;
 use dhct_app::correct::{AnalyseRequest, CorrectConfig, CorrectError, Corrected};
 use dhct_app::hints::Spelling;
+use dhct_features::{Cell, FeatureRow};
 use dhct_pipeline::Stage;
 use dhct_scan::{ScanPair, ScanPass};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray2};
@@ -188,13 +190,13 @@ enum Column {
     Text(Vec<String>),
 }
 
-/// Feature columns in `features.csv`'s order.
+/// Feature columns in `features.csv`'s order, then `indexed`.
 #[derive(Default)]
 struct Columns(Vec<(&'static str, Column)>);
 
 impl Columns {
     /// The column `name`, made by `new` when it does not exist yet.
-    fn column(&mut self, name: &'static str, new: fn() -> Column) -> &mut Column {
+    fn column(&mut self, name: &'static str, new: impl FnOnce() -> Column) -> &mut Column {
         let at = match self.0.iter().position(|(n, _)| *n == name) {
             Some(at) => at,
             None => {
@@ -204,82 +206,31 @@ impl Columns {
         };
         &mut self.0[at].1
     }
-    fn float(&mut self, name: &'static str, value: f64) {
-        if let Column::Float(v) = self.column(name, || Column::Float(Vec::new())) {
-            v.push(value);
+
+    /// Appends one row; an empty cell is −1 in an integer column and NaN in a float one.
+    fn push(&mut self, row: &FeatureRow) {
+        for (name, cell) in row.cells() {
+            match (cell, self.column(name, || new_column(cell))) {
+                (Cell::Int(v), Column::Int(c)) => c.push(v.unwrap_or(-1)),
+                (Cell::Float(v), Column::Float(c)) => c.push(v.unwrap_or(f64::NAN)),
+                (Cell::Text(v), Column::Text(c)) => c.push(v.to_owned()),
+                _ => unreachable!("a FeatureRow column keeps its type"),
+            }
         }
-    }
-    fn int(&mut self, name: &'static str, value: i64) {
-        if let Column::Int(v) = self.column(name, || Column::Int(Vec::new())) {
-            v.push(value);
-        }
-    }
-    fn bool(&mut self, name: &'static str, value: bool) {
-        if let Column::Bool(v) = self.column(name, || Column::Bool(Vec::new())) {
-            v.push(value);
-        }
-    }
-    fn text(&mut self, name: &'static str, value: String) {
-        if let Column::Text(v) = self.column(name, || Column::Text(Vec::new())) {
-            v.push(value);
+        let indexed = row.placement.and_then(|p| p.index).is_some();
+        if let Column::Bool(c) = self.column("indexed", || Column::Bool(Vec::new())) {
+            c.push(indexed);
         }
     }
 }
 
-fn feature_row(c: &mut Columns, pass: &dhct_pipeline::PassOutput, k: usize) {
-    let f = &pass.features.features[k];
-    c.int("id", f.id as i64);
-    c.text("pass", f.pass.to_string());
-    let floats = |c: &mut Columns, values: &[(&'static str, f64)]| {
-        for &(name, value) in values {
-            c.float(name, value);
-        }
-    };
-    floats(
-        c,
-        &[
-            ("x_px", f.x_px),
-            ("y_px", f.y_px),
-            ("x_m", f.x_m),
-            ("y_m", f.y_m),
-            ("x_sigma_px", f.x_sigma_px),
-            ("y_sigma_px", f.y_sigma_px),
-            ("sigma_major_px", f.sigma_major_px),
-            ("sigma_minor_px", f.sigma_minor_px),
-            ("theta_rad", f.theta_rad),
-            ("height", f.height),
-            ("z0", f.z0),
-            ("removed_level", f.removed_level),
-            ("residual_rms", f.residual_rms),
-        ],
-    );
-    c.int("pixel_count", f.pixel_count as i64);
-    c.float("ncc_peak", f.ncc_peak);
-    let status = serde_json::to_value(f.status).ok();
-    let status = status.as_ref().and_then(|v| v.as_str()).unwrap_or("");
-    c.text("status", status.into());
-    c.int("fit_iterations", f.fit_iterations as i64);
-    floats(
-        c,
-        &[
-            ("time_s", f.time_s),
-            ("line_time_s", f.line_time_s),
-            ("corrected_x_m", pass.corrected[k].x_m),
-            ("corrected_y_m", pass.corrected[k].y_m),
-        ],
-    );
-    let index = pass.indices[k];
-    c.bool("indexed", index.is_some());
-    let (region, n, m, site) = index.map_or((-1, -1, -1, -1), |i| {
-        (i.region as i64, i.n, i.m, i.site as i64)
-    });
-    let deviation = index.map_or([f64::NAN; 2], |i| i.deviation_m);
-    c.int("region", region);
-    c.int("n", n);
-    c.int("m", m);
-    c.int("site", site);
-    c.float("deviation_x_m", deviation[0]);
-    c.float("deviation_y_m", deviation[1]);
+/// An empty column of `cell`'s type.
+fn new_column(cell: Cell) -> Column {
+    match cell {
+        Cell::Int(_) => Column::Int(Vec::new()),
+        Cell::Float(_) => Column::Float(Vec::new()),
+        Cell::Text(_) => Column::Text(Vec::new()),
+    }
 }
 
 #[pymethods]
@@ -306,7 +257,7 @@ impl Correction {
         let mut c = Columns::default();
         for pass in &self.inner.analysis.passes {
             for k in 0..pass.features.features.len() {
-                feature_row(&mut c, pass, k);
+                c.push(&feature_row(pass, k));
             }
         }
         let d = PyDict::new(py);
