@@ -147,7 +147,7 @@ fn configs_round_trip_through_toml_and_json() {
     let json = config.to_json_string().unwrap();
     assert_eq!(SimulationConfig::from_json_str(&json).unwrap(), config);
     for preset in presets::ALL {
-        let c = (preset.build)();
+        let c = preset.config().unwrap();
         assert_eq!(
             SimulationConfig::from_toml_str(&c.to_toml_string().unwrap()).unwrap(),
             c

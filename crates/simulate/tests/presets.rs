@@ -1,14 +1,16 @@
-//! The shipped preset files equal the API presets, and every preset is valid.
+//! Every shipped preset file parses, carries its own name, is valid and builds; the
+//! shorthands and `by_name` read those files; the files hold the physics the docs name.
 
 use dhct_simulate::{Simulation, SimulationConfig, SimulationError, presets};
 
 #[test]
-fn every_preset_file_equals_its_api_preset() {
+fn every_preset_file_parses_with_its_name() {
     for preset in presets::ALL {
-        let from_file = SimulationConfig::from_toml_str(preset.toml)
+        let config = preset
+            .config()
             .unwrap_or_else(|e| panic!("{}: {e}", preset.name));
-        assert_eq!(from_file, (preset.build)(), "preset {}", preset.name);
-        assert_eq!(from_file.name, preset.name);
+        assert_eq!(config.name, preset.name);
+        assert_eq!(presets::by_name(preset.name).unwrap(), config);
     }
 }
 
@@ -29,14 +31,52 @@ fn preset_files_on_disk_are_the_embedded_ones() {
     for preset in presets::ALL {
         let config =
             SimulationConfig::from_path(&dir.join(format!("{}.toml", preset.name))).unwrap();
-        assert_eq!(config, (preset.build)());
+        assert_eq!(config, preset.config().unwrap());
+    }
+}
+
+#[test]
+fn the_shorthands_read_their_files() {
+    let pairs = [
+        ("fig3a-no-drift", presets::fig3_no_drift()),
+        ("fig3b-drift-fast", presets::fig3_drift_fast()),
+        ("fig3c-drift-along-slow", presets::fig3_drift_along_slow()),
+        (
+            "fig3d-drift-against-slow",
+            presets::fig3_drift_against_slow(),
+        ),
+        ("headline-2048", presets::headline_2048()),
+        ("ci-small", presets::ci_small()),
+    ];
+    for (name, config) in pairs {
+        assert_eq!(config, presets::by_name(name).unwrap(), "{name}");
+    }
+}
+
+#[test]
+fn the_files_hold_the_documented_physics() {
+    let headline = presets::headline_2048();
+    assert_eq!((headline.scan.columns, headline.scan.rows), (2048, 2048));
+    assert_eq!(headline.scan.width_m, 25e-9);
+    assert_eq!(headline.scan.fast_speed_m_per_s, 100e-9);
+    assert_eq!(headline.effects.len(), 3);
+    let fig3 = presets::fig3_drift_fast();
+    assert_eq!((fig3.scan.columns, fig3.scan.width_m), (512, 20e-9));
+    assert_eq!(fig3.scan.fast_speed_m_per_s, 50e-9);
+    assert_eq!(presets::fig3_no_drift().effects.len(), 0);
+    for drifting in [
+        presets::fig3_drift_fast(),
+        presets::fig3_drift_along_slow(),
+        presets::fig3_drift_against_slow(),
+    ] {
+        assert_eq!(drifting.effects.len(), 1, "{}", drifting.name);
     }
 }
 
 #[test]
 fn every_preset_validates_and_builds() {
     for preset in presets::ALL {
-        let config = (preset.build)();
+        let config = preset.config().unwrap();
         config
             .validate()
             .unwrap_or_else(|e| panic!("{}: {e}", preset.name));
