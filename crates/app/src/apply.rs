@@ -1,17 +1,19 @@
-//! `dhct apply MODEL.json FILE [RETRACE] -o OUT`: a model `dhct correct` fitted, applied to
-//! another file recorded in the same frame and timing (a channel saved separately, a
-//! repeated export). A file whose size, pixel size, timing or scan directions differ from
-//! the model's scan is refused, naming what differs.
+//! `dhct apply MODEL.json [FILE [RETRACE]] [--points POINTS.csv] -o OUT`: a model `dhct
+//! correct` fitted, applied to another file recorded in the same frame and timing (a
+//! channel saved separately, a repeated export), and to points of that frame
+//! ([`crate::points`]). A file whose size, pixel size, timing or scan directions differ
+//! from the model's scan is refused, naming what differs.
 
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use dhct_distortion::{DistortionModel, correct_image};
-use dhct_scan::{ImageChannel, ScanGeometry};
+use dhct_scan::{ImageChannel, ScanGeometry, ScanPair};
 use dhct_sm4_io::{GeometryOverrides, write_atomically};
 use serde::Deserialize;
 
 use crate::output_dir::StagedOutput;
+use crate::points::{POINTS_CSV, PointsSummary, map_points_file};
 use crate::setup::read_pair;
 
 /// What `apply` needs of a `model.json`.
@@ -25,20 +27,31 @@ struct SavedModel {
 pub struct ApplyRequest<'a> {
     /// The `model.json` a `dhct correct` run wrote.
     pub model: &'a Path,
-    /// The file to correct.
-    pub input: &'a Path,
+    /// The file to correct, if any.
+    pub input: Option<&'a Path>,
     /// A second file holding its retrace, if any.
     pub retrace: Option<&'a Path>,
     /// The channel (default: the topography).
     pub channel: Option<&'a str>,
+    /// A CSV file of points in the frame's coordinates to move into the sample frame.
+    pub points: Option<&'a Path>,
     /// The output folder.
     pub output: &'a Path,
     /// Replace an earlier run's folder.
     pub overwrite: bool,
 }
 
-/// Applies the model; returns the files written.
-pub fn run(request: &ApplyRequest) -> Result<Vec<String>> {
+/// What `apply` wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Applied {
+    /// The files written, by name.
+    pub written: Vec<String>,
+    /// What mapping the points found, when there were points.
+    pub points: Option<PointsSummary>,
+}
+
+/// Applies the model to the file and the points of the request.
+pub fn run(request: &ApplyRequest) -> Result<Applied> {
     let text = std::fs::read_to_string(request.model)
         .with_context(|| format!("cannot read {}", request.model.display()))?;
     let saved: SavedModel = serde_json::from_str(&text).with_context(|| {
@@ -47,31 +60,58 @@ pub fn run(request: &ApplyRequest) -> Result<Vec<String>> {
             request.model.display()
         )
     })?;
-    let pair = read_pair(
-        request.input,
-        request.retrace,
-        &GeometryOverrides::default(),
-        request.channel,
-    )?;
-    let geometry = pair.geometry();
-    same_scan(&saved.geometry, geometry)?;
+    let pair = request
+        .input
+        .map(|input| {
+            read_pair(
+                input,
+                request.retrace,
+                &GeometryOverrides::default(),
+                request.channel,
+            )
+        })
+        .transpose()?;
+    if let Some(pair) = &pair {
+        same_scan(&saved.geometry, pair.geometry())?;
+    }
     let staged = StagedOutput::prepare(request.output, request.overwrite)?;
+    let mut written = match &pair {
+        Some(pair) => write_corrected_images(&saved.model, pair, staged.path())?,
+        None => Vec::new(),
+    };
+    let points = request
+        .points
+        .map(|points| map_points_file(&saved.model, &saved.geometry, points, staged.path()))
+        .transpose()?;
+    if points.is_some() {
+        written.push(POINTS_CSV.to_string());
+    }
+    staged.commit()?;
+    Ok(Applied { written, points })
+}
+
+/// Writes the corrected images of every pass of `pair` into `folder`; returns their names.
+fn write_corrected_images(
+    model: &DistortionModel,
+    pair: &ScanPair,
+    folder: &Path,
+) -> Result<Vec<String>> {
+    let geometry = pair.geometry();
     let pitch = [geometry.pitch_x(), geometry.pitch_y()];
     let mut written = Vec::new();
     for (pass, image) in pair.images() {
-        let z = correct_image(&saved.model, geometry, pass, &image.z)?;
+        let z = correct_image(model, geometry, pass, &image.z)?;
         let channel =
             ImageChannel::new(format!("{} (corrected)", image.name), image.unit.clone(), z);
         let stem = format!("corrected_{pass}");
-        write_atomically(&staged.path().join(format!("{stem}.tiff")), |w| {
+        write_atomically(&folder.join(format!("{stem}.tiff")), |w| {
             dhct_sm4_io::tiff_file::write_f32_with_pixel_size(&channel, pitch, w)
         })?;
-        write_atomically(&staged.path().join(format!("{stem}.gsf")), |w| {
+        write_atomically(&folder.join(format!("{stem}.gsf")), |w| {
             dhct_sm4_io::gsf::write_pass(&channel, geometry, pass, w)
         })?;
         written.extend([format!("{stem}.tiff"), format!("{stem}.gsf")]);
     }
-    staged.commit()?;
     Ok(written)
 }
 
@@ -131,4 +171,36 @@ fn same_scan(model: &ScanGeometry, file: &ScanGeometry) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// What a run wrote, in words: the files, and for points how many were mapped, how many
+/// were recorded outside the frame's time span (extrapolated) and whether their 1σ is known.
+pub fn describe(applied: &Applied, folder: &Path) -> String {
+    let mut text = format!(
+        "wrote {} into {}\n",
+        applied.written.join(", "),
+        folder.display()
+    );
+    if let Some(points) = &applied.points {
+        text.push_str(&format!("mapped {} points", points.points));
+        if points.outside_frame_time > 0 {
+            let (count, verb) = match points.outside_frame_time {
+                1 => ("1 point".to_string(), "was"),
+                n => (format!("{n} points"), "were"),
+            };
+            text.push_str(&format!(
+                "; warning: {count} {verb} recorded outside the frame's time span, where the \
+                 drift and creep are extrapolated from the frame: their positions are only as \
+                 good as that extrapolation (see their sigma)",
+            ));
+        }
+        if !points.uncertainty_known {
+            text.push_str(
+                "; their 1σ is not known (the model does not carry its parameters' \
+                 correlations, or a parameter was not determined): the sigma columns are NaN",
+            );
+        }
+        text.push('\n');
+    }
+    text
 }

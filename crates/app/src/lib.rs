@@ -1,5 +1,5 @@
 //! dhct's application layer: every task of the command line (`correct`, `batch`,
-//! `diagnose`, `apply`, `info`, `simulate`, `lattice check`) as functions, so that both
+//! `diagnose`, `apply` (images and points), `info`, `simulate`, `lattice check`) as functions, so that both
 //! front ends — the `dhct` binary (crates/cli) and the Python package `dhct` — resolve
 //! options, read inputs and write outputs the same way. Errors stay typed to the edge
 //! ([`correct::CorrectError`]); [`hints`] renders a hint in the front end's own terms.
@@ -14,6 +14,7 @@ pub mod hints;
 pub mod info;
 pub mod lattice_check;
 pub mod output_dir;
+pub mod points;
 pub mod read_limits;
 pub mod report;
 pub mod setup;

@@ -148,11 +148,13 @@ enum Command {
     /// same frame and timing (a channel saved on its own, a repeated export): write its
     /// corrected trace and retrace (TIFF with pixel size, GSF) into OUTDIR. A file whose
     /// size, pixel size, timing or scan directions differ is refused, naming what differs.
+    /// With --points, move points of that frame into the sample frame with their 1σ.
     Apply {
         /// The model.json of a `dhct correct` run.
         model: PathBuf,
         /// The file to correct.
-        input: PathBuf,
+        #[arg(required_unless_present = "points")]
+        input: Option<PathBuf>,
         /// A separate file holding its retrace, if any.
         retrace: Option<PathBuf>,
         /// Output directory.
@@ -161,6 +163,12 @@ enum Command {
         /// The channel to correct (default: the topography).
         #[arg(long)]
         channel: Option<String>,
+        /// A CSV file of points of the model's frame (spectroscopy positions, grid points):
+        /// columns x_px, y_px (pixels) or x_m, y_m (metres from the first pixel's centre),
+        /// optionally t_s (seconds since the frame start) and pass; written with their
+        /// sample-frame position and 1σ to OUTDIR/points_corrected.csv.
+        #[arg(long, value_name = "POINTS.csv")]
+        points: Option<PathBuf>,
         /// Replace an earlier run's output folder.
         #[arg(long)]
         overwrite: bool,
@@ -452,16 +460,18 @@ fn main() -> ExitCode {
             retrace,
             output,
             channel,
+            points,
             overwrite,
         } => apply::run(&apply::ApplyRequest {
             model,
-            input,
+            input: input.as_deref(),
             retrace: retrace.as_deref(),
             channel: channel.as_deref(),
+            points: points.as_deref(),
             output,
             overwrite: *overwrite,
         })
-        .map(|written| println!("wrote {} into {}", written.join(", "), output.display())),
+        .map(|applied| print!("{}", apply::describe(&applied, output))),
         Command::Lattice {
             action: LatticeAction::Check { lattice, nn },
         } => nn

@@ -213,3 +213,123 @@ fn a_saved_model_applies_to_a_file_of_the_same_scan_only() {
     );
     assert!(!dir.path().join("refused").exists());
 }
+
+/// Columns `names` of a CSV text, as text rows.
+fn csv_columns(text: &str, names: &[&str]) -> Vec<Vec<String>> {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let at: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            header
+                .iter()
+                .position(|h| h == n)
+                .unwrap_or_else(|| panic!("{n}"))
+        })
+        .collect();
+    lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            at.iter().map(|&k| cells[k].to_string()).collect()
+        })
+        .collect()
+}
+
+/// `dhct apply MODEL.json --points POINTS.csv`: features' raw positions given as points
+/// (in pixels, in metres, with and without their acquisition time) land on the features'
+/// corrected positions within 0.01 px, with a finite 1σ; a point off the frame and a file
+/// without position columns are refused, naming the row and the columns.
+#[test]
+fn points_map_onto_the_corrected_features() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    assert!(correct(&example(), &[], &out).status.success());
+    let features = std::fs::read_to_string(out.join("features.csv")).unwrap();
+    let names = ["pass", "x_px", "y_px", "x_m", "y_m", "time_s"];
+    let rows: Vec<Vec<String>> = csv_columns(&features, &names)
+        .into_iter()
+        .chain(csv_columns(&features, &["corrected_x_m", "corrected_y_m"]))
+        .collect();
+    let half = rows.len() / 2;
+    let (raw, corrected) = rows.split_at(half);
+    let pitch = raw[1][3].parse::<f64>().unwrap() / raw[1][1].parse::<f64>().unwrap();
+    let picked: Vec<usize> = (0..half).step_by(half / 60).collect();
+    let apply = |points: &str, name: &str| {
+        let path = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&path, points).unwrap();
+        let folder = dir.path().join(name);
+        let run = common::dhct()
+            .arg("apply")
+            .arg(out.join("model.json"))
+            .arg("--points")
+            .arg(&path)
+            .arg("-o")
+            .arg(&folder)
+            .output()
+            .unwrap();
+        (run, folder)
+    };
+    for (form, header) in [
+        ("pixels", "label,pass,x_px,y_px"),
+        ("metres", "label,pass,x_m,y_m"),
+        ("timed", "label,pass,x_px,y_px,t_s"),
+    ] {
+        let mut text = format!("{header}\n");
+        for &k in &picked {
+            let r = &raw[k];
+            let (x, y) = match form {
+                "metres" => (&r[3], &r[4]),
+                _ => (&r[1], &r[2]),
+            };
+            let time = if form == "timed" {
+                format!(",{}", r[5])
+            } else {
+                String::new()
+            };
+            text.push_str(&format!("p{k},{},{x},{y}{time}\n", r[0]));
+        }
+        let (run, folder) = apply(&text, form);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let mapped = std::fs::read_to_string(folder.join("points_corrected.csv")).unwrap();
+        let columns = [
+            "label",
+            "corrected_x_m",
+            "corrected_y_m",
+            "sigma_x_m",
+            "sigma_y_m",
+        ];
+        let mapped = csv_columns(&mapped, &columns);
+        assert_eq!(mapped.len(), picked.len());
+        for (row, &k) in mapped.iter().zip(&picked) {
+            assert_eq!(row[0], format!("p{k}"));
+            let value = |s: &String| s.parse::<f64>().unwrap();
+            for axis in 0..2 {
+                let miss = (value(&row[1 + axis]) - value(&corrected[k][axis])).abs() / pitch;
+                assert!(miss < 0.01, "{form} p{k}: {miss} px");
+                let sigma = value(&row[3 + axis]) / pitch;
+                assert!(
+                    sigma.is_finite() && sigma > 0.0 && sigma < 1.0,
+                    "{form}: σ {sigma} px"
+                );
+            }
+        }
+    }
+    let (off, folder) = apply("x_px,y_px\n10,10\n9999,3\n", "off");
+    let stderr = String::from_utf8_lossy(&off.stderr);
+    assert_eq!(off.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("row 2") && stderr.contains("outside"),
+        "{stderr}"
+    );
+    assert!(!folder.exists());
+    let (unnamed, _) = apply("a,b\n10,10\n", "unnamed");
+    let stderr = String::from_utf8_lossy(&unnamed.stderr);
+    assert!(
+        stderr.contains("x_px") && stderr.contains("its columns are a, b"),
+        "{stderr}"
+    );
+}

@@ -102,15 +102,52 @@ pub fn fit_model(
         },
         || fit_hysteresis(local, line_scan_time_s, options),
     );
-    let (drift, mut parameters, diagnostics) = drift?;
-    let (hysteresis, more) = hysteresis?;
+    let (drift, mut parameters, diagnostics, drift_correlation) = drift?;
+    let (hysteresis, more, hysteresis_correlation) = hysteresis?;
     parameters.extend(more);
     Ok(DistortionModel {
         drift,
         hysteresis,
         parameters,
         diagnostics,
+        parameter_correlation: block_diagonal(drift_correlation, hysteresis_correlation),
     })
+}
+
+/// The correlation matrix of the `n` parameters from `at` of an inverse normal matrix (the
+/// reported parameters are each a rising function of one fit parameter, so they share it);
+/// 0 off the diagonal where a variance is not positive and finite. `None` without a matrix.
+pub(crate) fn correlations(inverse: &Option<DMatrix<f64>>, at: usize, n: usize) -> Correlation {
+    let c = inverse.as_ref()?;
+    let r = |i: usize, j: usize| {
+        let r = c[(i, j)] / (c[(i, i)] * c[(j, j)]).sqrt();
+        match (i == j, r.is_finite()) {
+            (true, _) => 1.0,
+            (false, true) => r.clamp(-1.0, 1.0),
+            (false, false) => 0.0,
+        }
+    };
+    Some(
+        (at..at + n)
+            .map(|i| (at..at + n).map(|j| r(i, j)).collect())
+            .collect(),
+    )
+}
+
+/// Two independent blocks as one correlation matrix (empty when either is unknown).
+fn block_diagonal(a: Correlation, b: Correlation) -> Vec<Vec<f64>> {
+    let (Some(a), Some(b)) = (a, b) else {
+        return Vec::new();
+    };
+    let (na, nb) = (a.len(), b.len());
+    let mut out = vec![vec![0.0; na + nb]; na + nb];
+    for (i, row) in a.iter().enumerate() {
+        out[i][..na].copy_from_slice(row);
+    }
+    for (i, row) in b.iter().enumerate() {
+        out[na + i][na..].copy_from_slice(row);
+    }
+    out
 }
 
 fn linear_ls(design: &DMatrix<f64>, y: &DVector<f64>) -> Option<DVector<f64>> {
@@ -193,7 +230,7 @@ fn fit_drift(
     line_scan_time_s: f64,
     robust_rounds: usize,
     secant_mode: bool,
-) -> Result<(DriftCreep, Vec<Parameter>, FitDiagnostics), DistortionError> {
+) -> Result<DriftResult, DistortionError> {
     let data = DriftData::new(local, secant_mode);
     let span = frame_duration_s.max(1e-9);
     let (start, t0_start) = drift_start(&data, span)?;
@@ -288,7 +325,7 @@ fn drift_result(
     fit: &ResidualFit,
     weights: &[f64],
     t0_map: LogisticLog,
-) -> Result<(DriftCreep, Vec<Parameter>, FitDiagnostics), DistortionError> {
+) -> Result<DriftResult, DistortionError> {
     let p = &fit.params;
     let s = scaled_sigmas(fit, weights, 7);
     let t0 = t0_map.t0(p[6]);
@@ -303,8 +340,18 @@ fn drift_result(
     }
     let parameters = drift_parameters(&p[..7], &s[..7], t0_map);
     let diagnostics = drift_diagnostics(&fit.inverse_normal, p[6], t0_map);
-    Ok((drift, parameters, diagnostics))
+    let correlation = correlations(&fit.inverse_normal, 0, 7);
+    Ok((drift, parameters, diagnostics, correlation))
 }
+
+/// A correlation matrix, `None` when the fit could not give one.
+type Correlation = Option<Vec<Vec<f64>>>;
+
+/// The drift/creep fit's model, reported parameters, weak spots and parameter correlation.
+type DriftResult = (DriftCreep, Vec<Parameter>, FitDiagnostics, Correlation);
+
+/// The hysteresis fit's law, reported parameters and parameter correlation.
+type HysteresisResult = (HysteresisLaw, Vec<Parameter>, Correlation);
 
 /// The drift/creep fit's degenerate pairs (from `inverse`, the inverse normal matrix of
 /// the seven drift parameters in fit order) and `t0` at a bound of its range (`q` its fit
@@ -493,12 +540,12 @@ fn fit_hysteresis(
     local: &[LocalDistortion],
     line_scan_time_s: f64,
     options: &FitOptions,
-) -> Result<(HysteresisLaw, Vec<Parameter>), DistortionError> {
+) -> Result<HysteresisResult, DistortionError> {
     let data = HysteresisData::new(local, options.secant);
     let m = data.tau.len();
     let law_of = |p: &[f64]| hysteresis_law(options.hysteresis, line_scan_time_s, p);
     let Some(p0) = hysteresis_start(&data, options.hysteresis, line_scan_time_s)? else {
-        return Ok((HysteresisLaw::none(), Vec::new()));
+        return Ok((HysteresisLaw::none(), Vec::new(), Some(Vec::new())));
     };
     let n = p0.len();
     if m < n + 3 {
@@ -525,7 +572,12 @@ fn fit_hysteresis(
             "hysteresis (the power law left its domain k > 0, n > −1)",
         ));
     }
-    Ok((law, hysteresis_parameters(options.hysteresis, p, &sg)))
+    let correlation = correlations(&fit.inverse_normal, 0, n);
+    Ok((
+        law,
+        hysteresis_parameters(options.hysteresis, p, &sg),
+        correlation,
+    ))
 }
 
 /// The start of the hysteresis fit for `choice` (`None` for no hysteresis): linear least

@@ -61,6 +61,7 @@ pub mod local;
 pub mod mask;
 pub mod model;
 pub mod neighbours;
+mod point;
 pub mod registration;
 pub mod route_choice;
 mod secant;
@@ -78,6 +79,7 @@ pub use neighbours::{
     AngleStats, ExclusionCounts, NeighbourOptions, NeighbourSelection, Rdf, RdfFit,
     SelectedFeature, nn_angle_stats, radial_distribution, select_features, select_nearest,
 };
+pub use point::{MappedPoint, map_point};
 pub use registration::Registration;
 pub use route_choice::{ModelRoute, RouteComparison, RoutePolicy};
 pub use seed::SeedMap;

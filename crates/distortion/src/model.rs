@@ -157,6 +157,14 @@ pub struct DistortionModel {
     /// Degenerate pairs and parameters at bounds (empty for a model not fitted).
     #[serde(default)]
     pub diagnostics: FitDiagnostics,
+    /// Correlation coefficients between the [`DistortionModel::parameters`] (same order;
+    /// 0 with an undetermined parameter, whose `sigma` already says so), for carrying the
+    /// model's uncertainty to positions ([`crate::map_point`]). Empty for a model
+    /// not fitted. The local route fits drift/creep and hysteresis on different
+    /// measurements, so their cross terms are 0 there; the global registration fits them
+    /// together.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameter_correlation: Vec<Vec<f64>>,
 }
 
 fn direction_vector(direction: ScanDirection) -> [f64; 2] {
@@ -184,6 +192,7 @@ impl DistortionModel {
             hysteresis: HysteresisLaw::none(),
             parameters: Vec::new(),
             diagnostics: FitDiagnostics::default(),
+            parameter_correlation: Vec::new(),
         }
     }
 
@@ -194,6 +203,7 @@ impl DistortionModel {
             hysteresis,
             parameters: Vec::new(),
             diagnostics: FitDiagnostics::default(),
+            parameter_correlation: Vec::new(),
         }
     }
 

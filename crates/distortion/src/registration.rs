@@ -21,8 +21,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::fit::{
-    FitOptions, HysteresisChoice, LogisticLog, axis_weights, drift_diagnostics, drift_parameters,
-    hysteresis_parameters, scaled_sigmas,
+    FitOptions, HysteresisChoice, LogisticLog, axis_weights, correlations, drift_diagnostics,
+    drift_parameters, hysteresis_parameters, scaled_sigmas,
 };
 use crate::hysteresis_problem::{Quantity, hysteresis_law, law_gradient, law_parameters};
 use crate::model::{DriftCreep, scan_basis};
@@ -448,6 +448,8 @@ impl<'a> RegistrationProblem<'a> {
             .as_ref()
             .map(|c| c.view((at, at), (7, 7)).clone_owned());
         model.diagnostics = drift_diagnostics(&drift_block, p[at + 6], self.t0_map);
+        model.parameter_correlation =
+            correlations(&fit.inverse_normal, at, n - at).unwrap_or_default();
         let m = self.features.len();
         let robust = mad_sigma_about(&fit.residuals[..2 * m], 0.0).unwrap_or(f64::NAN);
         Ok(Registration {
