@@ -13,15 +13,16 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use crate::hysteresis_problem::HysteresisChoice;
+pub use crate::hysteresis_problem::{BIC_PREFERENCE, HysteresisChoice};
 use crate::hysteresis_problem::{HysteresisData, HysteresisProblem, hysteresis_law};
 use crate::model::{
     Bound, DegeneratePair, DistortionModel, DriftCreep, FitDiagnostics, HysteresisLaw, Parameter,
 };
 use crate::secant::{secant, secant_offsets};
+use crate::thinning::thin;
 use crate::{DistortionError, LocalDistortion};
 use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
-use dhct_numerics::robust::{huber_weights, mad_sigma_about};
+use dhct_numerics::robust::{HUBER_K, huber_weights, mad_sigma_about};
 
 /// Options of [`fit_model`]; [`FitOptions::validate`] checks their ranges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -62,7 +63,7 @@ impl FitOptions {
 impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
-            hysteresis: HysteresisChoice::Power,
+            hysteresis: HysteresisChoice::Best,
             robust_rounds: 4,
             secant: true,
         }
@@ -541,11 +542,117 @@ fn fit_hysteresis(
     line_scan_time_s: f64,
     options: &FitOptions,
 ) -> Result<HysteresisResult, DistortionError> {
+    let choice = match options.hysteresis {
+        HysteresisChoice::Best => best_family(local, line_scan_time_s, options)?,
+        choice => choice,
+    };
     let data = HysteresisData::new(local, options.secant);
+    fit_hysteresis_as(&data, choice, line_scan_time_s, options).map(|fit| fit.result)
+}
+
+/// Local distortions the law family is chosen on under [`HysteresisChoice::Best`] (every
+/// k-th, in time order): enough for BIC to tell the laws apart, few enough that choosing
+/// costs little beside the one full fit.
+const FAMILY_CHOICE_MAX: usize = 3000;
+
+/// The hysteresis law family with the lowest BIC on (at most [`FAMILY_CHOICE_MAX`] of)
+/// `local`.
+fn best_family(
+    local: &[LocalDistortion],
+    line_scan_time_s: f64,
+    options: &FitOptions,
+) -> Result<HysteresisChoice, DistortionError> {
+    let sample = thin(local, FAMILY_CHOICE_MAX);
+    let data = HysteresisData::new(&sample, options.secant);
+    let fits: Vec<(HysteresisChoice, Result<HysteresisFit, DistortionError>)> = [
+        HysteresisChoice::Power,
+        HysteresisChoice::Exponential,
+        HysteresisChoice::Quartic { time_scale_s: None },
+    ]
+    .into_iter()
+    .map(|c| (c, fit_hysteresis_as(&data, c, line_scan_time_s, options)))
+    .collect();
+    best_by_bic(fits)
+}
+
+/// One hysteresis law fitted: the result and its residuals (predicted − measured scale).
+struct HysteresisFit {
+    result: HysteresisResult,
+    residuals: Vec<f64>,
+}
+
+/// The family with the lowest BIC among `fits`, the power law kept unless another is
+/// lower by [`BIC_PREFERENCE`]. Every law is scored on one noise scale, the smallest robust
+/// scale of their residuals, with Huber's loss (what the fits minimise):
+/// `BIC = 2·Σρ(r/σ) + k·ln m`. The power law's error when no law could be fitted.
+fn best_by_bic(
+    fits: Vec<(HysteresisChoice, Result<HysteresisFit, DistortionError>)>,
+) -> Result<HysteresisChoice, DistortionError> {
+    let scale = fits
+        .iter()
+        .filter_map(|(_, f)| f.as_ref().ok())
+        .filter_map(|f| mad_sigma_about(&f.residuals, 0.0))
+        .filter(|s| *s > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let bic = |f: &HysteresisFit| {
+        let k = HUBER_K;
+        let loss: f64 = f
+            .residuals
+            .iter()
+            .map(|r| (r / scale).abs())
+            .map(|a| {
+                if a <= k {
+                    0.5 * a * a
+                } else {
+                    k * a - 0.5 * k * k
+                }
+            })
+            .sum();
+        let m = f.residuals.len() as f64;
+        2.0 * loss + f.result.1.len() as f64 * m.ln()
+    };
+    let mut best: Option<(f64, HysteresisChoice)> = None;
+    let mut power_error = None;
+    for (choice, fit) in fits {
+        let fit = match fit {
+            Ok(fit) => fit,
+            Err(e) => {
+                if choice == HysteresisChoice::Power {
+                    power_error = Some(e);
+                }
+                continue;
+            }
+        };
+        let preference = if choice == HysteresisChoice::Power {
+            0.0
+        } else {
+            BIC_PREFERENCE
+        };
+        let score = bic(&fit) + preference;
+        if scale.is_finite() && best.as_ref().is_none_or(|(b, _)| score < *b) {
+            best = Some((score, choice));
+        }
+    }
+    match (best, power_error) {
+        (Some((_, choice)), _) => Ok(choice),
+        (None, Some(e)) => Err(e),
+        (None, None) => Err(DistortionError::FitFailed("hysteresis")),
+    }
+}
+
+/// Fits the hysteresis law `choice` to `data`.
+fn fit_hysteresis_as(
+    data: &HysteresisData,
+    choice: HysteresisChoice,
+    line_scan_time_s: f64,
+    options: &FitOptions,
+) -> Result<HysteresisFit, DistortionError> {
     let m = data.tau.len();
-    let law_of = |p: &[f64]| hysteresis_law(options.hysteresis, line_scan_time_s, p);
-    let Some(p0) = hysteresis_start(&data, options.hysteresis, line_scan_time_s)? else {
-        return Ok((HysteresisLaw::none(), Vec::new(), Some(Vec::new())));
+    let Some(p0) = hysteresis_start(data, choice, line_scan_time_s)? else {
+        return Ok(HysteresisFit {
+            result: (HysteresisLaw::none(), Vec::new(), Some(Vec::new())),
+            residuals: Vec::new(),
+        });
     };
     let n = p0.len();
     if m < n + 3 {
@@ -556,14 +663,14 @@ fn fit_hysteresis(
         });
     }
     let problem = HysteresisProblem {
-        data: &data,
-        choice: options.hysteresis,
+        data,
+        choice,
         line_scan_time_s,
     };
     let (fit, weights) = hysteresis_irls(&problem, m, p0, options.robust_rounds)?;
     let sg = scaled_sigmas(&fit, &weights, n);
     let p = &fit.params;
-    let law = law_of(p);
+    let law = hysteresis_law(choice, line_scan_time_s, p);
     if let HysteresisLaw::Power { k, n } = law
         && !(k > 0.0 && n > -1.0)
     {
@@ -573,11 +680,11 @@ fn fit_hysteresis(
         ));
     }
     let correlation = correlations(&fit.inverse_normal, 0, n);
-    Ok((
-        law,
-        hysteresis_parameters(options.hysteresis, p, &sg),
-        correlation,
-    ))
+    let parameters = hysteresis_parameters(choice, p, &sg);
+    Ok(HysteresisFit {
+        result: (law, parameters, correlation),
+        residuals: fit.residuals,
+    })
 }
 
 /// The start of the hysteresis fit for `choice` (`None` for no hysteresis): linear least
@@ -602,7 +709,7 @@ fn hysteresis_start(
                 .copied()
                 .collect()
         }
-        HysteresisChoice::Power => {
+        HysteresisChoice::Power | HysteresisChoice::Best => {
             let pts: Vec<(f64, f64)> = tau
                 .iter()
                 .zip(s)
@@ -681,7 +788,7 @@ pub(crate) fn hysteresis_parameters(
         HysteresisChoice::Quartic { .. } => (0..5)
             .map(|k| parameter(&format!("c{k}"), p[k], sg[k], "1"))
             .collect(),
-        HysteresisChoice::Power => vec![
+        HysteresisChoice::Power | HysteresisChoice::Best => vec![
             parameter("k", p[0], sg[0], "s^-n"),
             parameter("n", p[1], sg[1], "1"),
         ],

@@ -29,6 +29,36 @@ pub enum HysteresisChoice {
     Power,
     /// `S = 1 + A·exp(−τ/τ_h)`.
     Exponential,
+    /// The power law, the exponential and the quartic each fitted, the one with the lowest
+    /// BIC kept (the power law unless another is lower by [`BIC_PREFERENCE`]): the
+    /// scanner's law is not known in advance.
+    Best,
+}
+
+/// How much lower (in BIC) another law must be to replace the power law under
+/// [`HysteresisChoice::Best`] (10: "very strong" evidence on Kass & Raftery's scale).
+pub const BIC_PREFERENCE: f64 = 10.0;
+
+impl HysteresisChoice {
+    /// The family to fit in place of [`HysteresisChoice::Best`]: the family of `law` (what
+    /// a fit under `Best` chose), the power law when `law` is no hysteresis. Any other
+    /// choice is itself.
+    pub fn resolved(self, law: &HysteresisLaw) -> HysteresisChoice {
+        match (self, law) {
+            (HysteresisChoice::Best, HysteresisLaw::Quartic { time_scale_s, .. }) => {
+                HysteresisChoice::Quartic {
+                    time_scale_s: Some(*time_scale_s),
+                }
+            }
+            (HysteresisChoice::Best, HysteresisLaw::Exponential { amplitude, .. })
+                if *amplitude != 0.0 =>
+            {
+                HysteresisChoice::Exponential
+            }
+            (HysteresisChoice::Best, _) => HysteresisChoice::Power,
+            (choice, _) => choice,
+        }
+    }
 }
 
 /// Residuals (and Jacobian rows) computed per chunk in parallel; each depends on its own
@@ -108,7 +138,10 @@ pub(crate) fn hysteresis_law(
             coefficients: [p[0], p[1], p[2], p[3], p[4]],
             time_scale_s: time_scale_s.unwrap_or(line_scan_time_s),
         },
-        HysteresisChoice::Power => HysteresisLaw::Power { k: p[0], n: p[1] },
+        // `Best` is resolved before a fit; the power law is its default family.
+        HysteresisChoice::Power | HysteresisChoice::Best => {
+            HysteresisLaw::Power { k: p[0], n: p[1] }
+        }
         HysteresisChoice::Exponential => HysteresisLaw::Exponential {
             amplitude: p[0],
             time_constant_s: p[1].exp(),
@@ -129,8 +162,10 @@ pub(crate) fn law_parameters(
             coefficients.to_vec()
         }
         (HysteresisChoice::Quartic { .. }, _) => vec![0.0; 5],
-        (HysteresisChoice::Power, &HysteresisLaw::Power { k, n }) => vec![k, n],
-        (HysteresisChoice::Power, _) => vec![1.0, 0.0],
+        (HysteresisChoice::Power | HysteresisChoice::Best, &HysteresisLaw::Power { k, n }) => {
+            vec![k, n]
+        }
+        (HysteresisChoice::Power | HysteresisChoice::Best, _) => vec![1.0, 0.0],
         (
             HysteresisChoice::Exponential,
             &HysteresisLaw::Exponential {

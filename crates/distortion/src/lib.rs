@@ -66,6 +66,7 @@ pub mod registration;
 pub mod route_choice;
 mod secant;
 mod seed;
+mod thinning;
 
 pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sample_positions};
 pub use displacement::{DisplacementField, displacement_field};

@@ -26,6 +26,7 @@ use crate::fit::{
 };
 use crate::hysteresis_problem::{Quantity, hysteresis_law, law_gradient, law_parameters};
 use crate::model::{DriftCreep, scan_basis};
+use crate::thinning::thin;
 use crate::{DistortionError, DistortionModel, PassInput};
 
 /// Nanometres per metre: the fit works in nm (and nm/s).
@@ -277,7 +278,8 @@ pub enum StartQuality {
 }
 
 /// Fits the model to the positions of `features` (from [`index_features`]), starting from
-/// `start` (whose hysteresis law family is kept when `options.hysteresis` is that family).
+/// `start` (whose hysteresis law family is kept when `options.hysteresis` is that family;
+/// [`HysteresisChoice::Best`] fits `start`'s family).
 pub fn register(
     features: &[RegisteredFeature],
     geometry: &ScanGeometry,
@@ -294,7 +296,8 @@ pub fn register(
     }
     let passes = features.iter().map(|f| f.pass_index + 1).max().unwrap_or(1);
     let features = &thin(features, MAX_FITTED);
-    let problem = RegistrationProblem::new(features, geometry, passes, options.hysteresis);
+    let choice = options.hysteresis.resolved(&start.hysteresis);
+    let problem = RegistrationProblem::new(features, geometry, passes, choice);
     let corrected: Vec<[f64; 2]> = features
         .iter()
         .map(|f| corrected_position(f, start, geometry))
@@ -574,10 +577,4 @@ fn robust_fit(
     };
     let fit = fit_residuals(problem, problem.rows(), &fit.params, &weights, &once).unwrap_or(fit);
     Ok((fit, weights))
-}
-
-/// Every `k`-th item so that at most `most` remain (all when fewer).
-pub(crate) fn thin<T: Clone>(items: &[T], most: usize) -> Vec<T> {
-    let stride = items.len().div_ceil(most.max(1)).max(1);
-    items.iter().step_by(stride).cloned().collect()
 }

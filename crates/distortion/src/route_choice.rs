@@ -12,8 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::fit::{FitOptions, fit_model};
 use crate::registration::{
-    RegisteredFeature, Registration, StartQuality, deviations, place_lattice, register, thin,
+    RegisteredFeature, Registration, StartQuality, deviations, place_lattice, register,
 };
+use crate::thinning::thin;
 use crate::{DistortionError, DistortionModel, LocalDistortion};
 
 /// Number of cross-validation folds.
@@ -116,8 +117,10 @@ pub fn compare_routes(
             .filter(|l| fold_of(l.y_px * geometry.pitch_y(), band_m) != fold)
             .cloned()
             .collect();
+        // The folds refit the law family the whole data chose.
         let fold_options = FitOptions {
             robust_rounds: options.robust_rounds.min(FOLD_ROBUST_ROUNDS),
+            hysteresis: options.hysteresis.resolved(&registration.model.hysteresis),
             ..*options
         };
         let local_model = fit_model(
