@@ -6,6 +6,7 @@ use base64::Engine as _;
 use dhct_sm4_io::png_file::Colormap;
 
 use super::page::escape;
+use super::render::EncodedPicture;
 use crate::units;
 
 /// What a picture's colours mean: `colormap` maps `low..=high` (in `unit`) to its ends.
@@ -24,12 +25,13 @@ pub struct ColourBar {
 }
 
 /// Width added on the right for a colour bar, px.
-const COLOUR_BAR_MARGIN: usize = 96;
+const COLOUR_BAR_MARGIN: usize = 104;
 
-/// `png` (a `width × height` px picture, embedded once with SVG 2's `href`) as an SVG document of the same pixel size plus a
-/// colour bar margin; `metres_per_px` (x, y of the embedded picture) adds a scale bar.
+/// `picture` (a `width × height` px picture, embedded once with SVG 2's `href`) as an SVG
+/// document of the same pixel size plus a colour bar margin; `metres_per_px` (x, y of the
+/// embedded picture) adds a scale bar.
 pub fn picture_svg(
-    png: &[u8],
+    picture: &EncodedPicture,
     width: usize,
     height: usize,
     metres_per_px: Option<[f64; 2]>,
@@ -41,12 +43,13 @@ pub fn picture_svg(
         } else {
             0
         };
-    let data = base64::engine::general_purpose::STANDARD.encode(png);
+    let data = base64::engine::general_purpose::STANDARD.encode(&picture.bytes);
+    let mime = picture.mime;
     let mut svg = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{total_width}\" height=\"{height}\" viewBox=\"0 0 {total_width} {height}\" \
          font-family=\"sans-serif\"><rect width=\"100%\" height=\"100%\" fill=\"white\"/>\
          <image class=\"picture\" x=\"0\" y=\"0\" width=\"{width}\" height=\"{height}\" \
-         preserveAspectRatio=\"none\" href=\"data:image/png;base64,{data}\"/>"
+         preserveAspectRatio=\"none\" href=\"data:{mime};base64,{data}\"/>"
     );
     if let Some([x, _]) = metres_per_px.filter(|[x, y]| x.is_finite() && y.is_finite())
         && x > 0.0
@@ -81,7 +84,7 @@ fn scale_bar(width: usize, height: usize, metres_per_px: f64) -> String {
         "<g class=\"scale-bar\" data-length-m=\"{length_m:e}\" data-length-px=\"{bar_px:.3}\">\
          <rect x=\"{x}\" y=\"{y}\" width=\"{bar_px:.2}\" height=\"5\" fill=\"white\" \
          stroke=\"black\" stroke-width=\"1\"/><text x=\"{tx:.1}\" y=\"{ty}\" \
-         text-anchor=\"middle\" font-size=\"13\" fill=\"white\" stroke=\"black\" \
+         text-anchor=\"middle\" font-size=\"15\" fill=\"white\" stroke=\"black\" \
          stroke-width=\"3\" paint-order=\"stroke\">{label}</text></g>",
         tx = x + bar_px / 2.0,
         ty = y - 5.0,
@@ -105,7 +108,7 @@ fn colour_bar(width: usize, height: usize, bar: &ColourBar) -> String {
         .collect();
     let mut svg = format!(
         "<g class=\"colour-bar\"><defs><linearGradient id=\"cb-{id}\" x1=\"0\" y1=\"0\" x2=\"0\" \
-         y2=\"1\">{stops}</linearGradient></defs><text x=\"{x}\" y=\"14\" font-size=\"12\">{label}</text>\
+         y2=\"1\">{stops}</linearGradient></defs><text x=\"{x}\" y=\"15\" font-size=\"14\">{label}</text>\
          <rect x=\"{x}\" y=\"{top}\" width=\"14\" height=\"{h:.1}\" fill=\"url(#cb-{id})\" \
          stroke=\"#444\" stroke-width=\"0.8\"/>",
         id = gradient_id(bar),
@@ -120,7 +123,7 @@ fn colour_bar(width: usize, height: usize, bar: &ColourBar) -> String {
         let y = bottom - t * (bottom - top);
         svg.push_str(&format!(
             "<line x1=\"{x2:.1}\" y1=\"{y:.1}\" x2=\"{x3:.1}\" y2=\"{y:.1}\" stroke=\"#444\"/>\
-             <text x=\"{tx:.1}\" y=\"{ty:.1}\" font-size=\"11\">{}</text>",
+             <text x=\"{tx:.1}\" y=\"{ty:.1}\" font-size=\"13\">{}</text>",
             escape(&tick_label(value, &bar.unit)),
             x2 = x + 14.0,
             x3 = x + 18.0,
@@ -169,7 +172,11 @@ mod tests {
             unit: "m".into(),
             label: "height".into(),
         };
-        let svg = picture_svg(b"png", 400, 300, Some([2.5e-11, 2.5e-11]), Some(&bar));
+        let png = |bytes: &[u8]| EncodedPicture {
+            bytes: bytes.to_vec(),
+            mime: "image/png",
+        };
+        let svg = picture_svg(&png(b"png"), 400, 300, Some([2.5e-11, 2.5e-11]), Some(&bar));
         assert!(
             svg.contains("class=\"scale-bar\"") && svg.contains("2 nm"),
             "{svg}"
@@ -180,6 +187,6 @@ mod tests {
         );
         assert!(svg.contains("−100.0 pm"), "{svg}");
         // No physical size: no scale bar.
-        assert!(!picture_svg(b"png", 40, 30, None, None).contains("scale-bar"));
+        assert!(!picture_svg(&png(b"png"), 40, 30, None, None).contains("scale-bar"));
     }
 }

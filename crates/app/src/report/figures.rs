@@ -53,9 +53,14 @@ pub struct PictureStyle {
     pub max_side: Option<usize>,
 }
 
-/// Longest side of the pictures kept only as views (raw, NCC, deviation map), px, and of
-/// the previews inside the report.
+/// Longest side of the pictures kept only as views (raw, NCC, deviation map), px.
 pub const REDUCED: usize = 1100;
+
+/// Longest side of the previews inside the report (and their SVG files), px: about the
+/// width a report column shows them at, so their scale and colour bars' text is drawn near
+/// its own size and a 2048² run's report stays a few megabytes (the full-resolution
+/// pictures are the files beside it).
+pub const PREVIEW: usize = 600;
 
 impl Figure {
     pub(crate) fn picture(
@@ -65,29 +70,24 @@ impl Figure {
         canvas: &Canvas,
         style: PictureStyle,
     ) -> Figure {
-        let preview = canvas.preview(REDUCED);
+        let preview = canvas.preview(PREVIEW);
         let shown = preview.as_ref().unwrap_or(canvas);
-        let shown_png = shown.png();
         // The preview averages `factor × factor` canvas pixels (see `Canvas::preview`).
         let factor = match preview {
-            Some(_) => canvas.width.max(canvas.height).div_ceil(REDUCED) as f64,
+            Some(_) => canvas.width.max(canvas.height).div_ceil(PREVIEW) as f64,
             None => 1.0,
         };
         let metres_per_px = style.metres_per_px.map(|[x, y]| [x * factor, y * factor]);
         let svg = picture_svg(
-            &shown_png,
+            &shown.for_page(),
             shown.width,
             shown.height,
             metres_per_px,
             style.colour.as_ref(),
         );
-        let png = match (style.max_side, &preview) {
-            (Some(max), _) => canvas
-                .preview(max)
-                .map(|p| p.png())
-                .unwrap_or_else(|| canvas.png()),
-            (None, None) => shown_png,
-            (None, Some(_)) => canvas.png(),
+        let png = match style.max_side.and_then(|max| canvas.preview(max)) {
+            Some(reduced) => reduced.png(),
+            None => canvas.png(),
         };
         Figure {
             stem: stem.into(),

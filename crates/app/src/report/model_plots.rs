@@ -105,7 +105,7 @@ pub fn hysteresis_plot(geometry: &ScanGeometry, analysis: &Analysis) -> Figure {
         if !points.is_empty() {
             plot = plot.with(Series::new(
                 format!("{pass} (local)"),
-                thin(points, 2500),
+                thin(points, SHOWN_PER_PASS),
                 Style::Points,
                 colour,
             ));
@@ -124,13 +124,34 @@ pub fn hysteresis_plot(geometry: &ScanGeometry, analysis: &Analysis) -> Figure {
         "hysteresis",
         "Hysteresis fit (paper Fig. 8)",
         format!(
-            "Local fast-axis scale S of every selected feature against its time since the \
-             start of its line, trace (blue) and retrace (orange) pooled; black: the fitted \
-             law {}.",
+            "Local fast-axis scale S of the selected features against their time since the \
+             start of their line, trace (blue) and retrace (orange) pooled{}; black: the \
+             fitted law {}.",
+            shown_note(analysis),
             describe_law(law)
         ),
         &plot,
     )
+}
+
+/// Local measurements drawn per pass at most (evenly spaced in time): a plot of 2 × 1,500
+/// points shows the cloud and stays a few hundred kilobytes in the report.
+const SHOWN_PER_PASS: usize = 1500;
+
+/// " (N of M shown, ...)" when the passes have more local measurements than are drawn.
+fn shown_note(analysis: &Analysis) -> String {
+    let total: usize = analysis.dhct.passes.iter().map(|p| p.local.len()).sum();
+    let shown: usize = analysis
+        .dhct
+        .passes
+        .iter()
+        .map(|p| p.local.len().min(SHOWN_PER_PASS))
+        .sum();
+    if shown < total {
+        format!(" ({shown} of {total} shown, evenly spaced in time)")
+    } else {
+        String::new()
+    }
 }
 
 /// `f` of every local distortion measurement of `pass`.
@@ -199,7 +220,7 @@ fn drift_plot(analysis: &Analysis, axis: usize, t_max: f64) -> Figure {
         if !points.is_empty() {
             plot = plot.with(Series::new(
                 format!("{pass} (local)"),
-                thin(points, 2500),
+                thin(points, SHOWN_PER_PASS),
                 Style::Points,
                 colour,
             ));
@@ -221,9 +242,10 @@ fn drift_plot(analysis: &Analysis, axis: usize, t_max: f64) -> Figure {
         &format!("drift_{name}"),
         &format!("Drift and creep along {name} (paper Fig. 9)"),
         format!(
-            "Local drift velocity D{name} of every selected feature against acquisition time, \
-             trace (blue) and retrace (orange); black: the fitted drift + creep velocity \
+            "Local drift velocity D{name} of the selected features against acquisition time, \
+             trace (blue) and retrace (orange){}; black: the fitted drift + creep velocity \
              (v = {:.2} pm/s, a = {:.3} pm/s², C = {:.1} pm, t0 = {:.1} s).",
+            shown_note(analysis),
             drift.velocity_m_per_s[axis] * 1e12,
             drift.acceleration_m_per_s2[axis] * 1e12,
             drift.creep_m[axis] * 1e12,
@@ -282,7 +304,7 @@ pub fn deviation_scatter(region: &RegionFit) -> Figure {
                 .iter()
                 .map(|p| (p.deviation_m[0] * 1e12, p.deviation_m[1] * 1e12))
                 .collect(),
-            4000,
+            2 * SHOWN_PER_PASS,
         ),
         points_colour: BLUE,
         curves,

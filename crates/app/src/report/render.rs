@@ -257,6 +257,55 @@ impl Canvas {
     }
 }
 
+/// A picture encoded for a page: its bytes and their MIME type.
+pub struct EncodedPicture {
+    /// The encoded bytes.
+    pub bytes: Vec<u8>,
+    /// `image/png` or `image/jpeg`.
+    pub mime: &'static str,
+}
+
+/// PNG bytes of a continuous-tone preview above which JPEG is tried: noisy atomic images
+/// barely compress losslessly (about 3 bytes a pixel).
+const PHOTO_PNG_BYTES: usize = 96 * 1024;
+
+/// JPEG quality of previews (90: no visible blocks on colour-mapped images).
+const PREVIEW_JPEG_QUALITY: u8 = 90;
+
+impl Canvas {
+    /// The canvas for a page: PNG, or JPEG when the PNG is large (continuous tone) and the
+    /// JPEG less than half its size. The full-resolution files stay PNG.
+    pub fn for_page(&self) -> EncodedPicture {
+        let png = self.png();
+        let jpeg = (png.len() > PHOTO_PNG_BYTES)
+            .then(|| self.jpeg(PREVIEW_JPEG_QUALITY))
+            .flatten()
+            .filter(|jpeg| 2 * jpeg.len() < png.len());
+        match jpeg {
+            Some(bytes) => EncodedPicture {
+                bytes,
+                mime: "image/jpeg",
+            },
+            None => EncodedPicture {
+                bytes: png,
+                mime: "image/png",
+            },
+        }
+    }
+
+    /// JPEG bytes at `quality` (1–100), or `None` for a canvas JPEG cannot hold (a side
+    /// beyond 65,535 px).
+    fn jpeg(&self, quality: u8) -> Option<Vec<u8>> {
+        let width = u16::try_from(self.width).ok()?;
+        let height = u16::try_from(self.height).ok()?;
+        let mut out = Vec::new();
+        jpeg_encoder::Encoder::new(&mut out, quality)
+            .encode(&self.rgb, width, height, jpeg_encoder::ColorType::Rgb)
+            .ok()?;
+        Some(out)
+    }
+}
+
 /// Integer upscale so the longest side is at least `target` picture pixels (max 16×).
 pub fn upscale_for(rows: usize, columns: usize, target: usize) -> usize {
     let longest = rows.max(columns).max(1);
