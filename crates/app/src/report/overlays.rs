@@ -14,6 +14,8 @@ use super::figures::{
 use super::render::{Canvas, display_range, heat_colour, upscale_for};
 
 const WHITE: [u8; 3] = [255, 255, 255];
+/// Outlines under the markers, so they show on bright atoms too.
+const OUTLINE: [u8; 3] = [20, 20, 20];
 /// Okabe–Ito sky blue, bluish green and vermilion as picture colours.
 const SKY: [u8; 3] = [86, 180, 233];
 const GREEN_PX: [u8; 3] = [0, 158, 115];
@@ -136,22 +138,33 @@ pub fn lattice_overlay(inputs: &FigureInputs) -> Option<Figure> {
     let inside = |p: &[f64; 2], c: &Canvas| {
         p[0] >= 0.0 && p[1] >= 0.0 && p[0] < c.width as f64 && p[1] < c.height as f64
     };
+    // Cells that do not touch each other (the cells tile the image: all of them make a mesh).
+    let cell_side = a1.norm().max(a2.norm());
+    let mut drawn: Vec<Vector2<f64>> = Vec::new();
     for cell in &region.local_cells[0] {
         let (t, o) = (cell.transform(), Vector2::from(cell.origin_m));
+        if drawn.iter().any(|d| (d - o).norm() < 2.5 * cell_side) {
+            continue;
+        }
         let corners = [o, o + t * a1, o + t * (a1 + a2), o + t * a2];
         let px: Vec<[f64; 2]> = corners.iter().map(|p| to_px(p.x, p.y)).collect();
         if px.iter().all(|p| inside(p, &canvas)) {
-            canvas.polygon(&px, 1.0, SKY);
+            canvas.polygon(&px, 2.0, SKY);
+            drawn.push(o);
         }
     }
+    let marker = 0.6 * scale as f64;
     for (k, &i) in region.members[0].iter().enumerate() {
         let point = &region.fit.points[0][k];
         let site = region
             .fit
             .site_position(lattice, point.n, point.m, point.site, 0);
-        canvas.cross(to_px(site[0], site[1]), 0.6 * scale as f64, 1.5, WHITE);
-        let f = &pass.corrected[i];
-        canvas.disc(to_px(f.x_m, f.y_m), 0.35 * scale as f64, VERMILION_PX);
+        let at = to_px(site[0], site[1]);
+        canvas.cross(at, marker + 1.0, 4.0, OUTLINE);
+        canvas.cross(at, marker, 1.8, WHITE);
+        let f = to_px(pass.corrected[i].x_m, pass.corrected[i].y_m);
+        canvas.disc(f, 0.35 * scale as f64 + 1.5, OUTLINE);
+        canvas.disc(f, 0.35 * scale as f64, VERMILION_PX);
     }
     let channel = inputs.pair.image(pass.pass)?;
     Some(Figure::picture(
@@ -159,8 +172,9 @@ pub fn lattice_overlay(inputs: &FigureInputs) -> Option<Figure> {
         "Lattice fit overlay (paper Fig. S4)",
         format!(
             "Detail of the corrected {} image (columns {c0}–{c1}, rows {r0}–{r1}): fitted \
-             lattice sites (white +), corrected feature positions (vermilion dots) and the \
-             local unit cells fitted to their four corner features (sky blue).",
+             lattice sites (white +), corrected feature positions (vermilion dots) and, \
+             apart from one another, some of the local unit cells fitted to their four \
+             corner features (sky blue; every cell enters the averages).",
             pass.pass
         ),
         &canvas,
