@@ -159,6 +159,7 @@ fn correct_embedded_example_recovers_the_simulated_distortion() {
         "Normalised cross-correlation",
         "Radial distribution function (paper Fig. 6)",
         "Angular distribution (ADF, paper Fig. S2)",
+        "Local distortion (paper Fig. 7)",
         "Hysteresis fit (paper Fig. 8)",
         "Drift and creep along x (paper Fig. 9)",
         "Deviation heat map (paper Fig. S3)",

@@ -13,7 +13,7 @@ use super::bars::{ColourBar, picture_svg};
 use super::plots::Plot;
 use super::render::{Canvas, display_range, upscale_for};
 use super::scatter::EqualAspectPlot;
-use super::{model_plots, overlays};
+use super::{local_figure, model_plots, overlays};
 
 /// A figure: a picture (PNG file plus an annotated SVG) or a plot (SVG), with its file
 /// stem and caption.
@@ -200,6 +200,11 @@ pub fn make_figures(inputs: &FigureInputs) -> Vec<Figure> {
     jobs.push(Box::new(move || vec![model_plots::rdf_plot(analysis)]));
     jobs.push(Box::new(move || {
         model_plots::adf_plot(analysis).into_iter().collect()
+    }));
+    jobs.push(Box::new(move || {
+        local_figure::local_distortion_figure(inputs)
+            .into_iter()
+            .collect()
     }));
     jobs.push(Box::new(move || {
         vec![model_plots::hysteresis_plot(geometry, analysis)]
