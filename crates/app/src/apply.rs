@@ -16,11 +16,13 @@ use crate::output_dir::StagedOutput;
 use crate::points::{POINTS_CSV, PointsSummary, map_points_file};
 use crate::setup::read_pair;
 
-/// What `apply` needs of a `model.json`.
-#[derive(Deserialize)]
-struct SavedModel {
-    model: DistortionModel,
-    geometry: ScanGeometry,
+/// What `apply` needs of a `model.json`: the fitted model and the scan it was fitted on.
+#[derive(Debug, Clone, Deserialize)]
+pub struct SavedModel {
+    /// The fitted model.
+    pub model: DistortionModel,
+    /// The scan's geometry and timing.
+    pub geometry: ScanGeometry,
 }
 
 /// What to apply to what.

@@ -151,6 +151,13 @@ impl Columns {
     }
 }
 
+/// Whether the point at `xy_px` (pixels) lies on the frame, half a pixel around its edge
+/// pixels included: the model says nothing beyond.
+pub fn inside_frame(geometry: &ScanGeometry, xy_px: [f64; 2]) -> bool {
+    let inside = |v: f64, n: usize| (-EDGE_PX..=n as f64 - 1.0 + EDGE_PX).contains(&v);
+    inside(xy_px[0], geometry.columns()) && inside(xy_px[1], geometry.rows())
+}
+
 /// One input row read: its place in pixels, its time and pass.
 struct PointRow {
     xy_px: [f64; 2],
@@ -201,8 +208,7 @@ fn read_row(
             });
         }
     };
-    let inside = |v: f64, n: usize| (-EDGE_PX..=n as f64 - 1.0 + EDGE_PX).contains(&v);
-    if !(inside(xy_px[0], geometry.columns()) && inside(xy_px[1], geometry.rows())) {
+    if !inside_frame(geometry, xy_px) {
         return Err(PointsError::OutsideFrame {
             path: path.to_path_buf(),
             row,

@@ -5,7 +5,7 @@ use std::io::Write;
 use dhct_scan::ScanPass;
 use serde::{Deserialize, Serialize};
 
-use crate::{FeatureRow, FitStatus, LineLevelling};
+use crate::{FitStatus, LineLevelling};
 
 /// One fitted feature. Positions are in the controller frame of its image (display
 /// orientation; x = column, y = row; metres = px · pitch).
@@ -231,17 +231,5 @@ impl FeatureSet {
     pub fn write_json<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
         serde_json::to_writer_pretty(&mut *w, self).map_err(std::io::Error::other)?;
         writeln!(w)
-    }
-
-    /// Writes the features as CSV, one [`FeatureRow`] each, with a header line (the
-    /// correction and lattice columns empty: this crate does not place features).
-    pub fn write_csv<W: Write>(&self, w: W) -> std::io::Result<()> {
-        let mut writer = csv::Writer::from_writer(w);
-        for f in &self.features {
-            writer
-                .serialize(FeatureRow::of(f))
-                .map_err(std::io::Error::other)?;
-        }
-        writer.flush()
     }
 }

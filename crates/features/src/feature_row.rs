@@ -5,7 +5,9 @@
 use serde::ser::{Serialize, SerializeStruct, Serializer};
 use serde::{Deserialize, Serialize as DeriveSerialize};
 
-use crate::Feature;
+use std::io::Write;
+
+use crate::{Feature, FeatureSet};
 
 /// A feature's lattice site and its deviation from it (sample frame), once the lattice has
 /// been fitted and the feature indexed.
@@ -103,6 +105,20 @@ impl<'a> FeatureRow<'a> {
             ("deviation_x_m", Float(index.map(|i| i.deviation_m[0]))),
             ("deviation_y_m", Float(index.map(|i| i.deviation_m[1]))),
         ]
+    }
+}
+
+impl FeatureSet {
+    /// Writes the features as CSV, one [`FeatureRow`] each, with a header line (the
+    /// correction and lattice columns empty: this crate does not place features).
+    pub fn write_csv<W: Write>(&self, w: W) -> std::io::Result<()> {
+        let mut writer = csv::Writer::from_writer(w);
+        for f in &self.features {
+            writer
+                .serialize(FeatureRow::of(f))
+                .map_err(std::io::Error::other)?;
+        }
+        writer.flush()
     }
 }
 

@@ -3,6 +3,7 @@
 
 mod correct;
 mod errors;
+mod points;
 mod scan;
 mod simulate;
 
@@ -40,6 +41,7 @@ fn _dhct(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<correct::Correction>()?;
     module.add_function(wrap_pyfunction!(read, module)?)?;
     module.add_function(wrap_pyfunction!(correct::correct, module)?)?;
+    module.add_function(wrap_pyfunction!(points::map_points, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::simulate, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::presets, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::lattices, module)?)?;

@@ -310,3 +310,31 @@ def test_every_channel_is_written_when_asked(tmp_path):
     for channel in ("Current", "LI_Demod_1_X", "Counter_1"):
         for name in ("trace", "retrace"):
             assert f"corrected_{channel}_{name}.tiff" in written["outputs"]
+
+
+def test_map_points_puts_features_on_their_corrected_positions(result, tmp_path):
+    f = result.features
+    pitch = f["x_m"][1] / f["x_px"][1]
+    for pass_ in ("trace", "retrace"):
+        rows = np.flatnonzero(np.asarray(f["pass"]) == pass_)[::25]
+        x, y = f["x_px"][rows], f["y_px"][rows]
+        mapped = dhct.map_points(result, x, y, pass_=pass_)
+        for axis in ("x", "y"):
+            miss = np.abs(mapped[f"corrected_{axis}_m"] - f[f"corrected_{axis}_m"][rows]) / pitch
+            assert miss.max() < 0.01, (pass_, axis, miss.max())
+            assert np.all(np.isfinite(mapped[f"sigma_{axis}_m"]))
+        # In metres, with the features' own times, from the written model.json: the same.
+        result.write(tmp_path / pass_)
+        again = dhct.map_points(
+            tmp_path / pass_ / "model.json",
+            f["x_m"][rows],
+            f["y_m"][rows],
+            t=f["time_s"][rows],
+            pass_=pass_,
+            unit="m",
+        )
+        np.testing.assert_allclose(again["corrected_x_m"], mapped["corrected_x_m"], rtol=0, atol=1e-3 * pitch)
+    with pytest.raises(dhct.OptionError, match="outside"):
+        dhct.map_points(result, [1e6], [3.0])
+    with pytest.raises(dhct.OptionError, match="one length"):
+        dhct.map_points(result, [1.0, 2.0], [3.0])

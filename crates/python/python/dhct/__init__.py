@@ -54,6 +54,7 @@ __all__ = [
     "correct",
     "diagnose",
     "lattices",
+    "map_points",
     "presets",
     "read",
     "simulate",
@@ -409,6 +410,44 @@ class Result:
             + (f"<p>warnings:</p><ul>{warnings}</ul>" if warnings else "")
             + "</div>"
         )
+
+
+def map_points(
+    model: Union["Result", PathLike],
+    x: Any,
+    y: Any,
+    t: Any = None,
+    pass_: str = "trace",
+    unit: str = "px",
+) -> Dict[str, np.ndarray]:
+    """Moves points of the frame a model was fitted on (spectroscopy positions, a grid's
+    points) into its sample frame, with their 1σ.
+
+    ``model`` is a :class:`Result` or the path of a ``model.json`` that ``dhct correct``
+    wrote. ``x``, ``y``: the points in the file's display orientation, in pixels (0 at the
+    first pixel's centre; ``unit="px"``) or metres from that centre (``unit="m"``). ``t``:
+    when each was recorded, seconds since the frame start (NaN or omitted: when the pixel
+    under it was). ``pass_``: ``"trace"`` or ``"retrace"``, the lines the tip reached them
+    along. Returns numpy arrays ``corrected_x_m``, ``corrected_y_m`` (the frame of the
+    features' ``corrected_*``), ``sigma_x_m``, ``sigma_y_m`` (the model's statistical 1σ;
+    NaN when unknown) and ``time_s``. A point off the frame raises :class:`OptionError`.
+    """
+    if unit not in ("px", "m"):
+        raise OptionError(f"unit={unit!r}: use 'px' or 'm'")
+    if isinstance(model, Result):
+        text = model._raw.model_json()
+    else:
+        with open(model, encoding="utf-8") as f:
+            text = f.read()
+    as_array = lambda v: np.ascontiguousarray(np.atleast_1d(np.asarray(v, dtype=np.float64)))
+    return _dhct.map_points(
+        text,
+        as_array(x),
+        as_array(y),
+        None if t is None else as_array(t),
+        pass_,
+        unit == "m",
+    )
 
 
 def diagnose(

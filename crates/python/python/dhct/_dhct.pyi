@@ -73,5 +73,13 @@ def simulate(
     config_json: Optional[str] = None,
     seed: Optional[int] = None,
 ) -> Tuple[Scan, str, str]: ...
+def map_points(
+    model_json: str,
+    x: npt.NDArray[np.float64],
+    y: npt.NDArray[np.float64],
+    t: Optional[npt.NDArray[np.float64]] = None,
+    pass_name: str = "trace",
+    metres: bool = False,
+) -> Dict[str, npt.NDArray[np.float64]]: ...
 def presets() -> List[Tuple[str, str]]: ...
 def lattices() -> List[Tuple[str, List[str], str, bool]]: ...
