@@ -166,6 +166,8 @@ fn correct_embedded_example_recovers_the_simulated_distortion() {
         "Lattice fit overlay (paper Fig. S4)",
         "Translationally averaged unit cell (paper Fig. 10)",
         "Symmetry-averaged unit cell, p3m1 (paper Fig. 11)",
+        "Averaged cell over the lattice (paper Fig. 10a)",
+        "Symmetry-averaged cell over the lattice, p3m1 (paper Fig. 11a)",
         "Confidence ellipses",
         "data:image/png;base64,",
         "<svg",

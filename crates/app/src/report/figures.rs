@@ -13,7 +13,7 @@ use super::bars::{ColourBar, picture_svg};
 use super::plots::Plot;
 use super::render::{Canvas, display_range, upscale_for};
 use super::scatter::EqualAspectPlot;
-use super::{local_figure, model_plots, overlays};
+use super::{lattice_average, local_figure, model_plots, overlays};
 
 /// A figure: a picture (PNG file plus an annotated SVG) or a plot (SVG), with its file
 /// stem and caption.
@@ -227,6 +227,10 @@ pub fn make_figures(inputs: &FigureInputs) -> Vec<Figure> {
             jobs.push(Box::new(move || {
                 overlays::cell_picture(inputs, symmetrized)
                     .into_iter()
+                    .chain(lattice_average::lattice_average_picture(
+                        inputs,
+                        symmetrized,
+                    ))
                     .collect()
             }));
         }

@@ -5,6 +5,7 @@
 pub mod bars;
 pub mod figures;
 pub mod html;
+pub(crate) mod lattice_average;
 pub(crate) mod local_figure;
 pub(crate) mod model_plots;
 pub(crate) mod overlays;

@@ -187,7 +187,7 @@ pub fn lattice_overlay(inputs: &FigureInputs) -> Option<Figure> {
 }
 
 /// Periodic bilinear sample of a cell grid at fractional `(u, v)`.
-fn sample_cell(values: &Array2<f64>, u: f64, v: f64) -> f64 {
+pub(crate) fn sample_cell(values: &Array2<f64>, u: f64, v: f64) -> f64 {
     let r = values.nrows() as f64;
     let (x, y) = (u.rem_euclid(1.0) * r, v.rem_euclid(1.0) * r);
     let (j0, i0) = (

@@ -274,13 +274,13 @@ const PREVIEW_JPEG_QUALITY: u8 = 90;
 
 impl Canvas {
     /// The canvas for a page: PNG, or JPEG when the PNG is large (continuous tone) and the
-    /// JPEG less than half its size. The full-resolution files stay PNG.
+    /// JPEG under 70 % of its size. The full-resolution files stay PNG.
     pub fn for_page(&self) -> EncodedPicture {
         let png = self.png();
         let jpeg = (png.len() > PHOTO_PNG_BYTES)
             .then(|| self.jpeg(PREVIEW_JPEG_QUALITY))
             .flatten()
-            .filter(|jpeg| 2 * jpeg.len() < png.len());
+            .filter(|jpeg| 10 * jpeg.len() < 7 * png.len());
         match jpeg {
             Some(bytes) => EncodedPicture {
                 bytes,
