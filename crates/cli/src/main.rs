@@ -273,6 +273,11 @@ struct CorrectArgs {
     /// and .gsf, with the pixel size and the channel's unit.
     #[arg(long, value_parser = parse_channels)]
     channels: Option<correct::ChannelSet>,
+    /// The grid of the corrected TIFF and GSF files: frame (default: the scan's own; what
+    /// the correction moves outside it is cropped) or full (every corrected pixel on a
+    /// larger grid of the same pitch, no-data around; the GSF holds its origin).
+    #[arg(long, value_parser = parse_extent)]
+    extent: Option<correct::Extent>,
     /// Also write each pass's displacement field: displacement_trace.npy (shape 2 × rows ×
     /// columns: dx, dy in metres, where the tip really was relative to the controller) and
     /// displacement_trace.tiff (the same as two float pages with the pixel size).
@@ -306,6 +311,7 @@ impl CorrectArgs {
             plane_group: self.plane_group,
             colormap: self.colormap,
             displacement: self.displacement.then_some(true),
+            extent: self.extent,
             channels: self.channels,
             geometry: self.geometry.overrides(),
             overwrite: self.overwrite,
@@ -335,6 +341,17 @@ fn parse_channels(text: &str) -> Result<correct::ChannelSet, String> {
         "all" => Ok(correct::ChannelSet::All),
         other => Err(format!(
             "'{other}' is not a channel set: use all (the analysed channel is --channel)"
+        )),
+    }
+}
+
+fn parse_extent(text: &str) -> Result<correct::Extent, String> {
+    match text.trim().to_ascii_lowercase().as_str() {
+        "frame" => Ok(correct::Extent::Frame),
+        "full" => Ok(correct::Extent::Full),
+        other => Err(format!(
+            "'{other}' is not an extent: use frame (the scan's own grid) or full (every \
+             corrected pixel)"
         )),
     }
 }

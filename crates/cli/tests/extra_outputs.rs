@@ -333,3 +333,67 @@ fn points_map_onto_the_corrected_features() {
         "{stderr}"
     );
 }
+
+/// A GSF header's value of `key`.
+fn gsf_number(bytes: &[u8], key: &str) -> f64 {
+    let text = String::from_utf8_lossy(&bytes[..bytes.len().min(4096)]).into_owned();
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("{key} = ")))
+        .unwrap_or_else(|| panic!("{key} missing"))
+        .trim()
+        .parse()
+        .unwrap()
+}
+
+/// `--extent full`: the corrected GSF holds every corrected pixel on a grid of the same
+/// pitch, its origin in XOffset/YOffset; where it overlaps the frame it holds the frame's
+/// values, it holds pixels the frame crops, and every feature's corrected position lies on
+/// it.
+#[test]
+fn the_full_extent_keeps_every_corrected_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let (frame, full) = (dir.path().join("frame"), dir.path().join("full"));
+    assert!(correct(&example(), &[], &frame).status.success());
+    let run = correct(&example(), &["--extent", "full"], &full);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let read = |dir: &std::path::Path| {
+        let bytes = std::fs::read(dir.join("corrected_trace.gsf")).unwrap();
+        let file = dhct_sm4_io::gsf::read(&bytes).unwrap();
+        (bytes, file.pairs[0].trace().unwrap().z.clone())
+    };
+    let ((_, z_frame), (bytes, z_full)) = (read(&frame), read(&full));
+    let pitch = gsf_number(&bytes, "XReal") / gsf_number(&bytes, "XRes");
+    let origin = [
+        (gsf_number(&bytes, "XOffset") / pitch).round() as i64,
+        (gsf_number(&bytes, "YOffset") / pitch).round() as i64,
+    ];
+    let finite = |z: &ndarray::Array2<f64>| z.iter().filter(|v| v.is_finite()).count();
+    assert!(finite(&z_full) > finite(&z_frame));
+    for ((r, c), v) in z_frame.indexed_iter() {
+        let (rf, cf) = (r as i64 - origin[1], c as i64 - origin[0]);
+        if rf < 0 || cf < 0 || rf >= z_full.nrows() as i64 || cf >= z_full.ncols() as i64 {
+            assert!(v.is_nan(), "({r}, {c}) is data off the full grid");
+            continue;
+        }
+        let w = z_full[[rf as usize, cf as usize]];
+        assert!(
+            (v.is_nan() && w.is_nan()) || (v - w).abs() <= 1e-6 * v.abs(),
+            "({r}, {c})"
+        );
+    }
+    let features = std::fs::read_to_string(full.join("features.csv")).unwrap();
+    let positions = csv_columns(&features, &["corrected_x_m", "corrected_y_m"]);
+    let size = [z_full.ncols() as f64, z_full.nrows() as f64];
+    for row in &positions {
+        let p: Vec<f64> = row
+            .iter()
+            .map(|v| v.parse::<f64>().unwrap() / pitch)
+            .collect();
+        let on_grid = (0..2).all(|k| (-0.5..size[k] - 0.5).contains(&(p[k] - origin[k] as f64)));
+        assert!(on_grid, "{p:?} off the full grid at {origin:?} {size:?}");
+    }
+}

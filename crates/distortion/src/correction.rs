@@ -237,6 +237,84 @@ pub fn correct_image(
     ))
 }
 
+/// A corrected image on a grid that holds every corrected pixel (the paper's frame: no
+/// pixel cropped, no-data around them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtendedImage {
+    /// The values, rows × columns, NaN = no data.
+    pub z: Array2<f64>,
+    /// The sample-frame pixel (of the scan's own grid) at this grid's pixel `(0, 0)`:
+    /// `[column, row]`, negative where the grid reaches left of or above the scan's.
+    pub origin_px: [i64; 2],
+}
+
+/// Largest growth per side of an [`ExtendedImage`] over its scan.
+const MAX_EXTENT_GROWTH: usize = 3;
+
+/// [`correct_image`] on a grid holding every corrected pixel: the smallest grid of the
+/// same pitch, aligned with the scan's own, covering every pixel's sample position.
+pub fn correct_image_full(
+    model: &DistortionModel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    z: &Array2<f64>,
+) -> Result<ExtendedImage, DistortionError> {
+    let (rows, columns) = z.dim();
+    if rows != geometry.rows() || columns != geometry.columns() {
+        return Err(DistortionError::ShapeMismatch {
+            what: "image",
+            columns,
+            rows,
+            geometry_columns: geometry.columns(),
+            geometry_rows: geometry.rows(),
+        });
+    }
+    let positions = RowPositions::new(model, geometry, pass);
+    let (mut xs, mut ys) = (vec![0.0; columns], vec![0.0; columns]);
+    let (mut low, mut high) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for r in 0..rows {
+        positions.fill(r, &mut xs, &mut ys);
+        for (&x, &y) in xs
+            .iter()
+            .zip(&ys)
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+        {
+            low = [low[0].min(x), low[1].min(y)];
+            high = [high[0].max(x), high[1].max(y)];
+        }
+    }
+    if !(low[0].is_finite() && high[0].is_finite()) {
+        return Err(DistortionError::BadParameter(
+            "the model gives no pixel a finite position".into(),
+        ));
+    }
+    let origin = [low[0].floor(), low[1].floor()];
+    let out_columns = (high[0].ceil() - origin[0]) as usize + 1;
+    let out_rows = (high[1].ceil() - origin[1]) as usize + 1;
+    if out_columns > MAX_EXTENT_GROWTH * columns || out_rows > MAX_EXTENT_GROWTH * rows {
+        return Err(DistortionError::ExtentTooLarge {
+            columns: out_columns,
+            rows: out_rows,
+            scan_columns: columns,
+            scan_rows: rows,
+            limit: MAX_EXTENT_GROWTH,
+        });
+    }
+    let shifted = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
+        positions.fill(r, xs, ys);
+        xs.iter_mut().for_each(|x| *x -= origin[0]);
+        ys.iter_mut().for_each(|y| *y -= origin[1]);
+    };
+    let y_range = |r: usize| {
+        let (lo, hi) = positions.y_range(r, columns);
+        (lo - origin[1], hi - origin[1])
+    };
+    Ok(ExtendedImage {
+        z: resample_mesh(&shifted, &y_range, z, (out_rows, out_columns)),
+        origin_px: [origin[0] as i64, origin[1] as i64],
+    })
+}
+
 /// Rasterises the quad mesh whose row `r` of vertices `row_positions(r, xs, ys)` writes
 /// (output pixels) and whose values are `z` onto an `out_rows × out_columns` grid by
 /// barycentric interpolation; uncovered pixels NaN. Runs in parallel over horizontal bands
@@ -460,6 +538,43 @@ mod tests {
     use super::*;
     use crate::model::DriftCreep;
     use dhct_scan::{HysteresisLaw, ScanDirection};
+
+    /// The whole-extent image holds the frame image where they overlap, and every pixel
+    /// the frame crops: a drift that carries the scan left and down by several pixels.
+    #[test]
+    fn the_full_extent_holds_the_frame_and_what_it_crops() {
+        let geometry = ScanGeometry::new(
+            40,
+            30,
+            1e-10,
+            1e-10,
+            1e-3,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap();
+        let drift = DriftCreep {
+            velocity_m_per_s: [-2e-10, 1e-10],
+            ..DriftCreep::none()
+        };
+        let model = DistortionModel::new(drift, HysteresisLaw::none());
+        let z = Array2::from_shape_fn((30, 40), |(r, c)| (r * 40 + c) as f64);
+        for pass in ScanPass::BOTH {
+            let frame = correct_image(&model, &geometry, pass, &z).unwrap();
+            let full = correct_image_full(&model, &geometry, pass, &z).unwrap();
+            let [ox, oy] = full.origin_px;
+            assert!(ox < 0 && oy == 0, "{:?}", full.origin_px);
+            let finite = |a: &Array2<f64>| a.iter().filter(|v| v.is_finite()).count();
+            assert!(finite(&full.z) > finite(&frame), "nothing was cropped?");
+            for ((r, c), v) in frame.indexed_iter() {
+                let w = full.z[[(r as i64 - oy) as usize, (c as i64 - ox) as usize]];
+                assert!(
+                    (v.is_nan() && w.is_nan()) || (v - w).abs() < 1e-9,
+                    "{pass} ({r}, {c}): {v} vs {w}"
+                );
+            }
+        }
+    }
 
     /// Every pixel's y lies in its row's sampled range, for a fast axis along y (the
     /// hysteresis lag moves pixels along y, steepest at the line start), early creep,

@@ -44,4 +44,23 @@ pub enum DistortionError {
     /// An argument is out of range.
     #[error("invalid parameter: {0}")]
     BadParameter(String),
+    /// The corrected image of the whole scan would be far larger than the scan: the model
+    /// moves pixels further than a frame (not a drift a scan shows).
+    #[error(
+        "the corrected image of every pixel would be {columns} x {rows} px, more than \
+         {limit} times the scan's {scan_columns} x {scan_rows}: the model moves pixels \
+         further than a frame"
+    )]
+    ExtentTooLarge {
+        /// Columns the extent needs.
+        columns: usize,
+        /// Rows the extent needs.
+        rows: usize,
+        /// The scan's columns.
+        scan_columns: usize,
+        /// The scan's rows.
+        scan_rows: usize,
+        /// The largest growth per side allowed.
+        limit: usize,
+    },
 }

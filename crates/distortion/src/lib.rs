@@ -68,7 +68,10 @@ mod secant;
 mod seed;
 mod thinning;
 
-pub use correction::{CorrectedFeature, correct_features, correct_image, pixel_sample_positions};
+pub use correction::{
+    CorrectedFeature, ExtendedImage, correct_features, correct_image, correct_image_full,
+    pixel_sample_positions,
+};
 pub use displacement::{DisplacementField, displacement_field};
 pub use error::DistortionError;
 pub use fit::{FitOptions, HysteresisChoice, fit_model};

@@ -423,6 +423,29 @@ pub fn write_pass<W: Write>(
     pass: ScanPass,
     w: &mut W,
 ) -> Result<(), WriteError> {
+    check_size(channel, geometry)?;
+    write_grid(channel, geometry, pass, None, w)
+}
+
+/// Writes `channel`, a corrected image of `pass` on a grid of `geometry`'s pitch whose
+/// pixel `(0, 0)` is the scan grid's pixel `origin_px` (`[column, row]`, negative left of
+/// or above it), as a GSF file: its own size in `XRes`/`XReal`, the origin in `XOffset`/
+/// `YOffset` (metres), the scan's timing and directions in the `DHCT_*` keys.
+pub fn write_extended<W: Write>(
+    channel: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    origin_px: [i64; 2],
+    w: &mut W,
+) -> Result<(), WriteError> {
+    let offset = [
+        origin_px[0] as f64 * geometry.pitch_x(),
+        origin_px[1] as f64 * geometry.pitch_y(),
+    ];
+    write_grid(channel, geometry, pass, Some(offset), w)
+}
+
+fn check_size(channel: &ImageChannel, geometry: &ScanGeometry) -> Result<(), WriteError> {
     if channel.rows() != geometry.rows() || channel.columns() != geometry.columns() {
         return Err(WriteError::Unrepresentable {
             format: FORMAT,
@@ -435,6 +458,18 @@ pub fn write_pass<W: Write>(
             ),
         });
     }
+    Ok(())
+}
+
+/// The GSF of `channel` with the scan facts of `geometry` and `pass`; `offset` (metres)
+/// places a grid other than the scan's own.
+fn write_grid<W: Write>(
+    channel: &ImageChannel,
+    geometry: &ScanGeometry,
+    pass: ScanPass,
+    offset: Option<[f64; 2]>,
+    w: &mut W,
+) -> Result<(), WriteError> {
     let clean = |text: &str| -> String {
         text.chars()
             .map(|c| if c.is_control() { ' ' } else { c })
@@ -462,8 +497,18 @@ pub fn write_pass<W: Write>(
     };
     line("XRes", channel.columns().to_string());
     line("YRes", channel.rows().to_string());
-    line("XReal", format!("{:e}", geometry.width()));
-    line("YReal", format!("{:e}", geometry.height()));
+    line(
+        "XReal",
+        format!("{:e}", channel.columns() as f64 * geometry.pitch_x()),
+    );
+    line(
+        "YReal",
+        format!("{:e}", channel.rows() as f64 * geometry.pitch_y()),
+    );
+    if let Some([x, y]) = offset {
+        line("XOffset", format!("{x:e}"));
+        line("YOffset", format!("{y:e}"));
+    }
     line("XYUnits", "m".to_string());
     let unit = clean(&channel.unit);
     if !unit.is_empty() {

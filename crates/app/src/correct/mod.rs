@@ -1,6 +1,7 @@
 //! `dhct correct`: the whole DHCT chain on one file (or a trace/retrace pair of files), with
 //! every result written into an output directory and summarised in `report.html`.
 
+mod corrected_files;
 pub mod feature_table;
 
 use std::path::{Path, PathBuf};
@@ -21,9 +22,10 @@ use crate::report::figures::{FigureInputs, make_figures};
 pub use crate::report::summary::RunSummary;
 use crate::report::{html, write_bytes, write_figure_files};
 pub use crate::setup::{
-    ChannelSet, CorrectConfig, Length, MeasuredNnError, Resolved, build_lattice, load_mask,
+    ChannelSet, CorrectConfig, Extent, Length, MeasuredNnError, Resolved, build_lattice, load_mask,
     read_pair, resolve, with_measured_nn,
 };
+use corrected_files::{CorrectedImage, write_corrected_files};
 use feature_table::write_features_csv;
 
 /// What to run.
@@ -124,7 +126,8 @@ fn write_into(
                     })
                 },
                 || {
-                    let mut written = write_data_images(dir, pair, analysis)?;
+                    let extent = config.extent.unwrap_or_default();
+                    let mut written = write_data_images(dir, pair, analysis, extent)?;
                     if config.displacement == Some(true) {
                         written.extend(write_displacement_fields(dir, pair, analysis)?);
                     }
@@ -212,12 +215,32 @@ enum DataFormat {
 /// The data images: corrected images (TIFF with the scan's pixel size, GSF) and the unit
 /// cells (TIFF without a pixel size: their grid is in lattice coordinates), written in
 /// parallel.
-fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result<Vec<String>> {
+fn write_data_images(
+    dir: &Path,
+    pair: &ScanPair,
+    analysis: &Analysis,
+    extent: Extent,
+) -> Result<Vec<String>> {
     let geometry = pair.geometry();
     let pitch = [geometry.pitch_x(), geometry.pitch_y()];
+    let mut written = Vec::new();
     // One copy of each image, shared by its files (a huge scan's images are gigabytes).
     let mut jobs: Vec<(String, Arc<ImageChannel>, DataFormat)> = Vec::new();
     for pass in &analysis.passes {
+        if extent == Extent::Full {
+            let Some(raw) = pair.image(pass.pass) else {
+                continue;
+            };
+            let image = CorrectedImage {
+                stem: format!("corrected_{}", pass.pass),
+                raw,
+                pass: pass.pass,
+                model: &analysis.dhct.model,
+                geometry,
+            };
+            written.extend(write_corrected_files(dir, &image, extent)?);
+            continue;
+        }
         let channel = Arc::new(channel_like(pair, pass.pass, &pass.corrected_image));
         let name = format!("corrected_{}", pass.pass);
         jobs.push((
@@ -236,7 +259,8 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             jobs.push((name.into(), channel, DataFormat::Tiff(None)));
         }
     }
-    jobs.par_iter()
+    let from_jobs: Vec<String> = jobs
+        .par_iter()
         .map(|(name, channel, format)| {
             write_atomically(&dir.join(name), |w| match format {
                 DataFormat::Gsf(pass) => dhct_sm4_io::gsf::write_pass(channel, geometry, *pass, w),
@@ -247,7 +271,9 @@ fn write_data_images(dir: &Path, pair: &ScanPair, analysis: &Analysis) -> Result
             })?;
             Ok(name.clone())
         })
-        .collect()
+        .collect::<Result<_>>()?;
+    written.extend(from_jobs);
+    Ok(written)
 }
 
 /// Every other image channel of the source file(s), corrected with the model kept:
@@ -259,7 +285,6 @@ fn write_other_channels(dir: &Path, corrected: &Corrected) -> Result<Vec<String>
     };
     let analysed = corrected.pair.images().next().map(|(_, c)| c.name.clone());
     let geometry = corrected.pair.geometry();
-    let pitch = [geometry.pitch_x(), geometry.pitch_y()];
     let file = dhct_sm4_io::read_path_with_limits(
         input,
         &corrected.config.geometry,
@@ -296,22 +321,15 @@ fn write_other_channels(dir: &Path, corrected: &Corrected) -> Result<Vec<String>
         }
         let stem = unique_stem(&first.name, &mut used);
         for (pass, image) in pair.images() {
-            let z = dhct_distortion::correct_image(
-                &corrected.analysis.dhct.model,
-                geometry,
+            let image = CorrectedImage {
+                stem: format!("corrected_{stem}_{pass}"),
+                raw: image,
                 pass,
-                &image.z,
-            )?;
-            let channel =
-                ImageChannel::new(format!("{} (corrected)", image.name), image.unit.clone(), z);
-            let base = format!("corrected_{stem}_{pass}");
-            write_atomically(&dir.join(format!("{base}.tiff")), |w| {
-                dhct_sm4_io::tiff_file::write_f32_with_pixel_size(&channel, pitch, w)
-            })?;
-            write_atomically(&dir.join(format!("{base}.gsf")), |w| {
-                dhct_sm4_io::gsf::write_pass(&channel, geometry, pass, w)
-            })?;
-            names.extend([format!("{base}.tiff"), format!("{base}.gsf")]);
+                model: &corrected.analysis.dhct.model,
+                geometry,
+            };
+            let extent = corrected.config.extent.unwrap_or_default();
+            names.extend(write_corrected_files(dir, &image, extent)?);
         }
     }
     Ok(names)
@@ -388,7 +406,8 @@ pub fn text_summary(summary: &RunSummary, output: &Path) -> String {
             };
             let outside = if p.outside_frame > 0 {
                 format!(
-                    "; {} outside the frame after correction, not in the corrected image",
+                    "; {} outside the frame after correction: not in a frame-sized corrected \
+                     image (the full extent keeps them)",
                     p.outside_frame
                 )
             } else {

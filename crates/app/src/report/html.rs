@@ -83,8 +83,9 @@ fn summary_section(html: &mut Html, summary: &RunSummary) {
         .map(|p| {
             let outside = if p.outside_frame > 0 {
                 format!(
-                    "; {} ({:.1} %) lie outside the frame after correction and are cropped \
-                     from the corrected image, though kept in features.csv",
+                    "; {} ({:.1} %) lie outside the frame after correction: cropped from the \
+                     frame-sized corrected image, kept in features.csv and in full-extent \
+                     corrected files",
                     p.outside_frame,
                     100.0 * p.outside_frame as f64 / p.features.max(1) as f64
                 )

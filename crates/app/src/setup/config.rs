@@ -77,6 +77,9 @@ pub struct CorrectConfig {
     /// Also write the displacement field of each pass (`displacement_{pass}.npy` and
     /// `.tiff`: per pixel, where the tip really was relative to the controller, metres).
     pub displacement: Option<bool>,
+    /// The grid of the corrected TIFF and GSF files: the scan's own frame (default; what
+    /// the correction moves outside it is cropped) or every corrected pixel (`full`).
+    pub extent: Option<Extent>,
     /// The channel to analyse, by name (case-insensitive; a whole name first, else a part
     /// of one); default: the topography.
     pub channel: Option<String>,
@@ -162,6 +165,7 @@ impl CorrectConfig {
             plane_group,
             colormap,
             displacement,
+            extent,
             channels,
             channel
         );
@@ -276,6 +280,18 @@ fn edit_distance(a: &str, b: &str) -> usize {
         }
     }
     row[b.len()]
+}
+
+/// The grid the corrected TIFF and GSF files are written on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Extent {
+    /// The scan's own frame: what the correction moves outside it is cropped.
+    #[default]
+    Frame,
+    /// Every corrected pixel (the paper's frame): a larger grid of the same pitch, no-data
+    /// (NaN) around the image, its origin in the GSF's `XOffset`/`YOffset`.
+    Full,
 }
 
 /// Which image channels are corrected besides the analysed one.

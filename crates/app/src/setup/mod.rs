@@ -13,7 +13,7 @@ use dhct_scan::{ScanPair, ScanPass};
 use ndarray::Array2;
 
 pub use config::{
-    ChannelSet, CorrectConfig, LatticeChoiceError, Length, build_lattice, pipeline_table,
+    ChannelSet, CorrectConfig, Extent, LatticeChoiceError, Length, build_lattice, pipeline_table,
 };
 pub use inputs::{
     CALIBRATE_PITCH_TOLERANCE, MeasuredNnError, PRESET_PITCH_TOLERANCE, Resolved, resolve,

@@ -73,7 +73,15 @@ _GEOMETRY = {
 }
 
 #: `correct` options that are config keys of the same name.
-_PLAIN = ("polarity", "plane_group", "colormap", "mask_polygon", "displacement", "channels")
+_PLAIN = (
+    "polarity",
+    "plane_group",
+    "colormap",
+    "mask_polygon",
+    "displacement",
+    "channels",
+    "extent",
+)
 
 _OPTIONS = (
     ("retrace", "config", "calibrate", "trust_inputs", "pipeline", "progress")
@@ -202,7 +210,8 @@ def correct(
     ``calibrate``, ``trust_inputs``, ``polarity`` ("bright"/"dark"), ``plane_group``
     ("p3m1", ...), ``colormap``, ``displacement`` (True: :meth:`Result.write` also writes
     each pass's displacement field), ``channels`` ("all": :meth:`Result.write` also writes
-    every other channel of the file, corrected with the same model), ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
+    every other channel of the file, corrected with the same model), ``extent`` ("full":
+    :meth:`Result.write` writes the corrected TIFF/GSF with every corrected pixel), ``mask_polygon`` ([(x, y), ...] pixels), ``pipeline`` (a
     dict shaped like the config's [pipeline] table, e.g.
     ``{"features": {"min_relative_height": 0.5}}``), the geometry ``pitch`` (metres),
     ``pixel_period``, ``line_time``, ``turnaround`` (seconds), ``fast``, ``slow``, and
