@@ -338,3 +338,11 @@ def test_map_points_puts_features_on_their_corrected_positions(result, tmp_path)
         dhct.map_points(result, [1e6], [3.0])
     with pytest.raises(dhct.OptionError, match="one length"):
         dhct.map_points(result, [1.0, 2.0], [3.0])
+
+
+def test_extent_full_writes_every_corrected_pixel(scan, tmp_path):
+    dhct.correct(scan, extent="full").write(tmp_path / "full")
+    header = (tmp_path / "full" / "corrected_trace.gsf").read_bytes()[:400].decode("latin1")
+    assert "XOffset = " in header
+    with pytest.raises(dhct.OptionError, match="frame"):
+        dhct.correct(scan, extent="wide")
