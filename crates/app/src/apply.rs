@@ -184,7 +184,8 @@ pub fn describe(applied: &Applied, folder: &Path) -> String {
         folder.display()
     );
     if let Some(points) = &applied.points {
-        text.push_str(&format!("mapped {} points", points.points));
+        let plural = if points.points == 1 { "" } else { "s" };
+        text.push_str(&format!("mapped {} point{plural}", points.points));
         if points.outside_frame_time > 0 {
             let (count, verb) = match points.outside_frame_time {
                 1 => ("1 point".to_string(), "was"),
@@ -198,8 +199,9 @@ pub fn describe(applied: &Applied, folder: &Path) -> String {
         }
         if !points.uncertainty_known {
             text.push_str(
-                "; their 1σ is not known (the model does not carry its parameters' \
-                 correlations, or a parameter was not determined): the sigma columns are NaN",
+                "; their 1σ is not known (the correction kept has no fitted uncertainties, as \
+                 when the global affine map was kept, or a parameter was not determined): the \
+                 sigma columns are NaN",
             );
         }
         text.push('\n');
