@@ -629,7 +629,9 @@ fn best_by_bic(
             BIC_PREFERENCE
         };
         let score = bic(&fit) + preference;
-        if scale.is_finite() && best.as_ref().is_none_or(|(b, _)| score < *b) {
+        // Residuals all exactly 0 leave the scale infinite: every loss is then 0 and the
+        // parameter count decides. A law whose residuals are not finite is never kept.
+        if score.is_finite() && best.as_ref().is_none_or(|(b, _)| score < *b) {
             best = Some((score, choice));
         }
     }
@@ -826,4 +828,76 @@ pub(crate) fn axis_weights(residuals: &[f64], m: usize, huber: bool) -> Vec<f64>
 /// Robust scale of fit residuals about zero (0 when there are none).
 fn robust_scale(residuals: &[f64]) -> f64 {
     mad_sigma_about(residuals, 0.0).unwrap_or(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fitted law of `parameters` parameters with `residuals`.
+    fn fit(parameters: usize, residuals: Vec<f64>) -> Result<HysteresisFit, DistortionError> {
+        let names = ["p"; 5];
+        Ok(HysteresisFit {
+            result: (
+                HysteresisLaw::none(),
+                (0..parameters)
+                    .map(|k| parameter(names[k], 0.0, 0.0, "1"))
+                    .collect(),
+                None,
+            ),
+            residuals,
+        })
+    }
+
+    /// Residuals of scale `sigma` (a fixed alternating pattern, so the test is exact).
+    fn noise(sigma: f64) -> Vec<f64> {
+        (0..400)
+            .map(|k| sigma * [1.0, -0.5, 0.25, -1.2][k % 4])
+            .collect()
+    }
+
+    const POWER: HysteresisChoice = HysteresisChoice::Power;
+    const EXPONENTIAL: HysteresisChoice = HysteresisChoice::Exponential;
+    const QUARTIC: HysteresisChoice = HysteresisChoice::Quartic { time_scale_s: None };
+
+    #[test]
+    fn the_law_with_clearly_smaller_residuals_wins() {
+        let choice = best_by_bic(vec![
+            (POWER, fit(2, noise(2.0))),
+            (EXPONENTIAL, fit(2, noise(1.0))),
+            (QUARTIC, fit(5, noise(1.0))),
+        ]);
+        assert_eq!(choice.unwrap(), EXPONENTIAL);
+    }
+
+    #[test]
+    fn the_power_law_stays_unless_clearly_beaten() {
+        // Equal residuals: the preference keeps the power law.
+        let tie = best_by_bic(vec![
+            (POWER, fit(2, noise(1.0))),
+            (EXPONENTIAL, fit(2, noise(1.0))),
+            (QUARTIC, fit(5, noise(0.999))),
+        ]);
+        assert_eq!(tie.unwrap(), POWER);
+        // Residuals all exactly zero: the parameter count (and the preference) decide.
+        let exact = best_by_bic(vec![
+            (POWER, fit(2, vec![0.0; 50])),
+            (EXPONENTIAL, fit(2, vec![0.0; 50])),
+        ]);
+        assert_eq!(exact.unwrap(), POWER);
+    }
+
+    #[test]
+    fn a_law_that_failed_or_left_nan_is_never_chosen() {
+        let mut nan = noise(0.1);
+        nan[3] = f64::NAN;
+        let choice = best_by_bic(vec![
+            (POWER, Err(DistortionError::FitFailed("hysteresis"))),
+            (EXPONENTIAL, fit(2, nan)),
+            (QUARTIC, fit(5, noise(1.0))),
+        ]);
+        assert_eq!(choice.unwrap(), QUARTIC);
+        let none = best_by_bic(vec![(POWER, Err(DistortionError::FitFailed("power")))]);
+        assert!(matches!(none, Err(DistortionError::FitFailed("power"))));
+    }
 }
