@@ -218,6 +218,21 @@ pub fn correct_image(
     pass: ScanPass,
     z: &Array2<f64>,
 ) -> Result<Array2<f64>, DistortionError> {
+    let (rows, columns) = image_shape(geometry, z)?;
+    let positions = RowPositions::new(model, geometry, pass);
+    Ok(resample_mesh(
+        &|r, xs, ys| positions.fill(r, xs, ys),
+        &|r| positions.y_range(r, columns),
+        z,
+        (rows, columns),
+    ))
+}
+
+/// `z`'s `(rows, columns)`, an error unless they are `geometry`'s.
+fn image_shape(
+    geometry: &ScanGeometry,
+    z: &Array2<f64>,
+) -> Result<(usize, usize), DistortionError> {
     let (rows, columns) = z.dim();
     if rows != geometry.rows() || columns != geometry.columns() {
         return Err(DistortionError::ShapeMismatch {
@@ -228,13 +243,7 @@ pub fn correct_image(
             geometry_rows: geometry.rows(),
         });
     }
-    let positions = RowPositions::new(model, geometry, pass);
-    Ok(resample_mesh(
-        &|r, xs, ys| positions.fill(r, xs, ys),
-        &|r| positions.y_range(r, columns),
-        z,
-        (rows, columns),
-    ))
+    Ok((rows, columns))
 }
 
 /// A corrected image on a grid that holds every corrected pixel (the paper's frame: no
@@ -259,16 +268,7 @@ pub fn correct_image_full(
     pass: ScanPass,
     z: &Array2<f64>,
 ) -> Result<ExtendedImage, DistortionError> {
-    let (rows, columns) = z.dim();
-    if rows != geometry.rows() || columns != geometry.columns() {
-        return Err(DistortionError::ShapeMismatch {
-            what: "image",
-            columns,
-            rows,
-            geometry_columns: geometry.columns(),
-            geometry_rows: geometry.rows(),
-        });
-    }
+    let (rows, columns) = image_shape(geometry, z)?;
     let positions = RowPositions::new(model, geometry, pass);
     let (mut xs, mut ys) = (vec![0.0; columns], vec![0.0; columns]);
     let (mut low, mut high) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
