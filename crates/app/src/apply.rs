@@ -7,13 +7,15 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use dhct_distortion::{DistortionModel, correct_image};
-use dhct_scan::{ImageChannel, ScanGeometry, ScanPair};
-use dhct_sm4_io::{GeometryOverrides, write_atomically};
+use dhct_distortion::DistortionModel;
+use dhct_scan::{ScanGeometry, ScanPair};
+use dhct_sm4_io::GeometryOverrides;
 use serde::Deserialize;
 
+use crate::correct::corrected_files::{CorrectedImage, write_corrected_files};
 use crate::output_dir::StagedOutput;
 use crate::points::{POINTS_CSV, PointsSummary, map_points_file};
+use crate::setup::Extent;
 use crate::setup::read_pair;
 
 /// What `apply` needs of a `model.json`: the fitted model and the scan it was fitted on.
@@ -92,27 +94,23 @@ pub fn run(request: &ApplyRequest) -> Result<Applied> {
     Ok(Applied { written, points })
 }
 
-/// Writes the corrected images of every pass of `pair` into `folder`; returns their names.
+/// Writes the corrected images of every pass of `pair` into `folder` (on the scan's own
+/// grid, as `dhct correct` writes them by default); returns their names.
 fn write_corrected_images(
     model: &DistortionModel,
     pair: &ScanPair,
     folder: &Path,
 ) -> Result<Vec<String>> {
-    let geometry = pair.geometry();
-    let pitch = [geometry.pitch_x(), geometry.pitch_y()];
     let mut written = Vec::new();
-    for (pass, image) in pair.images() {
-        let z = correct_image(model, geometry, pass, &image.z)?;
-        let channel =
-            ImageChannel::new(format!("{} (corrected)", image.name), image.unit.clone(), z);
-        let stem = format!("corrected_{pass}");
-        write_atomically(&folder.join(format!("{stem}.tiff")), |w| {
-            dhct_sm4_io::tiff_file::write_f32_with_pixel_size(&channel, pitch, w)
-        })?;
-        write_atomically(&folder.join(format!("{stem}.gsf")), |w| {
-            dhct_sm4_io::gsf::write_pass(&channel, geometry, pass, w)
-        })?;
-        written.extend([format!("{stem}.tiff"), format!("{stem}.gsf")]);
+    for (pass, raw) in pair.images() {
+        let image = CorrectedImage {
+            stem: format!("corrected_{pass}"),
+            raw,
+            pass,
+            model,
+            geometry: pair.geometry(),
+        };
+        written.extend(write_corrected_files(folder, &image, Extent::Frame)?);
     }
     Ok(written)
 }

@@ -1,7 +1,7 @@
 //! `dhct correct`: the whole DHCT chain on one file (or a trace/retrace pair of files), with
 //! every result written into an output directory and summarised in `report.html`.
 
-mod corrected_files;
+pub(crate) mod corrected_files;
 pub mod feature_table;
 
 use std::path::{Path, PathBuf};

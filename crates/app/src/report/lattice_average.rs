@@ -4,9 +4,9 @@
 
 use nalgebra::{Matrix2, Vector2};
 
-use super::bars::ColourBar;
+use super::detail::Detail;
 use super::figures::{Figure, FigureInputs, PictureStyle, metres_per_picture_px};
-use super::overlays::sample_cell;
+use super::overlays::{cell_values, height_bar, sample_cell};
 use super::render::{Canvas, display_range, upscale_for};
 
 /// Side of the detail, nearest-neighbour distances.
@@ -22,11 +22,7 @@ pub fn lattice_average_picture(inputs: &FigureInputs, symmetrized: bool) -> Opti
         .passes
         .iter()
         .find(|p| p.pass == region.passes[0])?;
-    let values = if symmetrized {
-        &cell.symmetrized.values
-    } else {
-        &cell.averaged.values
-    };
+    let values = cell_values(cell, symmetrized);
     let [a1, a2] = lattice.primitive_vectors();
     let to_fraction = Matrix2::from_columns(&[a1, a2]).try_inverse()?;
     let fit = &region.fit;
@@ -34,14 +30,8 @@ pub fn lattice_average_picture(inputs: &FigureInputs, symmetrized: bool) -> Opti
     let origin = Vector2::from(fit.origin_m) + Vector2::from(*fit.set_offsets_m.first()?);
     let geometry = inputs.pair.geometry();
     let (rows, columns) = pass.corrected_image.dim();
-    let side = |pitch: f64, n: usize| {
-        ((DETAIL_NN * lattice.nearest_neighbour_distance() / pitch) as usize).clamp(8, n)
-    };
-    let (w, h) = (
-        side(geometry.pitch_x(), columns),
-        side(geometry.pitch_y(), rows),
-    );
-    let (c0, r0) = ((columns - w) / 2, (rows - h) / 2);
+    let detail = Detail::central(geometry, DETAIL_NN * lattice.nearest_neighbour_distance());
+    let (c0, r0, w, h) = (detail.c0, detail.r0, detail.width(), detail.height());
     let scale = upscale_for(h, w, 640);
     let range = display_range(values.view()).unwrap_or((0.0, 1.0));
     let canvas = Canvas::from_fn(w * scale, h * scale, inputs.colormap, range, |px, py| {
@@ -91,13 +81,7 @@ pub fn lattice_average_picture(inputs: &FigureInputs, symmetrized: bool) -> Opti
         &canvas,
         PictureStyle {
             metres_per_px: metres_per_picture_px(geometry, scale),
-            colour: Some(ColourBar {
-                colormap: inputs.colormap,
-                low: range.0,
-                high: range.1,
-                unit: "m".into(),
-                label: "height".into(),
-            }),
+            colour: Some(height_bar(inputs.colormap, range)),
             max_side: None,
         },
     ))

@@ -9,16 +9,12 @@ use dhct_distortion::{LocalDistortion, PassAnalysis};
 use dhct_scan::ScanGeometry;
 use ndarray::s;
 
+use super::detail::Detail;
 use super::figures::{
     Figure, FigureInputs, PictureStyle, channel_colour_bar, metres_per_picture_px,
 };
+use super::overlays::{GREEN_PX as GREEN, OUTLINE, SKY, WHITE};
 use super::render::{Canvas, display_range, upscale_for};
-
-/// Okabe–Ito sky blue and bluish green, white, and the outline under them.
-const SKY: [u8; 3] = [86, 180, 233];
-const GREEN: [u8; 3] = [0, 158, 115];
-const WHITE: [u8; 3] = [255, 255, 255];
-const OUTLINE: [u8; 3] = [20, 20, 20];
 
 /// Side of the detail, nearest-neighbour distances.
 const DETAIL_NN: f64 = 14.0;
@@ -37,9 +33,9 @@ pub fn local_distortion_figure(inputs: &FigureInputs) -> Option<Figure> {
     let geometry = inputs.pair.geometry();
     let raw = inputs.pair.image(analysed.pass)?;
     let nn_m = inputs.lattice.nearest_neighbour_distance();
-    let window = Window::central(geometry, DETAIL_NN * nn_m);
+    let window = Detail::central(geometry, DETAIL_NN * nn_m);
     let crop = raw.z.slice(s![window.r0..window.r1, window.c0..window.c1]);
-    let scale = upscale_for(window.r1 - window.r0, window.c1 - window.c0, 640);
+    let scale = upscale_for(window.height(), window.width(), 640);
     let range = display_range(crop);
     let mut canvas = Canvas::from_image(crop, inputs.colormap, range, scale);
     let shown = marked_features(analysed, &window, nn_m / geometry.pitch_x());
@@ -107,45 +103,11 @@ pub fn local_distortion_figure(inputs: &FigureInputs) -> Option<Figure> {
     ))
 }
 
-/// A crop of the raw image, pixel bounds `[r0, r1) × [c0, c1)`.
-struct Window {
-    r0: usize,
-    r1: usize,
-    c0: usize,
-    c1: usize,
-}
-
-impl Window {
-    /// The central square `side_m` wide (the whole image when smaller).
-    fn central(geometry: &ScanGeometry, side_m: f64) -> Window {
-        let (rows, columns) = (geometry.rows(), geometry.columns());
-        let side = |pitch: f64, n: usize| ((side_m / pitch).ceil() as usize).clamp(8, n);
-        let (w, h) = (
-            side(geometry.pitch_x(), columns),
-            side(geometry.pitch_y(), rows),
-        );
-        let (c0, r0) = ((columns - w) / 2, (rows - h) / 2);
-        Window {
-            r0,
-            r1: r0 + h,
-            c0,
-            c1: c0 + w,
-        }
-    }
-
-    fn contains(&self, x: f64, y: f64, margin: f64) -> bool {
-        x >= self.c0 as f64 + margin
-            && x <= self.c1 as f64 - 1.0 - margin
-            && y >= self.r0 as f64 + margin
-            && y <= self.r1 as f64 - 1.0 - margin
-    }
-}
-
 /// Local distortions inside `window` (a neighbour distance from its edge), greedily kept
 /// [`SPACING_NN`] neighbour distances (`nn_px`) apart.
 fn marked_features<'a>(
     pass: &'a PassAnalysis,
-    window: &Window,
+    window: &Detail,
     nn_px: f64,
 ) -> Vec<&'a LocalDistortion> {
     let mut kept: Vec<&LocalDistortion> = Vec::new();

@@ -3,6 +3,7 @@
 //! formatting of quantities. Imports neither `correct` nor `diagnose`.
 
 pub mod bars;
+pub(crate) mod detail;
 pub mod figures;
 pub mod html;
 pub(crate) mod lattice_average;

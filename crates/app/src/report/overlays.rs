@@ -13,12 +13,12 @@ use super::figures::{
 };
 use super::render::{Canvas, display_range, heat_colour, upscale_for};
 
-const WHITE: [u8; 3] = [255, 255, 255];
+pub(crate) const WHITE: [u8; 3] = [255, 255, 255];
 /// Outlines under the markers, so they show on bright atoms too.
-const OUTLINE: [u8; 3] = [20, 20, 20];
+pub(crate) const OUTLINE: [u8; 3] = [20, 20, 20];
 /// Okabe–Ito sky blue, bluish green and vermilion as picture colours.
-const SKY: [u8; 3] = [86, 180, 233];
-const GREEN_PX: [u8; 3] = [0, 158, 115];
+pub(crate) const SKY: [u8; 3] = [86, 180, 233];
+pub(crate) const GREEN_PX: [u8; 3] = [0, 158, 115];
 const VERMILION_PX: [u8; 3] = [213, 94, 0];
 
 /// The `q` quantile of sorted values (`fallback` when empty).
@@ -186,6 +186,26 @@ pub fn lattice_overlay(inputs: &FigureInputs) -> Option<Figure> {
     ))
 }
 
+/// The averaged cell's values, or the symmetrised cell's.
+pub(crate) fn cell_values(cell: &UnitCellAnalysis, symmetrized: bool) -> &Array2<f64> {
+    if symmetrized {
+        &cell.symmetrized.values
+    } else {
+        &cell.averaged.values
+    }
+}
+
+/// The colour bar of a unit-cell picture: heights over `range`, metres.
+pub(crate) fn height_bar(colormap: Colormap, range: (f64, f64)) -> ColourBar {
+    ColourBar {
+        colormap,
+        low: range.0,
+        high: range.1,
+        unit: "m".into(),
+        label: "height".into(),
+    }
+}
+
 /// Periodic bilinear sample of a cell grid at fractional `(u, v)`.
 pub(crate) fn sample_cell(values: &Array2<f64>, u: f64, v: f64) -> f64 {
     let r = values.nrows() as f64;
@@ -328,11 +348,7 @@ fn cell_caption(cell: &UnitCellAnalysis, lattice: &dyn Lattice, symmetrized: boo
 /// outline, the asymmetric unit (symmetrised only) and the confidence ellipses.
 pub fn cell_picture(inputs: &FigureInputs, symmetrized: bool) -> Option<Figure> {
     let (lattice, cell) = (inputs.lattice, inputs.analysis.unit_cell.as_ref()?);
-    let values = if symmetrized {
-        &cell.symmetrized.values
-    } else {
-        &cell.averaged.values
-    };
+    let values = cell_values(cell, symmetrized);
     let [a1, a2] = lattice.primitive_vectors();
     let inverse = Matrix2::from_columns(&[a1, a2]).try_inverse()?;
     let window = CellWindow::around(lattice);
@@ -378,13 +394,7 @@ pub fn cell_picture(inputs: &FigureInputs, symmetrized: bool) -> Option<Figure> 
             "Translationally averaged unit cell (paper Fig. 10)".to_string(),
         )
     };
-    let colour = ColourBar {
-        colormap: inputs.colormap,
-        low: range.0,
-        high: range.1,
-        unit: "m".into(),
-        label: "height".into(),
-    };
+    let colour = height_bar(inputs.colormap, range);
     Some(Figure::picture(
         stem,
         &title,
