@@ -197,16 +197,14 @@ fn read_row(
         .filter(|&at| !record.get(at).unwrap_or("").trim().is_empty())
         .map(|at| number((at, "t_s")))
         .transpose()?;
+    // No column or an empty cell: the trace.
     let pass = match columns.pass.map(|at| record.get(at).unwrap_or("").trim()) {
-        None | Some("" | "trace") => ScanPass::Trace,
-        Some("retrace") => ScanPass::Retrace,
-        Some(other) => {
-            return Err(PointsError::UnknownPass {
-                path: path.to_path_buf(),
-                row,
-                value: other.to_string(),
-            });
-        }
+        None | Some("") => ScanPass::Trace,
+        Some(name) => ScanPass::from_name(name).ok_or_else(|| PointsError::UnknownPass {
+            path: path.to_path_buf(),
+            row,
+            value: name.to_string(),
+        })?,
     };
     if !inside_frame(geometry, xy_px) {
         return Err(PointsError::OutsideFrame {

@@ -238,11 +238,7 @@ impl Correction {
     /// The corrected image of `pass` ("trace" or "retrace"), float64 rows × columns on the
     /// sample-frame grid (NaN where there is no data), or None.
     fn corrected<'py>(&self, py: Python<'py>, pass: &str) -> Option<Bound<'py, PyArray2<f64>>> {
-        let pass = match pass {
-            "trace" => ScanPass::Trace,
-            "retrace" => ScanPass::Retrace,
-            _ => return None,
-        };
+        let pass = ScanPass::from_name(pass)?;
         self.inner
             .analysis
             .passes

@@ -28,15 +28,9 @@ pub fn map_points<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let saved: SavedModel = serde_json::from_str(model_json)
         .map_err(|e| OptionError::new_err(format!("not a model.json written by dhct: {e}")))?;
-    let pass = match pass_name {
-        "trace" => ScanPass::Trace,
-        "retrace" => ScanPass::Retrace,
-        other => {
-            return Err(OptionError::new_err(format!(
-                "pass_={other:?}: use \"trace\" or \"retrace\""
-            )));
-        }
-    };
+    let pass = ScanPass::from_name(pass_name).ok_or_else(|| {
+        OptionError::new_err(format!("pass_={pass_name:?}: use \"trace\" or \"retrace\""))
+    })?;
     let (x, y) = (x.as_slice()?, y.as_slice()?);
     let t = t.as_ref().map(|t| t.as_slice()).transpose()?;
     if x.len() != y.len() || t.is_some_and(|t| t.len() != x.len()) {

@@ -85,6 +85,11 @@ impl ScanPass {
             ScanPass::Retrace => "retrace",
         }
     }
+
+    /// The pass whose [`ScanPass::name`] is `name`, if any.
+    pub fn from_name(name: &str) -> Option<ScanPass> {
+        ScanPass::BOTH.into_iter().find(|p| p.name() == name)
+    }
 }
 
 impl std::fmt::Display for ScanPass {

@@ -42,14 +42,12 @@ struct SidecarFields {
 
 impl SidecarFields {
     fn pass(&self, path: &Path) -> Result<ScanPass, ReadError> {
-        match self.pass.as_str() {
-            "trace" => Ok(ScanPass::Trace),
-            "retrace" => Ok(ScanPass::Retrace),
-            other => Err(sidecar_error(
+        ScanPass::from_name(&self.pass).ok_or_else(|| {
+            sidecar_error(
                 path,
-                format!("pass is {other:?}, not \"trace\" or \"retrace\""),
-            )),
-        }
+                format!("pass is {:?}, not \"trace\" or \"retrace\"", self.pass),
+            )
+        })
     }
 
     /// The scan geometry the sidecar states (the trace's fast direction is this pass's,
