@@ -5,6 +5,7 @@
 use dhct_calibrate::PairCalibration;
 use dhct_distortion::{DhctResult, Parameter};
 use dhct_lattice::Lattice;
+use dhct_scan::quantity::{si, value_with_sigma};
 use dhct_scan::{ScanGeometry, ScanPass, ValueSource};
 use serde::{Deserialize, Serialize};
 
@@ -269,12 +270,16 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
         .at_bounds
         .iter()
         .map(|b| {
+            let unit = unit_of(&model.parameters, &b.parameter);
             Warning::new(
                 WarningCode::ParameterAtBound,
                 format!(
-                    "{} = {:.4e} ended at a bound of its range [{:.3e}, {:.3e}]: the data do \
-                     not determine it",
-                    b.parameter, b.value, b.range[0], b.range[1]
+                    "{} = {} ended at a bound of its range [{}, {}]: the data do not \
+                     determine it",
+                    b.parameter,
+                    si(b.value, unit),
+                    si(b.range[0], unit),
+                    si(b.range[1], unit)
                 ),
                 "treat the drift/creep split as unmeasured; a longer or second frame, or \
                  the real scan timing, constrains it",
@@ -334,6 +339,14 @@ pub(crate) fn fit_warnings(dhct: &DhctResult) -> Vec<Warning> {
     warnings
 }
 
+/// The unit of the fitted parameter `name` (empty when it is not among `parameters`).
+fn unit_of<'a>(parameters: &'a [Parameter], name: &str) -> &'a str {
+    parameters
+        .iter()
+        .find(|p| p.name == name)
+        .map_or("", |p| p.unit.as_str())
+}
+
 /// One warning for every parameter whose uncertainty exceeds its value or is undetermined.
 fn uncertain(parameters: &[Parameter]) -> Option<Warning> {
     let listed: Vec<String> = parameters
@@ -341,9 +354,13 @@ fn uncertain(parameters: &[Parameter]) -> Option<Warning> {
         .filter(|p| !p.sigma.is_finite() || p.sigma > p.value.abs())
         .map(|p| {
             if p.sigma.is_finite() {
-                format!("{} = {:.3e} ± {:.1e} {}", p.name, p.value, p.sigma, p.unit)
+                format!(
+                    "{} = {}",
+                    p.name,
+                    value_with_sigma(p.value, p.sigma, &p.unit)
+                )
             } else {
-                format!("{} = {:.3e} {} (undetermined)", p.name, p.value, p.unit)
+                format!("{} = {} (undetermined)", p.name, si(p.value, &p.unit))
             }
         })
         .collect();

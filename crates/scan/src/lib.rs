@@ -7,6 +7,8 @@
 //! * [`ScanPair`]: the trace and retrace images of one channel, sharing one geometry.
 //! * [`HysteresisLaw`]: the scanner's apparent local scale against time since line start.
 //! * [`ScanFile`]: everything a reader found in one file.
+//! * [`quantity`]: a value with its unit (and 1σ) written for people, the same in every
+//!   crate's messages and in the report.
 //!
 //! # Conventions
 //!
@@ -46,6 +48,7 @@ mod file;
 mod geometry;
 mod hysteresis;
 mod pair;
+pub mod quantity;
 
 pub use channel::ImageChannel;
 pub use choice::NoSuchChannel;

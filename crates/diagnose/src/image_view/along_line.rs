@@ -393,9 +393,9 @@ fn refined_bin(power: &[f64], k: usize) -> f64 {
 /// `value` in `unit`, picometres when the unit is metres.
 pub(crate) fn z_value(value: f64, unit: &str) -> String {
     if unit == "m" {
-        format!("{:.2} pm", value * 1e12)
+        dhct_scan::quantity::picometres(value)
     } else {
-        format!("{value:.3e} {unit}")
+        dhct_scan::quantity::si(value, unit)
     }
 }
 

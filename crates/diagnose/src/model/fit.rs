@@ -39,6 +39,24 @@ pub struct FittedParameter {
     pub sigma: Option<f64>,
 }
 
+impl FittedParameter {
+    /// The SI unit its name ends with (`velocity_x_m_per_s` → `m/s`); empty for a ratio.
+    pub fn unit(&self) -> &'static str {
+        const SUFFIXES: [(&str, &str); 6] = [
+            ("_m_per_s2", "m/s^2"),
+            ("_m_per_s", "m/s"),
+            ("_m", "m"),
+            ("_s", "s"),
+            ("_hz", "Hz"),
+            ("_rad", "rad"),
+        ];
+        SUFFIXES
+            .iter()
+            .find(|(suffix, _)| self.name.ends_with(suffix))
+            .map_or("", |(_, unit)| unit)
+    }
+}
+
 pub(crate) fn weighted(residuals: &[[f64; 2]], sigma: [f64; 2]) -> DVector<f64> {
     DVector::from_iterator(
         2 * residuals.len(),

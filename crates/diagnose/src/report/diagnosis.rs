@@ -12,6 +12,7 @@ use crate::report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRAC
 use crate::report::verdict::{Verdict, VerdictKind, names};
 use crate::search::candidates::Candidate;
 use crate::search::select::CandidateScore;
+use dhct_scan::quantity::value_with_sigma;
 
 /// A fitted position-level model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -305,10 +306,8 @@ impl DiagnosisReport {
                 )?;
             }
             for p in &a.parameters {
-                match p.sigma {
-                    Some(s) => writeln!(f, "    {} = {:.4e} ± {:.1e}", p.name, p.value, s)?,
-                    None => writeln!(f, "    {} = {:.4e} (fixed)", p.name, p.value)?,
-                }
+                let shown = value_with_sigma(p.value, p.sigma.unwrap_or(0.0), p.unit());
+                writeln!(f, "    {} = {shown}", p.name)?;
             }
         }
         Ok(())
