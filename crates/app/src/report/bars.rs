@@ -137,7 +137,7 @@ fn colour_bar(width: usize, height: usize, bar: &ColourBar) -> String {
 
 /// A value for a colour-bar tick: lengths in pm (or nm), other units with an SI prefix,
 /// dimensionless values with two decimals.
-fn tick_label(value: f64, unit: &str) -> String {
+pub(super) fn tick_label(value: f64, unit: &str) -> String {
     let text = match unit {
         "m" if value.abs() < 1e-9 => units::picometres(value),
         "m" => units::length(value),

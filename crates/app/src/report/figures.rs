@@ -9,6 +9,7 @@ use dhct_sm4_io::png_file::Colormap;
 use ndarray::Array2;
 use rayon::prelude::*;
 
+use super::annotated_png::annotated;
 use super::bars::{ColourBar, picture_svg};
 use super::plots::Plot;
 use super::render::{Canvas, display_range, upscale_for};
@@ -31,8 +32,8 @@ pub struct Figure {
 /// What a figure holds.
 pub enum FigureContent {
     /// A picture: the PNG file (full resolution, or reduced for views whose full
-    /// resolution is another output) and the SVG shown in the report (a preview of it with
-    /// scale and colour bars).
+    /// resolution is another output; scale and colour bars drawn in) and the SVG shown in
+    /// the report (a preview of it with the same bars as vector graphics).
     Picture {
         /// The PNG file's bytes.
         png: Vec<u8>,
@@ -70,25 +71,24 @@ impl Figure {
         canvas: &Canvas,
         style: PictureStyle,
     ) -> Figure {
+        // A reduced copy's pixel averages `factor × factor` canvas pixels.
+        let reduced_pitch = |max_side: usize| {
+            let factor = canvas.reduction(max_side) as f64;
+            style.metres_per_px.map(|[x, y]| [x * factor, y * factor])
+        };
         let preview = canvas.preview(PREVIEW);
         let shown = preview.as_ref().unwrap_or(canvas);
-        // The preview averages `factor × factor` canvas pixels (see `Canvas::preview`).
-        let factor = match preview {
-            Some(_) => canvas.width.max(canvas.height).div_ceil(PREVIEW) as f64,
-            None => 1.0,
-        };
-        let metres_per_px = style.metres_per_px.map(|[x, y]| [x * factor, y * factor]);
         let svg = picture_svg(
             &shown.for_page(),
             shown.width,
             shown.height,
-            metres_per_px,
+            reduced_pitch(PREVIEW),
             style.colour.as_ref(),
         );
-        let png = match style.max_side.and_then(|max| canvas.preview(max)) {
-            Some(reduced) => reduced.png(),
-            None => canvas.png(),
-        };
+        let max_side = style.max_side.unwrap_or(usize::MAX);
+        let reduced = canvas.preview(max_side);
+        let file = reduced.as_ref().unwrap_or(canvas);
+        let png = annotated(file, reduced_pitch(max_side), style.colour.as_ref()).png();
         Figure {
             stem: stem.into(),
             title: title.into(),

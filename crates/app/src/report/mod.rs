@@ -2,6 +2,7 @@
 //! file, the plots, pictures with scale and colour bars, `model.json`'s content and the
 //! formatting of quantities. Imports neither `correct` nor `diagnose`.
 
+pub(crate) mod annotated_png;
 pub mod bars;
 pub(crate) mod detail;
 pub mod figures;
@@ -12,6 +13,7 @@ pub(crate) mod model_plots;
 pub(crate) mod overlays;
 pub mod page;
 pub mod plots;
+pub(crate) mod raster_text;
 pub mod render;
 pub mod scatter;
 pub mod summary;

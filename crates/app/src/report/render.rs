@@ -200,10 +200,44 @@ impl Canvas {
         self.line([x, y - size], [x, y + size], width, colour);
     }
 
+    /// A `width × height` canvas of one colour.
+    pub fn filled(width: usize, height: usize, colour: [u8; 3]) -> Canvas {
+        Canvas {
+            width,
+            height,
+            rgb: colour.repeat(width * height),
+        }
+    }
+
+    /// Copies `other` onto this canvas with its top-left corner at (`x`, `y`), clipped.
+    pub fn paste(&mut self, other: &Canvas, x: usize, y: usize) {
+        let columns = other.width.min(self.width.saturating_sub(x));
+        for row in 0..other.height.min(self.height.saturating_sub(y)) {
+            let from = row * other.width * 3;
+            let to = ((y + row) * self.width + x) * 3;
+            self.rgb[to..to + columns * 3].copy_from_slice(&other.rgb[from..from + columns * 3]);
+        }
+    }
+
+    /// Fills the rectangle from (`x`, `y`), `width × height` px, clipped.
+    pub fn fill_rect(&mut self, x: i64, y: i64, width: usize, height: usize, colour: [u8; 3]) {
+        for yy in y..y + height as i64 {
+            for xx in x..x + width as i64 {
+                self.blend(xx, yy, colour, 1.0);
+            }
+        }
+    }
+
+    /// By how much [`Canvas::preview`] reduces this canvas for `max_side` (1: not at all):
+    /// each preview pixel averages `factor × factor` canvas pixels.
+    pub fn reduction(&self, max_side: usize) -> usize {
+        self.width.max(self.height).div_ceil(max_side.max(1)).max(1)
+    }
+
     /// A box-filtered copy at most `max_side` px along its longer side, or `None` when
     /// this canvas is already that small.
     pub fn preview(&self, max_side: usize) -> Option<Canvas> {
-        let factor = self.width.max(self.height).div_ceil(max_side.max(1));
+        let factor = self.reduction(max_side);
         if factor <= 1 {
             return None;
         }
