@@ -36,11 +36,15 @@ pub enum FileFormat {
     OmicronMatrix,
     /// WSxM image (`.top`, `.stp`; text header + binary).
     Wsxm,
+    /// SPECS/Aarhus `.mul` (several images per file) and its index-less `.flm` film variant.
+    AarhusMul,
+    /// JPK Instruments image (`.jpk`, `.jpk-qi-image`: a TIFF with JPK's own tags).
+    Jpk,
 }
 
 impl FileFormat {
     /// Every format, in the order `dhct --help` and the README list them.
-    pub const ALL: [FileFormat; 14] = [
+    pub const ALL: [FileFormat; 16] = [
         FileFormat::RhkSm4,
         FileFormat::RhkSm3,
         FileFormat::NanonisSxm,
@@ -54,6 +58,8 @@ impl FileFormat {
         FileFormat::CreatecDat,
         FileFormat::OmicronMatrix,
         FileFormat::Wsxm,
+        FileFormat::AarhusMul,
+        FileFormat::Jpk,
         FileFormat::Png,
     ];
 
@@ -98,6 +104,8 @@ impl FileFormat {
             FileFormat::CreatecDat => "Createc DAT",
             FileFormat::OmicronMatrix => "Omicron MATRIX",
             FileFormat::Wsxm => "WSxM",
+            FileFormat::AarhusMul => "Aarhus MUL",
+            FileFormat::Jpk => "JPK",
         }
     }
 }

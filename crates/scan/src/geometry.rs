@@ -37,6 +37,7 @@ pub struct ScanGeometry {
     offset_y: f64,
     scale_source: ValueSource,
     timing_source: ValueSource,
+    frame: usize,
 }
 
 /// Where a geometry value came from.
@@ -93,6 +94,7 @@ impl ScanGeometry {
             offset_y: 0.0,
             scale_source: ValueSource::Stated,
             timing_source: ValueSource::Stated,
+            frame: 0,
         };
         geometry.validate()?;
         Ok(geometry)
@@ -174,6 +176,21 @@ impl ScanGeometry {
     pub fn with_timing_source(mut self, source: ValueSource) -> ScanGeometry {
         self.timing_source = source;
         self
+    }
+
+    /// Sets which frame of a multi-frame file this is (see [`ScanGeometry::frame`]).
+    pub fn with_frame(mut self, frame: usize) -> ScanGeometry {
+        self.frame = frame;
+        self
+    }
+
+    /// Which recording of its file this geometry belongs to: 0 for a file of one frame;
+    /// 0, 1, … in file order for a file that holds several frames recorded one after
+    /// another (SPECS `.mul` and `.flm`). Channels of one frame share its timing; channels
+    /// of different frames were recorded at different times, so one frame's distortion
+    /// model does not apply to another.
+    pub fn frame(&self) -> usize {
+        self.frame
     }
 
     /// Where the pixel pitch came from.
@@ -448,6 +465,12 @@ struct RawScanGeometry {
     scale_source: ValueSource,
     #[serde(default)]
     timing_source: ValueSource,
+    #[serde(default, skip_serializing_if = "is_zero")]
+    frame: usize,
+}
+
+fn is_zero(frame: &usize) -> bool {
+    *frame == 0
 }
 
 impl TryFrom<RawScanGeometry> for ScanGeometry {
@@ -468,6 +491,7 @@ impl TryFrom<RawScanGeometry> for ScanGeometry {
         .map(|g| {
             g.with_scale_source(raw.scale_source)
                 .with_timing_source(raw.timing_source)
+                .with_frame(raw.frame)
         })
     }
 }
@@ -488,6 +512,7 @@ impl From<ScanGeometry> for RawScanGeometry {
             offset_y_m: g.offset_y,
             scale_source: g.scale_source,
             timing_source: g.timing_source,
+            frame: g.frame,
         }
     }
 }

@@ -21,7 +21,12 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
     } else if bytes.starts_with(b"\x93NUMPY") {
         Some(FileFormat::Npy)
     } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-        Some(FileFormat::Tiff)
+        // JPK's images are TIFFs with JPK's own tags.
+        if crate::jpk::looks_like_jpk(bytes) {
+            Some(FileFormat::Jpk)
+        } else {
+            Some(FileFormat::Tiff)
+        }
     } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         Some(FileFormat::Png)
     } else if bytes.starts_with(crate::gwy::MAGIC) || bytes.starts_with(crate::gwy::OLD_MAGIC) {
@@ -40,6 +45,9 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::OmicronMatrix)
     } else if crate::wsxm::looks_like_wsxm(bytes) {
         Some(FileFormat::Wsxm)
+    } else if crate::mul::looks_like_mul(bytes) {
+        // Last: a MUL file has no magic of its own, only a plausible structure.
+        Some(FileFormat::AarhusMul)
     } else {
         None
     }

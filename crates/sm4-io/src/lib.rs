@@ -42,8 +42,10 @@ mod error;
 pub mod gsf;
 pub mod gwy;
 pub mod iso28600;
+pub mod jpk;
 pub mod limits;
 pub mod matrix;
+pub mod mul;
 pub mod nanoscope;
 pub mod nid;
 pub mod npy;
@@ -144,6 +146,8 @@ pub fn read_as_limited(
         FileFormat::CreatecDat => createc::read_limited(bytes, limits),
         FileFormat::OmicronMatrix => matrix::read_alone(bytes),
         FileFormat::Wsxm => wsxm::read_limited(bytes, limits),
+        FileFormat::AarhusMul => mul::read_limited(bytes, limits),
+        FileFormat::Jpk => jpk::read_limited(bytes, limits),
         FileFormat::Png => Err(ReadError::unsupported(
             FileFormat::Png,
             "PNG is an export format for pictures (no physical scale or float z); \

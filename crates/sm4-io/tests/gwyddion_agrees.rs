@@ -1,7 +1,7 @@
-//! Gwyddion, an independent maintained reader, against dhct's Nanosurf and Nanoscope
-//! readers: when the `gwyddion` program is installed (Debian package `gwyddion`), each real
-//! file is converted with `gwyddion --convert-to-gwy` and the `.gwy`, read by dhct's GWY
-//! reader, must hold the same images, in display orientation, with the same physical size
+//! Gwyddion, an independent maintained reader, against dhct's Nanosurf, Nanoscope and
+//! SPECS/Aarhus readers: when the `gwyddion` program is installed (Debian package
+//! `gwyddion`), each real file is converted with `gwyddion --convert-to-gwy` and the `.gwy`,
+//! read by dhct's GWY reader, must hold the same images, in display orientation, with the same physical size
 //! and units. Without `gwyddion` the test prints a note and passes.
 
 use std::path::{Path, PathBuf};
@@ -48,14 +48,17 @@ fn gwyddion_reads_the_same_images() {
         "nanosurf_grid_3um.nid",
         "bruker_example_40um.spm",
         "nanoscope_d3100_2um.000",
+        "specs_aarhus_100nm.mul",
     ]
     .iter()
     .map(|n| real(n))
     .collect();
     if let Some(dir) = std::env::var_os("DHCT_REAL_DATA") {
-        let stm = Path::new(&dir).join("stm-nanosurf-nid.nid");
-        if stm.is_file() {
-            files.push(stm);
+        for name in ["stm-nanosurf-nid.nid", "stm-aarhus-mul-b.mul"] {
+            let file = Path::new(&dir).join(name);
+            if file.is_file() {
+                files.push(file);
+            }
         }
     }
     let dir = tempfile::tempdir().unwrap();

@@ -306,6 +306,16 @@ fn write_other_channels(dir: &Path, corrected: &Corrected) -> Result<Vec<String>
             &corrected.config.geometry,
             Some(&first.name),
         )?;
+        if pair.geometry().frame() != geometry.frame() {
+            eprintln!(
+                "note: channel {} belongs to frame {} of the file, recorded at another time \
+                 than the analysed frame {}: not corrected with this frame's model",
+                first.name,
+                pair.geometry().frame(),
+                geometry.frame()
+            );
+            continue;
+        }
         if (pair.geometry().columns(), pair.geometry().rows())
             != (geometry.columns(), geometry.rows())
         {
