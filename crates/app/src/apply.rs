@@ -41,6 +41,8 @@ pub struct ApplyRequest<'a> {
     pub points: Option<&'a Path>,
     /// The output folder.
     pub output: &'a Path,
+    /// The grid of the corrected images (default: the scan's own frame).
+    pub extent: Extent,
     /// Replace an earlier run's folder.
     pub overwrite: bool,
 }
@@ -80,7 +82,7 @@ pub fn run(request: &ApplyRequest) -> Result<Applied> {
     }
     let staged = StagedOutput::prepare(request.output, request.overwrite)?;
     let mut written = match &pair {
-        Some(pair) => write_corrected_images(&saved.model, pair, staged.path())?,
+        Some(pair) => write_corrected_images(&saved.model, pair, staged.path(), request.extent)?,
         None => Vec::new(),
     };
     let points = request
@@ -94,12 +96,13 @@ pub fn run(request: &ApplyRequest) -> Result<Applied> {
     Ok(Applied { written, points })
 }
 
-/// Writes the corrected images of every pass of `pair` into `folder` (on the scan's own
-/// grid, as `dhct correct` writes them by default); returns their names.
+/// Writes the corrected images of every pass of `pair` into `folder` on the grid `extent`
+/// names, as `dhct correct` writes them; returns their names.
 fn write_corrected_images(
     model: &DistortionModel,
     pair: &ScanPair,
     folder: &Path,
+    extent: Extent,
 ) -> Result<Vec<String>> {
     let mut written = Vec::new();
     for (pass, raw) in pair.images() {
@@ -110,7 +113,7 @@ fn write_corrected_images(
             model,
             geometry: pair.geometry(),
         };
-        written.extend(write_corrected_files(folder, &image, Extent::Frame)?);
+        written.extend(write_corrected_files(folder, &image, extent)?);
     }
     Ok(written)
 }

@@ -169,6 +169,9 @@ enum Command {
         /// sample-frame position and 1σ to OUTDIR/points_corrected.csv.
         #[arg(long, value_name = "POINTS.csv")]
         points: Option<PathBuf>,
+        /// The grid of the corrected images, as for `correct`: frame (default) or full.
+        #[arg(long, value_parser = parse_extent)]
+        extent: Option<correct::Extent>,
         /// Replace an earlier run's output folder.
         #[arg(long)]
         overwrite: bool,
@@ -478,6 +481,7 @@ fn main() -> ExitCode {
             output,
             channel,
             points,
+            extent,
             overwrite,
         } => apply::run(&apply::ApplyRequest {
             model,
@@ -486,6 +490,7 @@ fn main() -> ExitCode {
             channel: channel.as_deref(),
             points: points.as_deref(),
             output,
+            extent: extent.unwrap_or_default(),
             overwrite: *overwrite,
         })
         .map(|applied| print!("{}", apply::describe(&applied, output))),

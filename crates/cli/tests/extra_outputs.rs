@@ -348,7 +348,7 @@ fn gsf_number(bytes: &[u8], key: &str) -> f64 {
 /// `--extent full`: the corrected GSF holds every corrected pixel on a grid of the same
 /// pitch, its origin in XOffset/YOffset; where it overlaps the frame it holds the frame's
 /// values, it holds pixels the frame crops, and every feature's corrected position lies on
-/// it.
+/// it; `dhct apply --extent full` writes the same file.
 #[test]
 fn the_full_extent_keeps_every_corrected_pixel() {
     let dir = tempfile::tempdir().unwrap();
@@ -396,4 +396,23 @@ fn the_full_extent_keeps_every_corrected_pixel() {
         let on_grid = (0..2).all(|k| (-0.5..size[k] - 0.5).contains(&(p[k] - origin[k] as f64)));
         assert!(on_grid, "{p:?} off the full grid at {origin:?} {size:?}");
     }
+    // `dhct apply --extent full` with the saved model writes the same full grid.
+    let applied = dir.path().join("applied");
+    let run = common::dhct()
+        .args(["apply", "--extent", "full", "-o"])
+        .arg(&applied)
+        .arg(full.join("model.json"))
+        .arg(example())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(
+        std::fs::read(applied.join("corrected_trace.gsf")).unwrap(),
+        bytes,
+        "apply --extent full writes what correct --extent full wrote"
+    );
 }
