@@ -5,7 +5,8 @@
 //! `cargo bench -p dhct-features --bench features [-- --write-dir ABSOLUTE_DIR]`
 //! With `--write-dir DIR`, the trace image (`trace.npy`), its true feature positions
 //! (`truth_trace.csv`), our features (`dhct_trace.csv`) and our timing (`dhct_timing.json`)
-//! are written there for `scripts/atomap_compare.py`.
+//! are written there, for comparing with other localisation tools (the Atomap comparison
+//! on equal terms is `scripts/peers/compare.py`).
 
 use std::time::Instant;
 
