@@ -76,10 +76,47 @@ impl GeometryFactory {
         metadata: &mut BTreeMap<String, String>,
     ) -> Result<ScanGeometry, ReadError> {
         let geometry_error = |source| ReadError::geometry(FORMAT, source);
+        let (pitch_x, pitch_y, scale_source) = self.pitch(columns, rows, metadata);
+        let (line_time, turnaround, timing) = self.timing(columns, metadata);
+        let (slow, direction) = self.slow_direction(reflect, metadata);
+        let timing_source = if timing == ValueSource::Stated && direction == ValueSource::Stated {
+            ValueSource::Stated
+        } else {
+            ValueSource::Assumed
+        };
+        let mut geometry = ScanGeometry::from_line_time(
+            columns,
+            rows,
+            pitch_x,
+            pitch_y,
+            line_time,
+            ScanDirection::Right,
+            slow,
+        )
+        .and_then(|g| g.with_turnaround(turnaround))
+        .map_err(geometry_error)?
+        .with_scale_source(scale_source)
+        .with_timing_source(timing_source);
+        if let Some(theta) = self.theta {
+            geometry = geometry.with_scan_angle(theta).map_err(geometry_error)?;
+        }
+        if let Some((x, y)) = self.centre(reflect) {
+            geometry = geometry.with_offset(x, y).map_err(geometry_error)?;
+        }
+        Ok(geometry)
+    }
+
+    /// Pixel pitch along x and y (metres) from the grid lengths, or the placeholder.
+    fn pitch(
+        &self,
+        columns: usize,
+        rows: usize,
+        metadata: &mut BTreeMap<String, String>,
+    ) -> (f64, f64, ValueSource) {
         let pitch = self
             .lengths
             .map(|(u, v)| (u.abs() / columns as f64, v.abs() / rows as f64));
-        let (pitch_x, pitch_y, scale_source) = match pitch {
+        match pitch {
             Some((x, y))
                 if plausible(x, &PLAUSIBLE_PITCH_M) && plausible(y, &PLAUSIBLE_PITCH_M) =>
             {
@@ -99,8 +136,16 @@ impl GeometryFactory {
                 );
                 (ASSUMED_PITCH, ASSUMED_PITCH, ValueSource::Assumed)
             }
-        };
+        }
+    }
 
+    /// Line time per pass and turnaround (seconds) from the line rate and duty cycle, or
+    /// the placeholder; the source says which.
+    fn timing(
+        &self,
+        columns: usize,
+        metadata: &mut BTreeMap<String, String>,
+    ) -> (f64, f64, ValueSource) {
         let mut timing_source = ValueSource::Stated;
         // The line pair period and the part of it spent scanning.
         let pair_period = self
@@ -151,7 +196,17 @@ impl GeometryFactory {
             );
             (ASSUMED_PIXEL_PERIOD * columns as f64, 0.0)
         };
+        (line_time, turnaround, timing_source)
+    }
 
+    /// The slow direction in display orientation, assumed when `Motion` is unknown or the
+    /// grid is reflected.
+    fn slow_direction(
+        &self,
+        reflect: bool,
+        metadata: &mut BTreeMap<String, String>,
+    ) -> (ScanDirection, ValueSource) {
+        let mut timing_source = ValueSource::Stated;
         // Which end of the stored rows was acquired first, and where it is displayed.
         let first_stored_first = match self.bottom_up {
             Some(bottom_up) => bottom_up,
@@ -187,35 +242,21 @@ impl GeometryFactory {
         } else {
             ScanDirection::Down
         };
-        let mut geometry = ScanGeometry::from_line_time(
-            columns,
-            rows,
-            pitch_x,
-            pitch_y,
-            line_time,
-            ScanDirection::Right,
-            slow,
-        )
-        .and_then(|g| g.with_turnaround(turnaround))
-        .map_err(geometry_error)?
-        .with_scale_source(scale_source)
-        .with_timing_source(timing_source);
-        let theta = self.theta.unwrap_or(0.0);
-        if self.theta.is_some() {
-            geometry = geometry.with_scan_angle(theta).map_err(geometry_error)?;
+        (slow, timing_source)
+    }
+
+    /// The grid's centre (metres): the origin corner plus half the grid, rotated by θ;
+    /// `None` when the grid is reflected or its origin or lengths are missing.
+    fn centre(&self, reflect: bool) -> Option<(f64, f64)> {
+        let ((x0, y0), (u, v)) = (self.origin?, self.lengths?);
+        if reflect {
+            return None;
         }
-        if let (Some((x0, y0)), Some((u, v)), false) = (self.origin, self.lengths, reflect) {
-            let (sin, cos) = theta.sin_cos();
-            let centre = (
-                x0 + 0.5 * (u * cos - v * sin),
-                y0 + 0.5 * (u * sin + v * cos),
-            );
-            if centre.0.is_finite() && centre.1.is_finite() {
-                geometry = geometry
-                    .with_offset(centre.0, centre.1)
-                    .map_err(geometry_error)?;
-            }
-        }
-        Ok(geometry)
+        let (sin, cos) = self.theta.unwrap_or(0.0).sin_cos();
+        let centre = (
+            x0 + 0.5 * (u * cos - v * sin),
+            y0 + 0.5 * (u * sin + v * cos),
+        );
+        (centre.0.is_finite() && centre.1.is_finite()).then_some(centre)
     }
 }
