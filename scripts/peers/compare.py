@@ -3,7 +3,7 @@
 
 Usage:
     cargo run --release -p dhct-bench --bin headline -- --sizes "" --repeats 1 \
-        --peers-dir "$PWD/target/peers" [--peer-size 1024]
+        --peers-dir "$PWD/target/peers" [--peer-size 1024] [--peer-static]
     python3 scripts/peers/compare.py "$PWD/target/peers" [--json OUT.json]
 
 The bench binary writes into the directory: `trace.npy` (the simulated headline-physics
@@ -363,6 +363,11 @@ def run_inside(directory, out_json, failed):
         a["time_ratio_atomap_over_dhct"] = a["seconds"] / ours_trace_s
         a["rms_ratio_dhct_over_atomap"] = d["rms_offset_removed_px"] / p["rms_offset_removed_px"]
 
+    if ours.get("static"):
+        print("static lattice (--peer-static): localisation only; the distortion peers are not run")
+        finish(report, out_json)
+        return
+
     g = run_affine(image, found_px, sample_m, nn_m, pitch)
     report["fft_affine"] = g
     print(f"FFT affine: corrected rms {g['rigid_rms_m'] * 1e12:.2f} pm in {g['seconds']:.3f} s; "
@@ -393,6 +398,10 @@ def run_inside(directory, out_json, failed):
               f"{ours_rigid / best['rigid_rms_m']:.4f} (LF {best['rigid_rms_m'] / ours_rigid:.1f}x worse); "
               f"LF field {best['seconds']:.2f} s vs dhct model + correction {distortion_s:.3f} s; "
               f"stmpy's whole local_corr incl. its image step on a 256^2 crop: {crop_s:.2f} s")
+    finish(report, out_json)
+
+
+def finish(report, out_json):
     report["load_at_end"] = os.getloadavg()
     if out_json:
         with open(out_json, "w") as f:

@@ -4,10 +4,13 @@
 //! ```sh
 //! cargo run --release -p dhct-bench --bin headline -- \
 //!     [--json OUT.json] [--sizes 512,1024,2048,4096] [--repeats 3] \
-//!     [--peers-dir DIR [--peer-size 1024]] [--sm4-out FILE] [--robustness] \
+//!     [--peers-dir DIR [--peer-size 1024] [--peer-static]] [--sm4-out FILE] [--robustness] \
 //!     [--skip-headline]
 //! python3 scripts/peers/compare.py DIR        # Atomap, stmpy Lawler–Fujita, FFT affine
 //! ```
+//!
+//! `--peer-static` writes the peers' image without drift, creep, hysteresis, line, 1/f and
+//! spike noise (white noise only): a comparison of localisation alone.
 //!
 //! Each timed run (read SM4 + `dhct_pipeline::run`) is a child process of its own
 //! (`headline measure FILE LATTICE_JSON`), so its peak memory (VmHWM) is that of the run
@@ -34,6 +37,7 @@ struct Args {
     repeats: usize,
     peers_dir: Option<PathBuf>,
     peer_size: usize,
+    peer_static: bool,
     sm4_out: Option<PathBuf>,
     robustness: bool,
     skip_headline: bool,
@@ -46,6 +50,7 @@ fn parse_args(args: &[String]) -> Result<Args, String> {
         repeats: 3,
         peers_dir: None,
         peer_size: 1024,
+        peer_static: false,
         sm4_out: None,
         robustness: false,
         skip_headline: false,
@@ -73,6 +78,7 @@ fn parse_args(args: &[String]) -> Result<Args, String> {
             "--peer-size" => {
                 parsed.peer_size = value()?.parse().map_err(|e| format!("--peer-size: {e}"))?
             }
+            "--peer-static" => parsed.peer_static = true,
             "--sm4-out" => parsed.sm4_out = Some(value()?.into()),
             "--robustness" => parsed.robustness = true,
             "--skip-headline" => parsed.skip_headline = true,
@@ -458,7 +464,7 @@ fn run(args: &Args) -> Result<(), String> {
 
     // 3. Files for the peer comparison.
     if let Some(dir) = &args.peers_dir {
-        let ours = write_peer_files(dir, args.peer_size)?;
+        let ours = write_peer_files(dir, args.peer_size, args.peer_static)?;
         report.insert("peers_input".into(), ours);
     }
 
@@ -497,14 +503,23 @@ fn run(args: &Args) -> Result<(), String> {
     Ok(())
 }
 
-/// Simulates the headline physics at `pixels`², runs our chain on it and writes, for
+/// Simulates the headline physics at `pixels`² (with `static_lattice`, its lattice and white
+/// noise only), runs our chain on it and writes, for
 /// `scripts/peers/compare.py`: `trace.npy` (metres, float64), `matches_trace.csv` (every
 /// trace feature matched to its truth: found and true controller position in px, our
 /// corrected and the true sample position in m) and `ours.json` (geometry, lattice, our
 /// stage times and residuals vs truth).
-fn write_peer_files(dir: &Path, pixels: usize) -> Result<Value, String> {
+fn write_peer_files(dir: &Path, pixels: usize, static_lattice: bool) -> Result<Value, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{dir:?}: {e}"))?;
-    let config = headline_at(pixels, SpeedScaling::SameSpeed);
+    let mut config = headline_at(pixels, SpeedScaling::SameSpeed);
+    if static_lattice {
+        // Localisation alone: the headline lattice and white noise, nothing that moves.
+        config.name = format!("static-{pixels}");
+        config.effects.clear();
+        config.noise.pink_sigma_m = 0.0;
+        config.noise.line_offset_sigma_m = 0.0;
+        config.noise.spike_probability = 0.0;
+    }
     let output = Simulation::from_config(&config)
         .and_then(|s| s.run())
         .map_err(|e| format!("simulation: {e}"))?;
@@ -544,6 +559,7 @@ fn write_peer_files(dir: &Path, pixels: usize) -> Result<Value, String> {
     let features_per_s = measurement.features as f64 / measurement.times.features_s;
     let ours = json!({
         "pixels": pixels,
+        "static": static_lattice,
         "pitch_m": [geometry.pitch_x(), geometry.pitch_y()],
         "nn_m": lattice.nearest_neighbour_distance(),
         "lattice": "graphite",
