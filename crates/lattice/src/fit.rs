@@ -16,6 +16,7 @@
 //! (otherwise the fit stops with an error rather than mis-indexing). A final Gauss–Newton fit
 //! of (o, θ, s_x, s_y, Δ_k) to all sets follows.
 
+use dhct_scan::quantity::length;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -38,8 +39,9 @@ pub enum LatticeFitError {
     },
     /// No bond lies within the nearest-neighbour window.
     #[error(
-        "no nearest-neighbour bonds were found (median NN distance {median_nn_m:e} m): the features \
-         do not form a lattice, or the lattice does not match"
+        "no nearest-neighbour bonds were found (median NN distance {}): the features do not \
+         form a lattice, or the lattice does not match",
+        length(*.median_nn_m)
     )]
     NoBonds {
         /// Median distance to the nearest point, metres.
@@ -47,9 +49,10 @@ pub enum LatticeFitError {
     },
     /// The indexing lost the lattice.
     #[error(
-        "the lattice fit diverged: within {radius_m:e} m of the seed only {fraction_ok:.0} % of the \
+        "the lattice fit diverged: within {} of the seed only {fraction_ok:.0} % of the \
          features lie within half a lattice constant of a site. Check the lattice type and constant, \
-         or fit one domain (mask region) at a time"
+         or fit one domain (mask region) at a time",
+        length(*.radius_m)
     )]
     Diverged {
         /// Radius of the indexing disc, metres.
@@ -77,8 +80,10 @@ pub enum LatticeFitError {
     },
     /// The indexing disc never covered every feature.
     #[error(
-        "the lattice fit did not converge: the indexing disc reached {radius_m:e} m after \
-         {iterations} doublings without covering every feature ({farthest_m:e} m from the seed)"
+        "the lattice fit did not converge: the indexing disc reached {} after {iterations} \
+         doublings without covering every feature ({} from the seed)",
+        length(*.radius_m),
+        length(*.farthest_m)
     )]
     NotConverged {
         /// Radius reached, metres.
