@@ -61,6 +61,7 @@ pub fn geometry_dict<'py>(py: Python<'py>, g: &ScanGeometry) -> PyResult<Bound<'
     d.set_item("offset_m", g.offset())?;
     d.set_item("scale_source", source(g.scale_source()))?;
     d.set_item("timing_source", source(g.timing_source()))?;
+    d.set_item("frame", g.frame())?;
     Ok(d)
 }
 

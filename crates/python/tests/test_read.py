@@ -109,3 +109,12 @@ def test_read_errors(tmp_path, example):
 def test_channel_by_name(example):
     s = dhct.read(example, channel="topography")
     assert s.channel.lower().startswith("topo")
+
+
+def test_each_image_of_a_film_is_its_own_frame(example):
+    film = example.parent / "real" / "specs_aarhus_film_100nm.flm"
+    frames = [dhct.read(film, channel=f"image {k} ") for k in range(1, 6)]
+    assert [s.geometry["frame"] for s in frames] == [0, 1, 2, 3, 4]
+    assert all(s.geometry["timing_source"] == "assumed" for s in frames)
+    assert frames[0].trace.shape == (512, 512)
+    assert abs(frames[0].geometry["width_m"] - 100e-9) < 1e-15
