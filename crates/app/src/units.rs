@@ -2,7 +2,7 @@
 //! `0.774 s`); formatting for people is `dhct_scan::quantity`, re-exported here.
 
 pub use dhct_scan::quantity::{
-    angstrom, degrees, length, picometres, si, unit_symbol, value_with_sigma,
+    angstrom, degrees, length, picometres, si, si_significant, unit_symbol, value_with_sigma,
 };
 
 /// Parses a length; a bare number is metres. Units: m, mm, um/µm, nm, A/Å, pm.

@@ -23,6 +23,20 @@ pub fn si(value: f64, unit: &str) -> String {
     format!("{digits} {prefix}{unit}")
 }
 
+/// `value` with an SI prefix, rounded to `digits` significant digits (at least 1):
+/// `si_significant(2.585791e-13, "m/s", 3)` = `"259 fm/s"`.
+pub fn si_significant(value: f64, unit: &str, digits: usize) -> String {
+    let symbol = unit_symbol(unit);
+    if value == 0.0 || !value.is_finite() || !prefixable(&symbol) {
+        return si(value, unit);
+    }
+    let (scale, prefix) = si_prefix(value);
+    let scaled = value / scale;
+    let integer_digits = scaled.abs().log10().floor() as i32 + 1;
+    let decimals = (digits.max(1) as i32 - integer_digits).max(0) as usize;
+    format!("{scaled:.decimals$} {prefix}{symbol}")
+}
+
 /// A length in ångström with `decimals` decimals: `"2.461 Å"`.
 pub fn angstrom(metres: f64, decimals: usize) -> String {
     format!("{:.decimals$} Å", metres * 1e10)
@@ -147,5 +161,7 @@ mod tests {
         assert_eq!(value_with_sigma(0.5, 0.0, "1"), "0.5000 (fixed)");
         assert_eq!(value_with_sigma(2.0, 0.25, "s^-n"), "2.00 ± 0.25 s⁻ⁿ");
         assert_eq!(si(2e-9, "A"), "2 nA");
+        assert_eq!(si_significant(2.585791e-13, "m/s", 3), "259 fm/s");
+        assert_eq!(si_significant(7.6999e-12, "m/s", 3), "7.70 pm/s");
     }
 }

@@ -9,7 +9,7 @@ use dhct_scan::{ScanDirection, ValueSource};
 use super::figures::Figure;
 use super::page::{Html, document};
 use super::summary::RunSummary;
-use crate::units::{angstrom, degrees, length, picometres, si, value_with_sigma};
+use crate::units::{angstrom, degrees, length, picometres, si, si_significant, value_with_sigma};
 
 /// A direction in words.
 pub fn direction_words(direction: ScanDirection) -> &'static str {
@@ -70,8 +70,9 @@ fn summary_section(html: &mut Html, summary: &RunSummary) {
     if let Some(found) = &summary.calibration {
         let c = &found.calibration;
         measured.push(format!(
-            "The lattice in the image, by FFT: x scale {:.4}, y scale {:.4}, shear {} relative \
-             to the lattice given (1, 1, 0° = the file's pixel size is right).",
+            "The raw lattice in the image, by FFT, against the lattice given: x {:.4}, y {:.4}, \
+             shear {} (apparent over true length: the file's pixel-size error and the drift, \
+             creep and hysteresis together; the distortion model below separates them).",
             c.scale[0],
             c.scale[1],
             degrees(c.shear_deg, 2)
@@ -393,9 +394,9 @@ fn model_section(html: &mut Html, summary: &RunSummary) {
     let gf = &summary.goodness;
     let drift = |k: usize| {
         format!(
-            "{} ({})",
-            si(gf.rms_drift_residual_m_per_s[k], "m/s"),
-            si(gf.rms_drift_m_per_s[k], "m/s")
+            "{} of {}",
+            si_significant(gf.rms_drift_residual_m_per_s[k], "m/s", 3),
+            si_significant(gf.rms_drift_m_per_s[k], "m/s", 3)
         )
     };
     html.table(
@@ -409,8 +410,8 @@ fn model_section(html: &mut Html, summary: &RunSummary) {
                 "rms S residual".into(),
                 format!("{:.4}", gf.rms_scale_residual),
             ],
-            vec!["rms Dx residual (rms Dx)".into(), drift(0)],
-            vec!["rms Dy residual (rms Dy)".into(), drift(1)],
+            vec!["rms Dx residual, of rms Dx".into(), drift(0)],
+            vec!["rms Dy residual, of rms Dy".into(), drift(1)],
         ],
     );
 }
