@@ -106,8 +106,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     }
     let mut metadata = BTreeMap::new();
     let mut pairs = Vec::new();
-    for (frame, start) in record_starts(bytes, &mut metadata)?.into_iter().enumerate() {
-        let label = Label::at(bytes, start).ok_or_else(|| truncated(bytes, start))?;
+    for (frame, (start, label)) in records(bytes, &mut metadata)?.into_iter().enumerate() {
         if let Some(pair) = image(bytes, start, &label, frame, &mut budget, &mut metadata)? {
             pairs.push(pair);
         }
@@ -128,15 +127,15 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     })
 }
 
-/// The label blocks of the images, in file order: from the index of a `.mul`, or by
+/// The images' label blocks and labels, in file order: from the index of a `.mul`, or by
 /// walking a `.flm` from block 0.
-fn record_starts(
+fn records(
     bytes: &[u8],
     metadata: &mut BTreeMap<String, String>,
-) -> Result<Vec<usize>, ReadError> {
+) -> Result<Vec<(usize, Label)>, ReadError> {
     let blocks = bytes.len() / BLOCK;
     if !bytes.starts_with(&MUL_START) {
-        let mut starts = Vec::new();
+        let mut records = Vec::new();
         let mut block = 0;
         while block < blocks {
             let label = Label::at(bytes, block).ok_or_else(|| truncated(bytes, block))?;
@@ -147,12 +146,13 @@ fn record_starts(
                 );
                 break;
             }
-            starts.push(block);
-            block += label.size as usize;
+            let next = block + label.size as usize;
+            records.push((block, label));
+            block = next;
         }
-        return Ok(starts);
+        return Ok(records);
     }
-    let mut starts = Vec::new();
+    let mut records = Vec::new();
     for entry in bytes[..INDEX_BLOCKS * BLOCK]
         .chunks_exact(6)
         .take(INDEX_ENTRIES)
@@ -168,9 +168,11 @@ fn record_starts(
                 format!("the index puts image {id} at block {block}, outside the file"),
             ));
         }
-        starts.push(block as usize);
+        let block = block as usize;
+        let label = Label::at(bytes, block).ok_or_else(|| truncated(bytes, block))?;
+        records.push((block, label));
     }
-    Ok(starts)
+    Ok(records)
 }
 
 fn truncated(bytes: &[u8], block: usize) -> ReadError {
