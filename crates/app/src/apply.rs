@@ -173,6 +173,15 @@ fn same_scan(model: &ScanGeometry, file: &ScanGeometry) -> Result<()> {
             model.slow_direction()
         );
     }
+    if model.frame() != file.frame() {
+        bail!(
+            "the image is frame {} of its file, the model was fitted on frame {}: the frames \
+             of a multi-frame file were recorded at different times, and a model applies only \
+             to the frame it was fitted on",
+            file.frame() + 1,
+            model.frame() + 1
+        );
+    }
     Ok(())
 }
 
@@ -208,4 +217,28 @@ pub fn describe(applied: &Applied, folder: &Path) -> String {
         text.push('\n');
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use dhct_scan::ScanDirection;
+
+    use super::*;
+
+    #[test]
+    fn a_model_applies_only_to_its_own_frame() {
+        let geometry = ScanGeometry::new(
+            8,
+            8,
+            1e-10,
+            1e-10,
+            1e-3,
+            ScanDirection::Right,
+            ScanDirection::Up,
+        )
+        .unwrap();
+        assert!(same_scan(&geometry, &geometry.clone()).is_ok());
+        let other = same_scan(&geometry, &geometry.clone().with_frame(2)).unwrap_err();
+        assert!(other.to_string().contains("frame 3"), "{other}");
+    }
 }
