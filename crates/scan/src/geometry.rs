@@ -38,6 +38,7 @@ pub struct ScanGeometry {
     scale_source: ValueSource,
     timing_source: ValueSource,
     frame: usize,
+    start_time: Option<f64>,
 }
 
 /// Where a geometry value came from.
@@ -95,6 +96,7 @@ impl ScanGeometry {
             scale_source: ValueSource::Stated,
             timing_source: ValueSource::Stated,
             frame: 0,
+            start_time: None,
         };
         geometry.validate()?;
         Ok(geometry)
@@ -191,6 +193,64 @@ impl ScanGeometry {
     /// model does not apply to another.
     pub fn frame(&self) -> usize {
         self.frame
+    }
+
+    /// Sets when the frame started (see [`ScanGeometry::start_time`]); a non-finite value
+    /// clears it.
+    pub fn with_start_time(mut self, seconds: Option<f64>) -> ScanGeometry {
+        self.start_time = seconds.filter(|s| s.is_finite());
+        self
+    }
+
+    /// When the frame's first line started, seconds since 1970-01-01 on the file's own
+    /// clock ([`crate::clock`]), as the file recorded it; `None` when it did not. Frames of
+    /// one session are ordered and spaced in time by it.
+    pub fn start_time(&self) -> Option<f64> {
+        self.start_time
+    }
+
+    /// The instrument-frame position (metres, display axes: x right, y down, of the
+    /// unrotated scanner) of controller position `p` (metres, this image's display frame):
+    /// the image centre goes to [`ScanGeometry::offset`], and the scan frame is turned by
+    /// [`ScanGeometry::scan_angle`] counter-clockwise as seen on screen:
+    /// `O + R(φ)·(p − c)`, `R(φ) = [[cos φ, sin φ], [−sin φ, cos φ]]` in display axes.
+    pub fn to_instrument(&self, p: [f64; 2]) -> [f64; 2] {
+        let c = self.centre();
+        let (s, co) = self.scan_angle.sin_cos();
+        let (x, y) = (p[0] - c[0], p[1] - c[1]);
+        [
+            self.offset_x + co * x + s * y,
+            self.offset_y - s * x + co * y,
+        ]
+    }
+
+    /// The inverse of [`ScanGeometry::to_instrument`]: controller position (metres, this
+    /// image's display frame) of instrument-frame position `q`.
+    pub fn from_instrument(&self, q: [f64; 2]) -> [f64; 2] {
+        let c = self.centre();
+        let (s, co) = self.scan_angle.sin_cos();
+        let (x, y) = (q[0] - self.offset_x, q[1] - self.offset_y);
+        [c[0] + co * x - s * y, c[1] + s * x + co * y]
+    }
+
+    /// Vector `v` (metres, instrument display axes) in this image's display frame.
+    pub fn vector_from_instrument(&self, v: [f64; 2]) -> [f64; 2] {
+        let (s, co) = self.scan_angle.sin_cos();
+        [co * v[0] - s * v[1], s * v[0] + co * v[1]]
+    }
+
+    /// Vector `v` (metres, this image's display frame) in instrument display axes.
+    pub fn vector_to_instrument(&self, v: [f64; 2]) -> [f64; 2] {
+        let (s, co) = self.scan_angle.sin_cos();
+        [co * v[0] + s * v[1], -s * v[0] + co * v[1]]
+    }
+
+    /// The image centre, controller metres: `((N_x − 1)·pitch_x/2, (N_y − 1)·pitch_y/2)`.
+    pub fn centre(&self) -> [f64; 2] {
+        [
+            (self.columns as f64 - 1.0) * self.pitch_x / 2.0,
+            (self.rows as f64 - 1.0) * self.pitch_y / 2.0,
+        ]
     }
 
     /// Where the pixel pitch came from.
@@ -467,6 +527,8 @@ struct RawScanGeometry {
     timing_source: ValueSource,
     #[serde(default, skip_serializing_if = "is_zero")]
     frame: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    start_time_s: Option<f64>,
 }
 
 fn is_zero(frame: &usize) -> bool {
@@ -492,6 +554,7 @@ impl TryFrom<RawScanGeometry> for ScanGeometry {
             g.with_scale_source(raw.scale_source)
                 .with_timing_source(raw.timing_source)
                 .with_frame(raw.frame)
+                .with_start_time(raw.start_time_s)
         })
     }
 }
@@ -513,6 +576,47 @@ impl From<ScanGeometry> for RawScanGeometry {
             scale_source: g.scale_source,
             timing_source: g.timing_source,
             frame: g.frame,
+            start_time_s: g.start_time,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn instrument_frame_round_trips_and_turns_counter_clockwise_on_screen() {
+        let g = ScanGeometry::new(
+            11,
+            21,
+            1.0,
+            1.0,
+            1e-3,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap()
+        .with_scan_angle(std::f64::consts::FRAC_PI_2)
+        .unwrap()
+        .with_offset(100.0, 200.0)
+        .unwrap();
+        assert_eq!(g.centre(), [5.0, 10.0]);
+        assert_eq!(g.to_instrument([5.0, 10.0]), [100.0, 200.0]);
+        // The scan's +x (right on its own screen) is up on the instrument's screen (−y).
+        let q = g.to_instrument([6.0, 10.0]);
+        assert!(
+            (q[0] - 100.0).abs() < 1e-12 && (q[1] - 199.0).abs() < 1e-12,
+            "{q:?}"
+        );
+        let p = g.from_instrument([103.0, 190.0]);
+        let back = g.to_instrument(p);
+        assert!((back[0] - 103.0).abs() < 1e-12 && (back[1] - 190.0).abs() < 1e-12);
+        let v = g.vector_from_instrument(g.vector_to_instrument([0.3, -0.7]));
+        assert!((v[0] - 0.3).abs() < 1e-12 && (v[1] + 0.7).abs() < 1e-12);
+        let json = serde_json::to_string(&g.clone().with_start_time(Some(1.5e9))).unwrap();
+        let back: ScanGeometry = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.start_time(), Some(1.5e9));
+        assert!(!serde_json::to_string(&g).unwrap().contains("start_time"));
     }
 }

@@ -42,6 +42,7 @@
 
 mod channel;
 mod choice;
+pub mod clock;
 mod direction;
 mod error;
 mod file;

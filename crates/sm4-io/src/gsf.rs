@@ -23,6 +23,7 @@
 //! | `DHCT_TraceFast`, `DHCT_SlowDirection` | `right`, `left`, `down` or `up` |
 //! | `DHCT_ScanAngle` | radians, counter-clockwise |
 //! | `DHCT_OffsetX`, `DHCT_OffsetY` | scan-frame centre, metres |
+//! | `DHCT_StartTime` | start of the frame's first line, seconds since 1970 (optional) |
 //! | `DHCT_ScaleSource`, `DHCT_TimingSource` | `stated` or `assumed` |
 //!
 //! A GSF file without them (e.g. written by Gwyddion) gets the placeholder pixel period
@@ -351,9 +352,11 @@ fn build_geometry<'a>(
             .with_offset(offset_x.unwrap_or(0.0), offset_y.unwrap_or(0.0))
             .map_err(geometry_error)?;
     }
+    let start = dhct_number("DHCT_StartTime")?;
     Ok(geometry
         .with_scale_source(scale_source)
-        .with_timing_source(timing_source))
+        .with_timing_source(timing_source)
+        .with_start_time(start))
 }
 
 /// The pixel pitches from `XReal`/`YReal` (in `XYUnits`). Both missing, or a non-length
@@ -535,6 +538,9 @@ fn write_grid<W: Write>(
     line("DHCT_ScanAngle", format!("{:e}", geometry.scan_angle()));
     line("DHCT_OffsetX", format!("{:e}", offset_x));
     line("DHCT_OffsetY", format!("{:e}", offset_y));
+    if let Some(start) = geometry.start_time() {
+        line("DHCT_StartTime", format!("{start:.6}"));
+    }
     line(
         "DHCT_ScaleSource",
         source(geometry.scale_source()).to_string(),

@@ -508,7 +508,27 @@ fn page_geometry(
         .map_err(|e| ReadError::geometry(FORMAT, e))?;
     Ok(geometry
         .with_scale_source(source(scale_stated))
-        .with_timing_source(source(period_stated && direction_known)))
+        .with_timing_source(source(period_stated && direction_known))
+        .with_start_time(page_start_time(text(string::DATE), text(string::TIME))))
+}
+
+/// The page's DATE ("MM/DD/YY") and TIME ("HH:MM:SS") strings as seconds since 1970
+/// ([`dhct_scan::clock`]); two-digit years are 19xx from 70 on, else 20xx.
+fn page_start_time(date: &str, time: &str) -> Option<f64> {
+    let parts: Vec<u32> = date
+        .split('/')
+        .map(|p| p.trim().parse().ok())
+        .collect::<Option<_>>()?;
+    let [month, day, year] = parts.as_slice() else {
+        return None;
+    };
+    let year = match *year {
+        y @ 0..=69 => 2000 + i64::from(y),
+        y @ 70..=99 => 1900 + i64::from(y),
+        y => i64::from(y),
+    };
+    let clock = dhct_scan::clock::parse_time_of_day(time)?;
+    dhct_scan::clock::seconds_from_civil((year, *month, *day), clock)
 }
 
 /// Sets the lines a partial scan never reached to NaN: lines (in acquisition order) from
@@ -819,6 +839,17 @@ fn iso_date(date: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn page_dates_become_start_times() {
+        assert_eq!(
+            page_start_time("06/03/23", "12:00:00"),
+            Some(1_685_793_600.0)
+        );
+        assert_eq!(page_start_time("12/31/99", "00:00:01"), Some(946_598_401.0));
+        assert_eq!(page_start_time("", "12:00:00"), None);
+        assert_eq!(page_start_time("06/03/23", "noon"), None);
+    }
 
     #[test]
     fn dates_become_iso() {

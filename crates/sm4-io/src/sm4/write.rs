@@ -15,6 +15,7 @@
 use std::io::Write;
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use dhct_scan::clock::civil_from_days;
 use dhct_scan::{FileFormat, ImageChannel, ScanFile, ScanGeometry, ScanPass};
 
 use super::layout::{
@@ -415,9 +416,29 @@ fn completed_lines(channel: &ImageChannel, g: &ScanGeometry) -> usize {
     completed
 }
 
-/// Date ("MM/DD/YY") and time ("HH:MM:SS") for the page strings: from the metadata
+/// Date ("MM/DD/YY") and time ("HH:MM:SS") for the page strings: the first pair's start
+/// time ([`ScanGeometry::start_time`]) when it has one, else from the metadata
 /// ("date" as ISO "YYYY-MM-DD" or RHK's form, "time"), else the current UTC time.
 fn date_time(file: &ScanFile) -> (String, String) {
+    let start = file
+        .pairs
+        .first()
+        .and_then(|p| p.geometry().start_time())
+        .filter(|t| *t >= 0.0 && *t < 4e9);
+    if let Some(start) = start {
+        let start = start.round() as u64;
+        let (year, month, day) = civil_from_days((start / 86_400) as i64);
+        let seconds = start % 86_400;
+        return (
+            format!("{month:02}/{day:02}/{:02}", year.rem_euclid(100)),
+            format!(
+                "{:02}:{:02}:{:02}",
+                seconds / 3600,
+                seconds / 60 % 60,
+                seconds % 60
+            ),
+        );
+    }
     let now = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map(|d| d.as_secs())
@@ -460,20 +481,6 @@ fn rhk_date(date: &str) -> Option<String> {
         return Some(format!("{m:02}/{d:02}/{:02}", y % 100));
     }
     None
-}
-
-/// Days since 1970-01-01 → (year, month, day) in the proleptic Gregorian calendar.
-fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    (year, month, day)
 }
 
 /// A stable, unique-per-page GUID (FNV-1a of the page number and name, shaped as a v4 GUID).
