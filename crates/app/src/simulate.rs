@@ -1,12 +1,14 @@
 //! `dhct simulate CONFIG -o DIR`: simulate an STM acquisition (trace + retrace) with
-//! distortion effects and write the images and the ground truth.
+//! distortion effects and write the images and the ground truth; or, when the config has a
+//! `[sequence]` table, an image sequence (every frame's images and `sequence_truth.json`).
 
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use dhct_simulate::{Simulation, SimulationConfig, SimulationError, presets};
+use dhct_simulate::sequence::{FrameTruth, SEQUENCE_TRUTH_FILE};
+use dhct_simulate::{SequenceSimulation, Simulation, SimulationConfig, SimulationError, presets};
 
 /// Where the config comes from.
 pub enum ConfigSource<'a> {
@@ -66,6 +68,9 @@ pub fn run(request: &SimulateRequest) -> Result<String> {
     let Some(dir) = request.output else {
         bail!("no output directory: give -o DIR (or --print-config to only show the config)");
     };
+    if config.sequence.is_some() {
+        return run_sequence(&config, dir);
+    }
     let simulation = Simulation::from_config(&config).context("invalid simulation config")?;
     let started = Instant::now();
     let output = simulation.run().context("simulation failed")?;
@@ -104,6 +109,65 @@ pub fn run(request: &SimulateRequest) -> Result<String> {
         let _ = writeln!(text, "wrote {}", path.display());
     }
     Ok(text)
+}
+
+/// Runs and writes the sequence `config` describes, one frame at a time; returns one line
+/// per frame and a summary.
+fn run_sequence(config: &SimulationConfig, dir: &Path) -> Result<String> {
+    let sequence = SequenceSimulation::from_config(config).context("invalid simulation config")?;
+    let g = config
+        .scan
+        .geometry()
+        .context("invalid simulation config")?;
+    let timeline = sequence.timeline();
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "simulating {} ({} frames of {} x {} px, {:.4} x {:.4} nm, frame {:.1} s, {:.0} s in all)",
+        if config.name.is_empty() {
+            "sequence"
+        } else {
+            &config.name
+        },
+        sequence.frame_count(),
+        g.columns(),
+        g.rows(),
+        g.width() * 1e9,
+        g.height() * 1e9,
+        g.frame_duration(),
+        timeline.end_s(),
+    );
+    let started = Instant::now();
+    let written = sequence
+        .write(dir, |frame, _| {
+            let _ = writeln!(text, "{}", frame_line(frame));
+        })
+        .with_context(|| format!("cannot write the sequence to {}", dir.display()))?;
+    let _ = writeln!(
+        text,
+        "wrote {} files into {} in {:.2} s; the ground truth is {SEQUENCE_TRUTH_FILE}",
+        written.len(),
+        dir.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(text)
+}
+
+/// One frame of a sequence: time, scan angle, centre, drift at its start, features imaged.
+fn frame_line(frame: &FrameTruth) -> String {
+    let p = &frame.placement;
+    format!(
+        "frame {:>3}: T = {:>6.0} s, scan angle {:6.1} deg, centre ({:.3}, {:.3}) nm, \
+         drift at start ({:.3}, {:.3}) nm, {} features imaged by the trace",
+        p.index,
+        p.start_s,
+        p.scan_angle_rad.to_degrees(),
+        p.offset_m[0] * 1e9,
+        p.offset_m[1] * 1e9,
+        p.displacement_at_start_m[0] * 1e9,
+        p.displacement_at_start_m[1] * 1e9,
+        frame.imaged_features(dhct_scan::ScanPass::Trace).count(),
+    )
 }
 
 #[cfg(test)]
@@ -167,6 +231,43 @@ mod tests {
         })
         .unwrap_err();
         assert!(format!("{error:#}").contains("ci-small"));
+    }
+
+    #[test]
+    fn a_sequence_config_writes_every_frame_and_the_truth() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sequence.toml");
+        let mut config = presets::graphite_sequence();
+        config.scan.columns = 32;
+        config.scan.rows = 32;
+        config.scan.width_m = 0.5e-9;
+        config.scan.height_m = 0.5e-9;
+        config.sequence.as_mut().unwrap().frames = 3;
+        config.sequence.as_mut().unwrap().moves[0].before_frame = 2;
+        std::fs::write(&path, config.to_toml_string().unwrap()).unwrap();
+        let out = dir.path().join("seq");
+        let text = run(&SimulateRequest {
+            source: ConfigSource::File(&path),
+            output: Some(&out),
+            seed: Some(4),
+            print_config: false,
+        })
+        .unwrap();
+        assert!(text.contains("3 frames of 32 x 32 px"), "{text}");
+        assert_eq!(text.matches("frame   ").count(), 3, "{text}");
+        for name in [
+            "frame_00.sm4",
+            "frame_02.sm4",
+            "frame_01_trace.png",
+            SEQUENCE_TRUTH_FILE,
+        ] {
+            assert!(out.join(name).is_file(), "{name} missing: {text}");
+        }
+        let truth: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(SEQUENCE_TRUTH_FILE)).unwrap())
+                .unwrap();
+        assert_eq!(truth["config"]["seed"], 4);
+        assert_eq!(truth["frames"].as_array().unwrap().len(), 3);
     }
 
     #[test]

@@ -35,6 +35,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::effects::EffectConfig;
 use crate::error::{finite, finite2, fraction, invalid, non_negative, positive};
+use crate::sequence::SequenceConfig;
 use crate::{Region, SimulationError};
 
 /// Memory a simulation takes per pixel, bytes (measured: 2048² px take 0.30 GB peak, about
@@ -94,6 +95,11 @@ pub struct SimulationConfig {
     /// The displacement effects, summed.
     #[serde(default)]
     pub effects: Vec<EffectConfig>,
+    /// If present, the config describes an image sequence (many frames of one area with
+    /// drift continuous across them), run by [`crate::SequenceSimulation`]; the rest of the
+    /// config is each frame's base.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<SequenceConfig>,
 }
 
 /// The raster scan. Both trace and retrace are simulated.
@@ -504,7 +510,8 @@ impl SimulationConfig {
     /// Checks every value; errors name the field (`scan.width_m`, `effects[1].t0_s` ...).
     /// Besides ranges, counts are capped so that memory and time stay bounded: pixels
     /// ([`MAX_PIXELS`]), effects ([`MAX_EFFECTS`]), lists ([`MAX_LIST`], [`MAX_ADATOMS`])
-    /// and lattice sites in the scanned area ([`MAX_NOMINAL_SITES`]).
+    /// and lattice sites in the scanned area ([`MAX_NOMINAL_SITES`]). A `[sequence]` table is
+    /// checked too ([`SequenceConfig::validate`]), with what it refuses in the base config.
     pub fn validate(&self) -> Result<(), SimulationError> {
         self.scan.validate()?;
         self.surface.validate()?;
@@ -522,6 +529,9 @@ impl SimulationConfig {
         self.noise.validate()?;
         for (index, effect) in self.effects.iter().enumerate() {
             effect.validate(&format!("effects[{index}]"))?;
+        }
+        if let Some(sequence) = &self.sequence {
+            sequence.validate(self)?;
         }
         Ok(())
     }

@@ -43,7 +43,8 @@
 //!
 //! [`config`] (serde config), [`presets`], [`surface`] (sample model), [`effects`] (the
 //! effect library), [`raster`] (the scan), [`noise`], [`truth`] (ground truth),
-//! [`output`] (files).
+//! [`output`] (files), [`sequence`] (many frames of one area with drift continuous over
+//! the session).
 
 pub mod config;
 pub mod effects;
@@ -53,6 +54,7 @@ pub mod output;
 pub mod presets;
 pub mod raster;
 mod region;
+pub mod sequence;
 mod simulation;
 pub mod surface;
 pub mod truth;
@@ -66,5 +68,6 @@ pub use effects::{AcquisitionContext, Effect, EffectConfig, HeightEffect, Hyster
 pub use error::SimulationError;
 pub use output::SimulationOutput;
 pub use region::Region;
+pub use sequence::{SequenceConfig, SequenceOutput, SequenceSimulation, SequenceTruth};
 pub use simulation::{CHANNEL_NAME, Simulation};
 pub use truth::{DisplacementField, FeatureAcquisition, FeatureTruth, GroundTruth};

@@ -12,6 +12,9 @@
 //!   creep, power-law hysteresis and noise of typical room-temperature magnitude.
 //! * `ci-small`: the same physics on 256 × 256 px over 4 nm of graphite; runs in well
 //!   under a second.
+//! * `graphite-sequence`: an image sequence ([`crate::sequence`]) of 12 such frames, 3 s
+//!   apart, with drift continuous over the session (a slow oscillation, initial creep, a
+//!   move with its own creep before frame 6).
 
 use crate::SimulationConfig;
 use crate::SimulationError;
@@ -35,7 +38,7 @@ impl Preset {
 }
 
 /// Every preset.
-pub const ALL: [Preset; 6] = [
+pub const ALL: [Preset; 7] = [
     Preset {
         name: "fig3a-no-drift",
         summary: "Fig. 3 lattice (1 nm, 512², 50 nm/s) without drift",
@@ -65,6 +68,11 @@ pub const ALL: [Preset; 6] = [
         name: "ci-small",
         summary: "CI-sized graphite, 256², 4 nm, drift+creep+hysteresis+noise",
         toml: include_str!("../presets/ci-small.toml"),
+    },
+    Preset {
+        name: "graphite-sequence",
+        summary: "12-frame sequence of ci-small-like graphite frames, drift+oscillation+creep, a move",
+        toml: include_str!("../presets/graphite-sequence.toml"),
     },
 ];
 
@@ -124,4 +132,14 @@ pub fn headline_2048() -> SimulationConfig {
 /// hysteresis S = 0.95·τ^−0.03, 2 pm white noise.
 pub fn ci_small() -> SimulationConfig {
     shipped("ci-small")
+}
+
+/// An image sequence ([`crate::SequenceSimulation`]): 12 frames of graphite, 256 × 256 px
+/// over 4 nm at 50 nm/s (frame 40.96 s), one every 44 s (3 s pause, rounded up); session
+/// drift (3, −2) pm/s with acceleration (1, 0) fm/s² and a (0.2, 0.1) nm oscillation of
+/// period 260 s, initial creep C = (0.1, 0.05) nm with t0 = 20 s, a move to (1, −0.5) nm before
+/// frame 6 with creep C = (0.2, −0.1) nm, t0 = 5 s; hysteresis S = 0.95·τ^−0.03 and 2 pm white
+/// noise as in [`ci_small`].
+pub fn graphite_sequence() -> SimulationConfig {
+    shipped("graphite-sequence")
 }

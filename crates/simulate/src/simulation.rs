@@ -6,6 +6,7 @@ use nalgebra::Vector2;
 
 use crate::config::SimulationConfig;
 use crate::effects::{Effect, HeightEffect};
+use crate::error::invalid;
 use crate::noise::NoiseModel;
 use crate::raster::{Displacer, RenderInput, displacement_field, render, visited_area};
 use crate::surface::{SampleArea, Surface, Terrace};
@@ -29,9 +30,29 @@ pub struct Simulation {
 
 impl Simulation {
     /// Validates `config` and builds everything that does not depend on the run.
+    ///
+    /// A config with a `[sequence]` describes many frames and is refused here: run it with
+    /// [`crate::SequenceSimulation`].
     pub fn from_config(config: &SimulationConfig) -> Result<Simulation, SimulationError> {
+        if config.sequence.is_some() {
+            return Err(invalid(
+                "sequence",
+                "this config describes an image sequence: run it with SequenceSimulation \
+                 (`dhct simulate` does)",
+            ));
+        }
         config.validate()?;
         let geometry = config.scan.geometry()?;
+        Self::with_geometry(config, geometry)
+    }
+
+    /// Builds `config` (validated, without `[sequence]`) on `geometry`, which is
+    /// `config.scan.geometry()` placed in the instrument frame (scan angle, offset, start
+    /// time): a frame of a sequence.
+    pub(crate) fn with_geometry(
+        config: &SimulationConfig,
+        geometry: ScanGeometry,
+    ) -> Result<Simulation, SimulationError> {
         let lattice = config.surface.lattice.build()?;
         let effects = config
             .effects

@@ -11,8 +11,8 @@ use common::{
 use dhct_scan::ScanPass;
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, LineDrift,
-    LineJitter, LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, ThermalDrift,
-    TipChange, Vibration,
+    LineJitter, LogCreep, PiezoNonlinearity, ScanCoupling, SessionDrift, SlowScanHysteresis,
+    ThermalDrift, TipChange, Vibration,
 };
 use dhct_simulate::{AcquisitionContext, Effect, EffectConfig, HysteresisLaw, Region, StepEdge};
 
@@ -724,10 +724,18 @@ fn every_effect_keeps_the_effect_contract() {
             quadratic_m: [1e-11, -2e-11],
             cubic_m: [3e-11, 4e-11],
         }),
+        Box::new(SessionDrift {
+            velocity_m_per_s: [3e-12, -2e-12],
+            acceleration_m_per_s2: [1e-15, 0.0],
+            oscillation_m: [2e-10, 1e-10],
+            oscillation_period_s: 900.0,
+            frame_start_s: 88.0,
+            scan_angle_rad: 0.5,
+        }),
     ];
     assert_eq!(
         effects.len(),
-        13,
+        14,
         "one per effect type (telegraph tip and strain bubble aside)"
     );
     for effect in effects {

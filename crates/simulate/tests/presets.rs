@@ -1,7 +1,7 @@
 //! Every shipped preset file parses, carries its own name, is valid and builds; the
 //! shorthands and `by_name` read those files; the files hold the physics the docs name.
 
-use dhct_simulate::{Simulation, SimulationConfig, SimulationError, presets};
+use dhct_simulate::{SequenceSimulation, Simulation, SimulationConfig, SimulationError, presets};
 
 #[test]
 fn every_preset_file_parses_with_its_name() {
@@ -47,6 +47,7 @@ fn the_shorthands_read_their_files() {
         ),
         ("headline-2048", presets::headline_2048()),
         ("ci-small", presets::ci_small()),
+        ("graphite-sequence", presets::graphite_sequence()),
     ];
     for (name, config) in pairs {
         assert_eq!(config, presets::by_name(name).unwrap(), "{name}");
@@ -64,6 +65,10 @@ fn the_files_hold_the_documented_physics() {
     assert_eq!((fig3.scan.columns, fig3.scan.width_m), (512, 20e-9));
     assert_eq!(fig3.scan.fast_speed_m_per_s, 50e-9);
     assert_eq!(presets::fig3_no_drift().effects.len(), 0);
+    let sequence = presets::graphite_sequence();
+    let table = sequence.sequence.as_ref().unwrap();
+    assert_eq!((sequence.scan.columns, table.frames), (256, 12));
+    assert_eq!((table.pause_s, table.moves[0].before_frame), (3.0, 6));
     for drifting in [
         presets::fig3_drift_fast(),
         presets::fig3_drift_along_slow(),
@@ -80,7 +85,13 @@ fn every_preset_validates_and_builds() {
         config
             .validate()
             .unwrap_or_else(|e| panic!("{}: {e}", preset.name));
-        Simulation::from_config(&config).unwrap();
+        if config.sequence.is_some() {
+            SequenceSimulation::from_config(&config).unwrap();
+            let error = Simulation::from_config(&config).unwrap_err();
+            assert!(error.to_string().contains("sequence"), "{error}");
+        } else {
+            Simulation::from_config(&config).unwrap();
+        }
     }
 }
 

@@ -20,6 +20,7 @@ mod drift;
 mod hysteresis;
 mod out_of_library;
 mod piezo;
+mod session_drift;
 mod tip_change;
 mod vibration;
 
@@ -37,6 +38,7 @@ pub use drift::{LineDrift, ThermalDrift};
 pub use hysteresis::{AsymmetricHysteresis, FastScanHysteresis, HysteresisLaw, SlowScanHysteresis};
 pub use out_of_library::{LineJitter, StrainBubble, TelegraphTip};
 pub use piezo::PiezoNonlinearity;
+pub use session_drift::SessionDrift;
 pub use tip_change::TipChange;
 pub use vibration::Vibration;
 
@@ -182,6 +184,9 @@ pub enum EffectConfig {
     StrainBubble(StrainBubble),
     /// Every scan line displaced by its own random offset (outside the diagnosis library).
     LineJitter(LineJitter),
+    /// The thermal drift of a session of frames as one frame sees it (written by
+    /// [`crate::sequence`] into each frame's config).
+    SessionDrift(SessionDrift),
 }
 
 impl EffectConfig {
@@ -207,6 +212,7 @@ impl EffectConfig {
             EffectConfig::TelegraphTip(e) => e,
             EffectConfig::StrainBubble(e) => e,
             EffectConfig::LineJitter(e) => e,
+            EffectConfig::SessionDrift(e) => e,
         }
     }
 
@@ -228,6 +234,7 @@ impl EffectConfig {
             EffectConfig::StrainBubble(e) => e.validate(field),
             EffectConfig::LineJitter(e) => e.validate(field),
             EffectConfig::PiezoNonlinearity(e) => e.validate(field),
+            EffectConfig::SessionDrift(e) => e.validate(field),
         }
     }
 
@@ -250,6 +257,7 @@ impl EffectConfig {
             EffectConfig::StrainBubble(e) => Box::new(e.clone()),
             EffectConfig::LineJitter(e) => Box::new(e.clone()),
             EffectConfig::PiezoNonlinearity(e) => Box::new(e.clone()),
+            EffectConfig::SessionDrift(e) => Box::new(e.clone()),
         })
     }
 

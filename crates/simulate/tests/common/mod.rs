@@ -55,6 +55,7 @@ pub fn base_config() -> SimulationConfig {
         noise: NoiseConfig::default(),
         output: OutputConfig::default(),
         effects: Vec::new(),
+        sequence: None,
     }
 }
 
