@@ -10,7 +10,7 @@
 //! written through a staging folder and moved into place at the end (see
 //! [`crate::output_dir`]).
 
-mod inputs;
+pub mod inputs;
 mod table;
 
 use std::collections::{HashMap, HashSet};

@@ -17,6 +17,7 @@ pub mod output_dir;
 pub mod points;
 pub mod read_limits;
 pub mod report;
+pub mod series;
 pub mod setup;
 pub mod simulate;
 pub mod units;

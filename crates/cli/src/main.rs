@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use dhct_app::{apply, batch, correct, diagnose, info, lattice_check, simulate, units};
+use dhct_app::{apply, batch, correct, diagnose, info, lattice_check, series, simulate, units};
 use dhct_scan::ScanDirection;
 use dhct_sm4_io::GeometryOverrides;
 
@@ -104,6 +104,26 @@ enum Command {
         /// each shard its own -o and merge the tables with `dhct summarize`.
         #[arg(long)]
         shard: Option<batch::Shard>,
+        #[command(flatten)]
+        options: CorrectArgs,
+    },
+    /// Fit one model to frames of one area taken one after another (folders, glob patterns
+    /// and files; ordered by the start time each file records): drift continuous over the
+    /// whole session, a creep after every move of the frame, one hysteresis law; register
+    /// every frame into one sample frame. Writes series.json, features.csv (every frame's
+    /// features in the session frame), trajectory.csv (the drift with 1σ) and registered/
+    /// (each frame's images on one grid, their stack as a multi-page TIFF, and the mean).
+    Series {
+        /// Folders, glob patterns (quoted) or files: the frames.
+        #[arg(required = true)]
+        inputs: Vec<String>,
+        /// Output directory (created if missing).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Interior knots of the drift spline over the session (default: chosen by
+        /// cross-validation).
+        #[arg(long, value_parser = clap::value_parser!(u16).range(0..=1000))]
+        knots: Option<u16>,
         #[command(flatten)]
         options: CorrectArgs,
     },
@@ -465,6 +485,25 @@ fn main() -> ExitCode {
                 json: options.json,
                 progress: !options.quiet,
             })
+        }),
+        Command::Series {
+            inputs,
+            output,
+            knots,
+            options,
+        } => options.config().and_then(|config| {
+            let summary = series::run(&series::SeriesRequest {
+                inputs,
+                output,
+                config,
+                knots: knots.map(usize::from),
+            })?;
+            let text = if options.json {
+                serde_json::to_string_pretty(&summary)? + "\n"
+            } else {
+                series::text_summary(&summary, output)
+            };
+            diagnose::write_stdout(&text)
         }),
         Command::Summarize { inputs, output } => {
             batch::summarize(inputs, output).and_then(|text| diagnose::write_stdout(&text))

@@ -90,7 +90,7 @@ pub fn pixel_sample_positions(
 }
 
 /// Writes the sample-frame positions (output pixels) of input row `r` to `(xs, ys)`.
-type RowPositionsFn<'a> = dyn Fn(usize, &mut [f64], &mut [f64]) + Sync + 'a;
+pub type RowPositionsFn<'a> = dyn Fn(usize, &mut [f64], &mut [f64]) + Sync + 'a;
 
 /// A range (output rows) holding the y positions of every pixel of input row `r`.
 type RowYRangeFn<'a> = dyn Fn(usize) -> (f64, f64) + Sync + 'a;
@@ -313,6 +313,27 @@ pub fn correct_image_full(
         z: resample_mesh(&shifted, &y_range, z, (out_rows, out_columns)),
         origin_px: [origin[0] as i64, origin[1] as i64],
     })
+}
+
+/// Resamples `z` onto an `out_rows × out_columns` grid, given where each input pixel lands
+/// on it: `row_positions(r, xs, ys)` writes the output-pixel coordinates of input row `r`.
+/// Uncovered output pixels are NaN (see [`correct_image`] for the method).
+pub fn resample_onto(
+    row_positions: &RowPositionsFn<'_>,
+    z: &Array2<f64>,
+    out_shape: (usize, usize),
+) -> Array2<f64> {
+    let columns = z.ncols();
+    let y_range = |r: usize| {
+        let (mut xs, mut ys) = (vec![0.0; columns], vec![0.0; columns]);
+        row_positions(r, &mut xs, &mut ys);
+        ys.iter()
+            .filter(|y| y.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &y| {
+                (lo.min(y), hi.max(y))
+            })
+    };
+    resample_mesh(row_positions, &y_range, z, out_shape)
 }
 
 /// Rasterises the quad mesh whose row `r` of vertices `row_positions(r, xs, ys)` writes

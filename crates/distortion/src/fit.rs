@@ -157,7 +157,7 @@ fn linear_ls(design: &DMatrix<f64>, y: &DVector<f64>) -> Option<DVector<f64>> {
     jtj.lu().solve(&jty)
 }
 
-fn parameter(name: &str, value: f64, sigma: f64, unit: &str) -> Parameter {
+pub(crate) fn parameter(name: &str, value: f64, sigma: f64, unit: &str) -> Parameter {
     Parameter {
         name: name.to_string(),
         value,

@@ -66,6 +66,7 @@ pub mod registration;
 pub mod route_choice;
 mod secant;
 mod seed;
+pub mod series;
 mod thinning;
 
 pub use correction::{

@@ -1,0 +1,231 @@
+//! `dhct series FRAME... -o OUTDIR`: frames of one area fitted with one physical model
+//! (drift continuous over the session, creep after every move, one hysteresis law) and
+//! registered into one sample frame. Each frame is first analysed alone, as `dhct correct`
+//! does; its features and its own model start the series fit
+//! ([`dhct_distortion::series`]).
+
+mod order;
+mod outputs;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions, fit_series};
+use dhct_distortion::{FitOptions, PassInput};
+use serde::Serialize;
+
+use crate::analysis::{Corrected, analyse_file};
+use crate::setup::CorrectConfig;
+
+pub use order::Timed;
+
+/// What `dhct series` was asked to do.
+pub struct SeriesRequest<'a> {
+    /// Folders, glob patterns or files: the frames.
+    pub inputs: &'a [String],
+    /// The output directory.
+    pub output: &'a Path,
+    /// The config every frame is analysed with.
+    pub config: CorrectConfig,
+    /// The drift spline's knots (`None`: cross-validated).
+    pub knots: Option<usize>,
+}
+
+/// One frame as the series saw it.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameSummary {
+    /// Its file.
+    pub file: String,
+    /// Seconds since the first frame's start.
+    pub start_s: f64,
+    /// Its scan angle, degrees.
+    pub scan_angle_deg: f64,
+    /// Its frame centre, metres (instrument frame).
+    pub offset_m: [f64; 2],
+    /// Features found (all passes).
+    pub features: usize,
+    /// Its own model's hysteresis parameters (fitted to this frame alone).
+    pub own_hysteresis: Vec<dhct_distortion::Parameter>,
+}
+
+/// `series.json`: the frames, the fit and what was assumed.
+#[derive(Debug, Clone, Serialize)]
+pub struct SeriesSummary {
+    /// The frames in time order.
+    pub frames: Vec<FrameSummary>,
+    /// The series fit.
+    pub fit: SeriesFit,
+    /// Notes and assumptions (clock, order).
+    pub notes: Vec<String>,
+    /// Files written into the output directory.
+    pub outputs: Vec<String>,
+}
+
+/// Runs `dhct series`; returns the summary (also written as `series.json`).
+pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
+    let found = crate::batch::inputs::find(request.inputs, request.output)?;
+    for s in &found.skipped {
+        eprintln!("note: skipping {}: {}", s.path.display(), s.note);
+    }
+    if found.scans.len() < 2 {
+        bail!(
+            "a series needs at least two frames, {} found in {}: one frame is corrected by \
+             `dhct correct`",
+            found.scans.len(),
+            request.inputs.join(", ")
+        );
+    }
+    let staged =
+        crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
+    let corrected: Vec<Corrected> = found
+        .scans
+        .iter()
+        .map(|input| {
+            analyse_file(&input.path, None, request.config.clone(), &|_| {})
+                .with_context(|| format!("frame {} cannot be analysed alone", input.path.display()))
+        })
+        .collect::<Result<_>>()?;
+    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
+    let geometries: Vec<(PathBuf, &dhct_scan::ScanGeometry)> = paths
+        .iter()
+        .zip(&corrected)
+        .map(|(p, c)| (p.clone(), c.pair.geometry()))
+        .collect();
+    let (timed, notes) = order::order(&geometries)?;
+    let fit = fit_frames(&corrected, &timed, request)?;
+
+    let mut summary = SeriesSummary {
+        frames: timed
+            .iter()
+            .map(|t| frame_summary(t, &corrected[t.input]))
+            .collect(),
+        fit,
+        notes,
+        outputs: Vec::new(),
+    };
+    summary.outputs = outputs::write_all(staged.path(), &summary, &corrected, &timed)?;
+    outputs::write_summary(staged.path(), &summary)?;
+    staged.commit()?;
+    Ok(summary)
+}
+
+/// The series fit of the analysed frames in time order.
+fn fit_frames(
+    corrected: &[Corrected],
+    timed: &[Timed],
+    request: &SeriesRequest,
+) -> Result<SeriesFit> {
+    let frames: Vec<SeriesFrame> = timed
+        .iter()
+        .map(|t| {
+            let c = &corrected[t.input];
+            SeriesFrame {
+                geometry: c.pair.geometry(),
+                inputs: c
+                    .analysis
+                    .passes
+                    .iter()
+                    .map(|p| PassInput {
+                        features: &p.features.features,
+                        mask: c.mask.as_ref(),
+                    })
+                    .collect(),
+                model: &c.analysis.dhct.model,
+                start_s: t.start_s,
+            }
+        })
+        .collect();
+    let lattice = corrected[timed[0].input].lattice.as_ref();
+    let options = SeriesOptions {
+        fit: FitOptions {
+            secant: false,
+            ..corrected[timed[0].input].options.dhct.fit
+        },
+        knots: request
+            .knots
+            .map_or(KnotChoice::CrossValidated, KnotChoice::Fixed),
+    };
+    fit_series(&frames, lattice, &options).context("the series fit failed")
+}
+
+fn frame_summary(t: &Timed, c: &Corrected) -> FrameSummary {
+    let g = c.pair.geometry();
+    let model = &c.analysis.dhct.model;
+    let drift_count = model
+        .parameters
+        .iter()
+        .take_while(|p| !matches!(p.name.as_str(), "k" | "n" | "amplitude" | "c0"))
+        .count();
+    FrameSummary {
+        file: t.path.display().to_string(),
+        start_s: t.start_s,
+        scan_angle_deg: g.scan_angle().to_degrees(),
+        offset_m: [g.offset().0, g.offset().1],
+        features: c
+            .analysis
+            .passes
+            .iter()
+            .map(|p| p.features.features.len())
+            .sum(),
+        own_hysteresis: model.parameters[drift_count..].to_vec(),
+    }
+}
+
+/// What `dhct series` prints: the frames, the drift, the hysteresis and where the outputs
+/// are.
+pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
+    use dhct_scan::quantity::{length, value_with_sigma};
+    use std::fmt::Write as _;
+    let fit = &summary.fit;
+    let mut text = String::new();
+    for note in &summary.notes {
+        let _ = writeln!(text, "note: {note}");
+    }
+    let session = fit.trajectory.last().map_or(0.0, |p| p.time_s);
+    let _ = writeln!(
+        text,
+        "{} frames over {:.0} s; {} features fitted, rms deviation from the lattice {}",
+        summary.frames.len(),
+        session,
+        fit.features,
+        length(fit.rms_deviation_m)
+    );
+    let _ = writeln!(
+        text,
+        "drift: spline with {} interior knots{}; {} creep(s) after moves",
+        fit.drift.basis.interior_knots,
+        if fit.knot_scores.is_empty() {
+            " (as given)"
+        } else {
+            " (cross-validated)"
+        },
+        fit.drift.creeps.len()
+    );
+    for start in &fit.unresolved_creeps_s {
+        let _ = writeln!(
+            text,
+            "  the creep after the move at {start:.1} s is not resolved (its time constant \
+             ran to a bound): left out, the drift spline takes it"
+        );
+    }
+    for (k, (frame, start)) in summary.frames.iter().zip(&fit.frame_starts).enumerate() {
+        let _ = writeln!(
+            text,
+            "  frame {k:>2} at {:>7.1} s: D = ({}, {}) {}",
+            frame.start_s,
+            value_with_sigma(start.displacement_m[0], start.sigma_m[0], "m"),
+            value_with_sigma(start.displacement_m[1], start.sigma_m[1], "m"),
+            frame.file
+        );
+    }
+    for p in &fit.parameters {
+        let _ = writeln!(
+            text,
+            "  {} = {}",
+            p.name,
+            value_with_sigma(p.value, p.sigma, &p.unit)
+        );
+    }
+    let _ = writeln!(text, "outputs: {}", output.display());
+    text
+}

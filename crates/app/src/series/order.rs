@@ -1,0 +1,164 @@
+//! The frames of a series on one clock: ordered by the start time each file records,
+//! spaced by it, and what to say when a file records none or frames overlap in time.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use dhct_scan::ScanGeometry;
+
+/// Start times a file rounds to the second may make back-to-back frames overlap by up to
+/// this much (seconds); the later frame is then taken to start when the earlier ended.
+const ROUNDING_OVERLAP_S: f64 = 1.5;
+
+/// One frame's place on the session clock.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timed {
+    /// Index of the frame among the inputs (path order).
+    pub input: usize,
+    /// Its file.
+    pub path: PathBuf,
+    /// Seconds since the first frame's start.
+    pub start_s: f64,
+}
+
+/// The frames in time order with their session start times, and notes for the user (an
+/// order other than the names', a clock assumed, a start moved past a rounding overlap).
+pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<String>)> {
+    let mut notes = Vec::new();
+    let stated: Vec<Option<f64>> = frames.iter().map(|(_, g)| g.start_time()).collect();
+    if stated.iter().any(Option::is_none) {
+        let missing: Vec<String> = frames
+            .iter()
+            .zip(&stated)
+            .filter(|(_, s)| s.is_none())
+            .map(|((p, _), _)| p.display().to_string())
+            .collect();
+        notes.push(format!(
+            "assumption: {} of {} files record no start time ({}); the frames are taken in \
+             name order, each starting when the one before ended (pauses between frames \
+             would make the drift between them wrong)",
+            missing.len(),
+            frames.len(),
+            missing.join(", ")
+        ));
+        let mut start = 0.0;
+        let timed = frames
+            .iter()
+            .enumerate()
+            .map(|(input, (path, g))| {
+                let t = Timed {
+                    input,
+                    path: path.clone(),
+                    start_s: start,
+                };
+                start += g.frame_duration();
+                t
+            })
+            .collect();
+        return Ok((timed, notes));
+    }
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by(|&a, &b| {
+        stated[a]
+            .unwrap_or(0.0)
+            .total_cmp(&stated[b].unwrap_or(0.0))
+    });
+    if order.iter().enumerate().any(|(k, &i)| k != i) {
+        notes.push(
+            "the frames are taken in the order of their recorded start times, not of their names"
+                .into(),
+        );
+    }
+    let first = stated[order[0]].unwrap_or(0.0);
+    let mut timed: Vec<Timed> = Vec::new();
+    for &i in &order {
+        let mut start_s = stated[i].unwrap_or(0.0) - first;
+        if let Some(before) = timed.last() {
+            let end = before.start_s + frames[before.input].1.frame_duration();
+            if start_s < end - ROUNDING_OVERLAP_S {
+                bail!(
+                    "{} starts {:.1} s into the session but {} (started {:.1} s in) takes {:.1} s: \
+                     the frames overlap in time, so they are not one sequence of scans (check \
+                     the files' dates and line times)",
+                    frames[i].0.display(),
+                    start_s,
+                    before.path.display(),
+                    before.start_s,
+                    frames[before.input].1.frame_duration()
+                );
+            }
+            if start_s < end {
+                start_s = end;
+            }
+        }
+        timed.push(Timed {
+            input: i,
+            path: frames[i].0.clone(),
+            start_s,
+        });
+    }
+    Ok((timed, notes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dhct_scan::ScanDirection;
+
+    fn geometry(start: Option<f64>) -> ScanGeometry {
+        // 10 lines of 1 s each way: a 20 s frame.
+        ScanGeometry::from_line_time(
+            10,
+            10,
+            1e-10,
+            1e-10,
+            1.0,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap()
+        .with_start_time(start)
+    }
+
+    #[test]
+    fn frames_are_ordered_by_time_and_overlaps_refused() {
+        let g = [
+            geometry(Some(130.0)),
+            geometry(Some(100.0)),
+            geometry(Some(119.0)),
+        ];
+        let frames: Vec<(PathBuf, &ScanGeometry)> = g
+            .iter()
+            .enumerate()
+            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
+            .collect();
+        let err = order(&frames).unwrap_err().to_string();
+        assert!(err.contains("overlap"), "{err}");
+        let g = [
+            geometry(Some(150.0)),
+            geometry(Some(100.0)),
+            geometry(Some(119.5)),
+        ];
+        let frames: Vec<(PathBuf, &ScanGeometry)> = g
+            .iter()
+            .enumerate()
+            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
+            .collect();
+        let (timed, notes) = order(&frames).unwrap();
+        let starts: Vec<(usize, f64)> = timed.iter().map(|t| (t.input, t.start_s)).collect();
+        assert_eq!(starts, [(1, 0.0), (2, 20.0), (0, 50.0)]);
+        assert!(notes[0].contains("recorded start times"), "{notes:?}");
+        let g = [geometry(Some(100.0)), geometry(None)];
+        let frames: Vec<(PathBuf, &ScanGeometry)> = g
+            .iter()
+            .enumerate()
+            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
+            .collect();
+        let (timed, notes) = order(&frames).unwrap();
+        assert_eq!(timed[1].start_s, 20.0);
+        assert!(
+            notes[0].starts_with("assumption: 1 of 2 files"),
+            "{notes:?}"
+        );
+    }
+}

@@ -1,0 +1,193 @@
+//! What `dhct series` writes: the features of every frame in the session frame
+//! (`features.csv`), the drift over the session (`trajectory.csv`), every frame's images
+//! registered onto one grid (`registered/frame_NN_{trace,retrace}.gsf`, the stack as one
+//! multi-page TIFF, and their mean), and `series.json`.
+
+use std::io::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use dhct_distortion::series::{SeriesFeature, register_image};
+use dhct_scan::{ImageChannel, ScanPass};
+use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
+use ndarray::Array2;
+
+use super::{SeriesSummary, Timed};
+use crate::analysis::Corrected;
+
+/// Writes every output but `series.json`; returns the names written.
+pub fn write_all(
+    dir: &Path,
+    summary: &SeriesSummary,
+    corrected: &[Corrected],
+    timed: &[Timed],
+) -> Result<Vec<String>> {
+    let mut written = vec![write_features(dir, summary, corrected, timed)?];
+    written.push(write_trajectory(dir, summary)?);
+    written.extend(write_registered(dir, summary, corrected, timed)?);
+    written.push(SERIES_JSON.to_string());
+    Ok(written)
+}
+
+/// File name of the summary.
+pub const SERIES_JSON: &str = "series.json";
+
+/// Writes `series.json`.
+pub fn write_summary(dir: &Path, summary: &SeriesSummary) -> Result<()> {
+    write_atomically(&dir.join(SERIES_JSON), |w| {
+        serde_json::to_writer_pretty(&mut *w, summary)
+            .map_err(|e| WriteError::Stream(std::io::Error::other(e)))?;
+        w.write_all(b"\n")?;
+        Ok(())
+    })?;
+    Ok(())
+}
+
+fn csv_error(e: csv::Error) -> WriteError {
+    WriteError::Stream(std::io::Error::other(e))
+}
+
+/// `features.csv`: every feature of every frame with its session position.
+fn write_features(
+    dir: &Path,
+    summary: &SeriesSummary,
+    corrected: &[Corrected],
+    timed: &[Timed],
+) -> Result<String> {
+    const NAME: &str = "features.csv";
+    write_atomically(&dir.join(NAME), |w| {
+        let mut out = csv::Writer::from_writer(w);
+        out.write_record([
+            "frame",
+            "pass",
+            "x_px",
+            "y_px",
+            "session_time_s",
+            "height",
+            "corrected_x_m",
+            "corrected_y_m",
+        ])
+        .map_err(csv_error)?;
+        for (k, t) in timed.iter().enumerate() {
+            let c = &corrected[t.input];
+            let g = c.pair.geometry();
+            for pass in &c.analysis.passes {
+                for f in &pass.features.features {
+                    let at = SeriesFeature::at_pixel(g, t.start_s, f.pass, f.x_px, f.y_px);
+                    let q = summary.fit.position_of(&at);
+                    out.write_record([
+                        k.to_string(),
+                        f.pass.name().to_string(),
+                        format!("{:.4}", f.x_px),
+                        format!("{:.4}", f.y_px),
+                        format!("{:.6}", at.time_s),
+                        format!("{:e}", f.height),
+                        format!("{:e}", q[0]),
+                        format!("{:e}", q[1]),
+                    ])
+                    .map_err(csv_error)?;
+                }
+            }
+        }
+        out.flush()?;
+        Ok(())
+    })?;
+    Ok(NAME.to_string())
+}
+
+/// `trajectory.csv`: the drift over the session with 1σ.
+fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
+    const NAME: &str = "trajectory.csv";
+    write_atomically(&dir.join(NAME), |w| {
+        let mut out = csv::Writer::from_writer(w);
+        out.write_record(["session_time_s", "dx_m", "dy_m", "sigma_x_m", "sigma_y_m"])
+            .map_err(csv_error)?;
+        for p in &summary.fit.trajectory {
+            out.write_record([
+                format!("{:.4}", p.time_s),
+                format!("{:e}", p.displacement_m[0]),
+                format!("{:e}", p.displacement_m[1]),
+                format!("{:e}", p.sigma_m[0]),
+                format!("{:e}", p.sigma_m[1]),
+            ])
+            .map_err(csv_error)?;
+        }
+        out.flush()?;
+        Ok(())
+    })?;
+    Ok(NAME.to_string())
+}
+
+/// Every frame's images registered onto the first frame's grid, their stack and its mean.
+fn write_registered(
+    dir: &Path,
+    summary: &SeriesSummary,
+    corrected: &[Corrected],
+    timed: &[Timed],
+) -> Result<Vec<String>> {
+    let folder = dir.join("registered");
+    std::fs::create_dir_all(&folder)
+        .with_context(|| format!("cannot create {}", folder.display()))?;
+    let grid = corrected[timed[0].input].pair.geometry().clone();
+    let mut written = Vec::new();
+    let mut pages: Vec<ImageChannel> = Vec::new();
+    for (k, t) in timed.iter().enumerate() {
+        let pair = &corrected[t.input].pair;
+        for (pass, image) in pair.images() {
+            let z = register_image(
+                &summary.fit,
+                pair.geometry(),
+                t.start_s,
+                pass,
+                &image.z,
+                &grid,
+            )?;
+            let name = format!("frame_{k:02}_{}", pass.name());
+            let channel =
+                ImageChannel::new(format!("{} {name}", image.name), image.unit.clone(), z);
+            let file = format!("registered/{name}.gsf");
+            write_atomically(&dir.join(&file), |w| {
+                gsf::write_pass(&channel, &grid, pass, w)
+            })?;
+            written.push(file);
+            pages.push(channel);
+        }
+    }
+    let mean = mean_image(&pages);
+    let unit = pages.first().map(|p| p.unit.clone()).unwrap_or_default();
+    let mean = ImageChannel::new("mean of the registered frames", unit, mean);
+    write_atomically(&dir.join("registered/mean.gsf"), |w| {
+        gsf::write_pass(&mean, &grid, ScanPass::Trace, w)
+    })?;
+    written.push("registered/mean.gsf".into());
+    let refs: Vec<&ImageChannel> = pages.iter().collect();
+    write_atomically(&dir.join("registered/stack.tif"), |w| {
+        tiff_file::write_f32_pages_with_pixel_size(&refs, [grid.pitch_x(), grid.pitch_y()], w)
+    })?;
+    written.push("registered/stack.tif".into());
+    Ok(written)
+}
+
+/// The mean of `pages` per pixel over the pages that hold a value there (NaN where none).
+fn mean_image(pages: &[ImageChannel]) -> Array2<f64> {
+    let Some(first) = pages.first() else {
+        return Array2::zeros((0, 0));
+    };
+    let mut sum = Array2::<f64>::zeros(first.z.dim());
+    let mut count = Array2::<f64>::zeros(first.z.dim());
+    for page in pages {
+        ndarray::Zip::from(&mut sum)
+            .and(&mut count)
+            .and(&page.z)
+            .for_each(|s, n, &v| {
+                if v.is_finite() {
+                    *s += v;
+                    *n += 1.0;
+                }
+            });
+    }
+    ndarray::Zip::from(&mut sum).and(&count).for_each(|s, &n| {
+        *s = if n > 0.0 { *s / n } else { f64::NAN };
+    });
+    sum
+}

@@ -1,0 +1,668 @@
+//! The series fit: one drift (a spline in session time), a creep after every move and one
+//! hysteresis law, fitted jointly to every indexed feature of every frame against one
+//! lattice of the known constant; the number of spline knots chosen by cross-validation over
+//! blocks of time.
+
+use dhct_lattice::Lattice;
+use dhct_numerics::lm::{LmOptions, ResidualFit, fit_residuals};
+use dhct_numerics::robust::mad_sigma_about;
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::alignment::{frame_shifts, index_series};
+use super::frame::{SeriesFeature, SeriesFrame};
+use super::problem::{NM, SeriesProblem};
+use super::session_drift::{MoveCreep, SessionDrift};
+use super::spline::SplineBasis;
+use crate::DistortionError;
+use crate::fit::{
+    FitOptions, LogisticLog, axis_weights, hysteresis_parameters, parameter, scaled_sigmas,
+};
+use crate::model::{HysteresisLaw, Parameter};
+use crate::thinning::thin;
+
+/// Most features the joint fit uses (evenly thinned in time beyond; all are placed).
+pub const MAX_SERIES_FITTED: usize = 24_000;
+
+/// Features each cross-validation fit is scored on (evenly thinned in time).
+const CROSS_VALIDATION_FEATURES: usize = 4000;
+
+/// How many interior knots the drift spline gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KnotChoice {
+    /// Chosen by cross-validation over blocks of time among 0, 1, 2, 4, 8, … up to four
+    /// per frame.
+    CrossValidated,
+    /// This many.
+    Fixed(usize),
+}
+
+/// Options of [`fit_series`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeriesOptions {
+    /// Hysteresis law and robust rounds (the secant option does not apply).
+    pub fit: FitOptions,
+    /// The drift spline's knots.
+    pub knots: KnotChoice,
+}
+
+/// The cross-validated misfit of one knot count.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct KnotScore {
+    /// Interior knots.
+    pub interior_knots: usize,
+    /// RMS deviation of the held-out features from their sites, metres.
+    pub held_out_rms_m: f64,
+}
+
+/// One sample of the fitted drift trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryPoint {
+    /// Session time, seconds.
+    pub time_s: f64,
+    /// `D(T)`, metres, instrument frame.
+    pub displacement_m: [f64; 2],
+    /// Its 1σ per axis, metres (from the spline and creep amplitudes' covariance).
+    pub sigma_m: [f64; 2],
+}
+
+/// The result of [`fit_series`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeriesFit {
+    /// The drift and creep over the session.
+    pub drift: SessionDrift,
+    /// The fast-scan hysteresis shared by every frame.
+    pub hysteresis: HysteresisLaw,
+    /// Lattice rotation θ in the instrument frame, radians.
+    pub lattice_angle_rad: f64,
+    /// Lattice origin in the instrument frame, metres.
+    pub origin_m: [f64; 2],
+    /// The creeps' and the hysteresis law's parameters with 1σ.
+    pub parameters: Vec<Parameter>,
+    /// `D(T)` sampled over the session with its 1σ.
+    pub trajectory: Vec<TrajectoryPoint>,
+    /// `D` at each frame's start with its 1σ.
+    pub frame_starts: Vec<TrajectoryPoint>,
+    /// Line scan time the hysteresis law is in, seconds.
+    pub line_time_s: f64,
+    /// Robust RMS of the fitted features' deviations from their sites, metres.
+    pub rms_deviation_m: f64,
+    /// Features in the fit.
+    pub features: usize,
+    /// The knot counts tried and their held-out misfit (empty when fixed).
+    pub knot_scores: Vec<KnotScore>,
+    /// Session times of the moves (0: the one before the session) whose creep the data did
+    /// not resolve (its time constant ran to a bound): left out of the model, the drift
+    /// spline takes what there is of it.
+    #[serde(default)]
+    pub unresolved_creeps_s: Vec<f64>,
+}
+
+impl SeriesFit {
+    /// Session position (instrument frame, metres) of `f` under the fit.
+    pub fn position_of(&self, f: &SeriesFeature) -> [f64; 2] {
+        let lag = match f.pass {
+            dhct_scan::ScanPass::Trace => self.hysteresis.excess_integral(f.line_time_s),
+            dhct_scan::ScanPass::Retrace => {
+                self.hysteresis.excess_integral(self.line_time_s)
+                    - self.hysteresis.excess_integral(f.line_time_s)
+            }
+        };
+        let d = self.drift.displacement(f.time_s);
+        [
+            f.controller_m[0] + f.lag_direction_m_per_s[0] * lag + d[0],
+            f.controller_m[1] + f.lag_direction_m_per_s[1] * lag + d[1],
+        ]
+    }
+}
+
+/// Fits one model to every frame of `frames` (at least two, in time order, with the same
+/// size, pitch and timing) against `lattice`.
+pub fn fit_series(
+    frames: &[SeriesFrame],
+    lattice: &dyn Lattice,
+    options: &SeriesOptions,
+) -> Result<SeriesFit, DistortionError> {
+    check_frames(frames)?;
+    let shifts = frame_shifts(frames, lattice)?;
+    let placed = |f: &SeriesFeature| {
+        let p = frames[f.frame].own_position(f.input, f.feature_index);
+        let s = shifts[f.frame];
+        [p[0] + s[0], p[1] + s[1]]
+    };
+    let mut features = index_series(frames, lattice, &placed)?;
+    let mut setup = Setup::new(frames, options);
+    let knots = match options.knots {
+        KnotChoice::Fixed(k) => (k, Vec::new()),
+        KnotChoice::CrossValidated => setup.cross_validate(&features, frames, &shifts)?,
+    };
+    let mut fit = setup.fit(
+        &features,
+        &setup.start_drift(frames, &shifts, knots.0),
+        None,
+    )?;
+    // A creep whose time constant ran to a bound is not resolved (the spline took it, or
+    // it was not there): fitted again without it, and said.
+    let unresolved: Vec<f64> = fit
+        .drift
+        .creeps
+        .iter()
+        .filter(|c| setup.t0_map.at_bound(setup.t0_map.parameter(c.t0_s)))
+        .map(|c| c.start_s)
+        .collect();
+    if !unresolved.is_empty() {
+        setup.creep_starts.retain(|s| !unresolved.contains(s));
+        fit = setup.fit(
+            &features,
+            &setup.start_drift(frames, &shifts, knots.0),
+            None,
+        )?;
+        fit.unresolved_creeps_s = unresolved;
+    }
+    // Index again in the fitted frame while that indexes markedly more features.
+    for _ in 0..2 {
+        let Ok(again) = index_series(frames, lattice, &|f| fit.position_of(f)) else {
+            break;
+        };
+        if (again.len() as f64) < 1.02 * features.len() as f64 {
+            break;
+        }
+        let Ok(better) = setup.fit(&again, &fit.drift, Some(&fit)) else {
+            break;
+        };
+        features = again;
+        fit = better;
+    }
+    fit.knot_scores = knots.1;
+    Ok(fit)
+}
+
+/// Frames a series can be fitted from: at least two, same size, pitch and line timing.
+fn check_frames(frames: &[SeriesFrame]) -> Result<(), DistortionError> {
+    let Some(first) = frames.first() else {
+        return Err(DistortionError::BadParameter(
+            "a series needs frames".into(),
+        ));
+    };
+    if frames.len() < 2 {
+        return Err(DistortionError::BadParameter(
+            "a series needs at least two frames; one frame is fitted by itself".into(),
+        ));
+    }
+    let g0 = first.geometry;
+    for (k, frame) in frames.iter().enumerate() {
+        let g = frame.geometry;
+        let same = g.columns() == g0.columns()
+            && g.rows() == g0.rows()
+            && (g.pitch_x() / g0.pitch_x() - 1.0).abs() < 1e-6
+            && (g.pitch_y() / g0.pitch_y() - 1.0).abs() < 1e-6
+            && (g.line_scan_time() / g0.line_scan_time() - 1.0).abs() < 1e-6;
+        if !same {
+            return Err(DistortionError::BadParameter(format!(
+                "frame {k} is {}x{} px of {:.4e} x {:.4e} m with {:.4e} s lines, frame 0 is \
+                 {}x{} px of {:.4e} x {:.4e} m with {:.4e} s lines: a series fit needs \
+                 frames of one size, pitch and timing",
+                g.columns(),
+                g.rows(),
+                g.pitch_x(),
+                g.pitch_y(),
+                g.line_scan_time(),
+                g0.columns(),
+                g0.rows(),
+                g0.pitch_x(),
+                g0.pitch_y(),
+                g0.line_scan_time()
+            )));
+        }
+        if k > 0
+            && frame.start_s
+                < frames[k - 1].start_s + frames[k - 1].geometry.frame_duration() * 0.999
+        {
+            return Err(DistortionError::BadParameter(format!(
+                "frame {k} starts {:.1} s into the session, before frame {} ended ({:.1} s): \
+                 frames must be in time order and not overlap",
+                frame.start_s,
+                k - 1,
+                frames[k - 1].start_s + frames[k - 1].geometry.frame_duration()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// What every fit of one series shares.
+struct Setup {
+    options: SeriesOptions,
+    end_s: f64,
+    line_time_s: f64,
+    creep_starts: Vec<f64>,
+    t0_map: LogisticLog,
+    start_law: HysteresisLaw,
+    frame_starts_s: Vec<f64>,
+}
+
+impl Setup {
+    fn new(frames: &[SeriesFrame], options: &SeriesOptions) -> Setup {
+        let g0 = frames[0].geometry;
+        let last = frames.last().unwrap_or(&frames[0]);
+        let end_s = last.start_s + last.geometry.frame_duration();
+        // A creep from before the session, and one after every move of the frame centre.
+        let mut creep_starts = vec![0.0];
+        for pair in frames.windows(2) {
+            let (a, b) = (pair[0].geometry.offset(), pair[1].geometry.offset());
+            if (a.0 - b.0).hypot(a.1 - b.1) > 0.5 * g0.pitch_x().min(g0.pitch_y()) {
+                creep_starts.push(pair[1].start_s);
+            }
+        }
+        Setup {
+            options: *options,
+            end_s,
+            line_time_s: g0.line_scan_time(),
+            creep_starts,
+            t0_map: LogisticLog::for_frame(g0.line_scan_time(), g0.frame_duration()),
+            start_law: frames[0].model.hysteresis.clone(),
+            frame_starts_s: frames.iter().map(|f| f.start_s).collect(),
+        }
+    }
+
+    /// The start: each frame's own creep for the creeps, the spline fitted to what is left
+    /// of the frames' own drifts placed at their shifts.
+    fn start_drift(
+        &self,
+        frames: &[SeriesFrame],
+        shifts: &[[f64; 2]],
+        knots: usize,
+    ) -> SessionDrift {
+        let basis = SplineBasis {
+            start_s: 0.0,
+            end_s: self.end_s,
+            interior_knots: knots,
+        };
+        let creeps: Vec<MoveCreep> = self
+            .creep_starts
+            .iter()
+            .map(|&start_s| {
+                let frame = frames
+                    .iter()
+                    .find(|f| f.start_s >= start_s)
+                    .unwrap_or(&frames[0]);
+                let own = &frame.model.drift;
+                MoveCreep {
+                    start_s,
+                    coefficient_m: frame.geometry.vector_to_instrument(own.creep_m),
+                    t0_s: own.t0_s,
+                }
+            })
+            .collect();
+        let with_creeps = SessionDrift {
+            coefficients_m: vec![[0.0; 2]; basis.len()],
+            basis: basis.clone(),
+            creeps,
+        };
+        let mut samples = Vec::new();
+        for (frame, shift) in frames.iter().zip(shifts) {
+            let duration = frame.geometry.frame_duration();
+            for j in 0..=20 {
+                let t = duration * j as f64 / 20.0;
+                let own = frame.own_drift(t);
+                let creep = with_creeps.displacement(frame.start_s + t);
+                let own_creep = frame.geometry.vector_to_instrument({
+                    let d = &frame.model.drift;
+                    let log = (t / d.t0_s).ln_1p();
+                    [d.creep_m[0] * log, d.creep_m[1] * log]
+                });
+                samples.push((
+                    frame.start_s + t,
+                    [
+                        shift[0] + own[0] - own_creep[0] - creep[0]
+                            + with_creeps.displacement(frame.start_s)[0],
+                        shift[1] + own[1] - own_creep[1] - creep[1]
+                            + with_creeps.displacement(frame.start_s)[1],
+                    ],
+                ));
+            }
+        }
+        let coefficients_m = fit_spline(&basis, &samples);
+        SessionDrift {
+            coefficients_m,
+            ..with_creeps
+        }
+    }
+
+    fn problem<'a>(&self, features: &'a [SeriesFeature], basis: SplineBasis) -> SeriesProblem<'a> {
+        let choice = self.options.fit.hysteresis.resolved(&self.start_law);
+        SeriesProblem::new(
+            features,
+            basis,
+            self.creep_starts.clone(),
+            choice,
+            self.line_time_s,
+            self.t0_map,
+        )
+    }
+
+    /// The robust fit from `start` (θ and the origin placed in closed form unless `previous`
+    /// gives them).
+    fn fit(
+        &self,
+        features: &[SeriesFeature],
+        start: &SessionDrift,
+        previous: Option<&SeriesFit>,
+    ) -> Result<SeriesFit, DistortionError> {
+        self.fit_rounds(features, start, previous, self.options.fit.robust_rounds)
+    }
+
+    /// [`Setup::fit`] with `robust_rounds` Huber rounds.
+    fn fit_rounds(
+        &self,
+        features: &[SeriesFeature],
+        start: &SessionDrift,
+        previous: Option<&SeriesFit>,
+        robust_rounds: usize,
+    ) -> Result<SeriesFit, DistortionError> {
+        if features.len() < 24 {
+            return Err(DistortionError::TooFewFeatures {
+                what: "series fit",
+                found: features.len(),
+                needed: 24,
+            });
+        }
+        let features = thin(features, MAX_SERIES_FITTED);
+        let problem = self.problem(&features, start.basis.clone());
+        let law = previous.map_or_else(|| self.start_law.clone(), |p| p.hysteresis.clone());
+        let (theta, origin) = match previous {
+            Some(p) => (p.lattice_angle_rad, p.origin_m),
+            None => place(&features, start, &law, self.line_time_s),
+        };
+        let p0 = problem.start(theta, origin, start, &law);
+        let (fit, weights) = robust_fit(&problem, p0, robust_rounds)?;
+        Ok(self.result(&problem, &fit, &weights))
+    }
+
+    fn result(&self, problem: &SeriesProblem, fit: &ResidualFit, weights: &[f64]) -> SeriesFit {
+        let p = &fit.params;
+        let n = p.len();
+        let sigma = scaled_sigmas(fit, weights, n);
+        let drift = problem.drift(p);
+        let mut parameters = Vec::new();
+        let at = problem.creep_at();
+        for (k, creep) in drift.creeps.iter().enumerate() {
+            let q = p[at + 3 * k + 2];
+            let s = &sigma[at + 3 * k..at + 3 * k + 3];
+            parameters.push(parameter(
+                &format!("creep{k}_C_x"),
+                creep.coefficient_m[0],
+                s[0] / NM,
+                "m",
+            ));
+            parameters.push(parameter(
+                &format!("creep{k}_C_y"),
+                creep.coefficient_m[1],
+                s[1] / NM,
+                "m",
+            ));
+            parameters.push(parameter(
+                &format!("creep{k}_t0"),
+                creep.t0_s,
+                self.t0_map.derivative(q) * s[2],
+                "s",
+            ));
+        }
+        let h_at = problem.hysteresis_at();
+        parameters.extend(hysteresis_parameters(
+            problem.choice,
+            &p[h_at..],
+            &sigma[h_at..],
+        ));
+        let covariance = scaled_covariance(fit, weights);
+        let sample = |t: f64| trajectory_point(problem, &drift, covariance.as_ref(), t);
+        let trajectory = (0..=200)
+            .map(|j| sample(self.end_s * j as f64 / 200.0))
+            .collect();
+        let frame_starts = self.frame_starts_s.iter().map(|&t| sample(t)).collect();
+        let m = problem.features.len();
+        let robust = mad_sigma_about(&fit.residuals[..2 * m], 0.0).unwrap_or(f64::NAN);
+        SeriesFit {
+            hysteresis: problem.law(p),
+            drift,
+            lattice_angle_rad: p[0],
+            origin_m: [p[1] / NM, p[2] / NM],
+            parameters,
+            trajectory,
+            frame_starts,
+            line_time_s: self.line_time_s,
+            rms_deviation_m: robust * std::f64::consts::SQRT_2 / NM,
+            features: m,
+            knot_scores: Vec::new(),
+            unresolved_creeps_s: Vec::new(),
+        }
+    }
+
+    /// The knot count with the lowest held-out misfit: 5 folds of blocks of time (an
+    /// eighth of a frame each), each fitted without its features and scored on them.
+    fn cross_validate(
+        &self,
+        features: &[SeriesFeature],
+        frames: &[SeriesFrame],
+        shifts: &[[f64; 2]],
+    ) -> Result<(usize, Vec<KnotScore>), DistortionError> {
+        let block = frames[0].geometry.frame_duration() / 8.0;
+        let most = 4 * frames.len();
+        let candidates: Vec<usize> = std::iter::once(0)
+            .chain((0..).map(|e| 1usize << e).take_while(|k| *k <= most))
+            .collect();
+        let features = thin(features, CROSS_VALIDATION_FEATURES);
+        let fold = |f: &SeriesFeature| ((f.time_s / block) as usize) % 5;
+        let mut scores = Vec::new();
+        for &knots in &candidates {
+            let start = self.start_drift(frames, shifts, knots);
+            let mut squares = (0.0, 0usize);
+            for k in 0..5 {
+                let train: Vec<SeriesFeature> =
+                    features.iter().filter(|f| fold(f) != k).copied().collect();
+                let test: Vec<SeriesFeature> =
+                    features.iter().filter(|f| fold(f) == k).copied().collect();
+                let Ok(fit) = self.fit_rounds(&train, &start, None, 0) else {
+                    continue;
+                };
+                let (s, c) = fit.lattice_angle_rad.sin_cos();
+                for f in &test {
+                    let q = fit.position_of(f);
+                    let [ux, uy] = f.site_m;
+                    let dx = q[0] - fit.origin_m[0] - (c * ux - s * uy);
+                    let dy = q[1] - fit.origin_m[1] - (s * ux + c * uy);
+                    squares.0 += dx * dx + dy * dy;
+                    squares.1 += 1;
+                }
+            }
+            if squares.1 > 0 {
+                scores.push(KnotScore {
+                    interior_knots: knots,
+                    held_out_rms_m: (squares.0 / squares.1 as f64).sqrt(),
+                });
+            }
+            if worse_twice(&scores) {
+                break;
+            }
+        }
+        let best = scores
+            .iter()
+            .min_by(|a, b| a.held_out_rms_m.total_cmp(&b.held_out_rms_m))
+            .map(|s| s.interior_knots)
+            .ok_or(DistortionError::FitFailed("series knot cross-validation"))?;
+        Ok((best, scores))
+    }
+}
+
+/// Whether the last two knot counts both scored worse than the one before each: more knots
+/// only fit noise from here on.
+fn worse_twice(scores: &[KnotScore]) -> bool {
+    let n = scores.len();
+    n >= 3
+        && scores[n - 1].held_out_rms_m > scores[n - 2].held_out_rms_m
+        && scores[n - 2].held_out_rms_m > scores[n - 3].held_out_rms_m
+}
+
+/// Least-squares spline coefficients (the first fixed at 0) through `samples` of
+/// `(time, displacement)`.
+fn fit_spline(basis: &SplineBasis, samples: &[(f64, [f64; 2])]) -> Vec<[f64; 2]> {
+    let n = basis.len();
+    let mut a = DMatrix::<f64>::zeros(samples.len(), n - 1);
+    let mut values = vec![0.0; n];
+    for (row, (t, _)) in samples.iter().enumerate() {
+        basis.values(*t, &mut values);
+        for j in 1..n {
+            a[(row, j - 1)] = values[j];
+        }
+    }
+    let svd = a.svd(true, true);
+    let solve = |axis: usize| {
+        let b = nalgebra::DVector::from_iterator(samples.len(), samples.iter().map(|s| s.1[axis]));
+        svd.solve(&b, 1e-12).ok()
+    };
+    let (x, y) = (solve(0), solve(1));
+    (0..n)
+        .map(|j| match (&x, &y) {
+            (Some(x), Some(y)) if j > 0 => [x[j - 1], y[j - 1]],
+            _ => [0.0; 2],
+        })
+        .collect()
+}
+
+/// Closed-form θ and origin placing the lattice on `features` under `drift` and `law`.
+fn place(
+    features: &[SeriesFeature],
+    drift: &SessionDrift,
+    law: &HysteresisLaw,
+    line_time_s: f64,
+) -> (f64, [f64; 2]) {
+    let probe = SeriesFit {
+        drift: drift.clone(),
+        hysteresis: law.clone(),
+        lattice_angle_rad: 0.0,
+        origin_m: [0.0; 2],
+        parameters: Vec::new(),
+        trajectory: Vec::new(),
+        frame_starts: Vec::new(),
+        line_time_s,
+        rms_deviation_m: 0.0,
+        features: 0,
+        knot_scores: Vec::new(),
+        unresolved_creeps_s: Vec::new(),
+    };
+    let positions: Vec<[f64; 2]> = features.iter().map(|f| probe.position_of(f)).collect();
+    let count = features.len().max(1) as f64;
+    let mean = |get: &dyn Fn(usize) -> [f64; 2]| {
+        let s = (0..features.len()).fold([0.0; 2], |a, i| {
+            let v = get(i);
+            [a[0] + v[0], a[1] + v[1]]
+        });
+        [s[0] / count, s[1] / count]
+    };
+    let mp = mean(&|i| positions[i]);
+    let mu = mean(&|i| features[i].site_m);
+    let (mut cross, mut dot) = (0.0, 0.0);
+    for (f, p) in features.iter().zip(&positions) {
+        let (px, py) = (p[0] - mp[0], p[1] - mp[1]);
+        let (ux, uy) = (f.site_m[0] - mu[0], f.site_m[1] - mu[1]);
+        dot += ux * px + uy * py;
+        cross += ux * py - uy * px;
+    }
+    let theta = cross.atan2(dot);
+    let (s, c) = theta.sin_cos();
+    (
+        theta,
+        [
+            mp[0] - (c * mu[0] - s * mu[1]),
+            mp[1] - (s * mu[0] + c * mu[1]),
+        ],
+    )
+}
+
+/// Huber IRLS from `p0`, each axis weighted by its own robust scale.
+fn robust_fit(
+    problem: &SeriesProblem,
+    mut p: Vec<f64>,
+    robust_rounds: usize,
+) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
+    let m = problem.features.len();
+    let priors = problem.rows() - 2 * m;
+    let mut weights = problem.plain_weights();
+    let lm = LmOptions {
+        max_iterations: 100,
+        ..LmOptions::default()
+    };
+    let mut last = None;
+    for round in 0..=robust_rounds.max(1) {
+        let fit = fit_residuals(problem, problem.rows(), &p, &weights, &lm)
+            .ok_or(DistortionError::FitFailed("series"))?;
+        p.clone_from(&fit.params);
+        weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);
+        weights.extend(std::iter::repeat_n(1.0, priors));
+        last = Some(fit);
+    }
+    let fit = last.ok_or(DistortionError::FitFailed("series"))?;
+    if !fit.params.iter().all(|v| v.is_finite()) {
+        return Err(DistortionError::FitFailed("series"));
+    }
+    let once = LmOptions {
+        max_iterations: 0,
+        ..LmOptions::default()
+    };
+    let fit = fit_residuals(problem, problem.rows(), &fit.params, &weights, &once).unwrap_or(fit);
+    Ok((fit, weights))
+}
+
+/// `σ̂²·(JᵀWJ)⁻¹`, nm units.
+fn scaled_covariance(fit: &ResidualFit, weights: &[f64]) -> Option<DMatrix<f64>> {
+    let chi2: f64 = fit
+        .residuals
+        .iter()
+        .zip(weights)
+        .map(|(r, w)| w * r * r)
+        .sum();
+    let dof = fit.residuals.len().saturating_sub(fit.params.len()).max(1) as f64;
+    fit.inverse_normal.as_ref().map(|c| c * (chi2 / dof))
+}
+
+/// `D(t)` with its 1σ from the covariance of the spline coefficients and creep amplitudes.
+fn trajectory_point(
+    problem: &SeriesProblem,
+    drift: &SessionDrift,
+    covariance: Option<&DMatrix<f64>>,
+    t: f64,
+) -> TrajectoryPoint {
+    let n_basis = drift.basis.len();
+    let free = n_basis - 1;
+    let mut values = vec![0.0; n_basis];
+    drift.basis.values(t, &mut values);
+    let at = problem.creep_at();
+    let sigma_m = std::array::from_fn(|axis| {
+        let Some(c) = covariance else {
+            return f64::NAN;
+        };
+        // Gradient of D_axis(t) in the parameters.
+        let mut g: Vec<(usize, f64)> = values
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(j, v)| (3 + axis * free + j - 1, *v))
+            .collect();
+        for (k, creep) in drift.creeps.iter().enumerate() {
+            g.push((at + 3 * k + axis, creep.log_term(t)));
+        }
+        let mut variance = 0.0;
+        for &(i, gi) in &g {
+            for &(j, gj) in &g {
+                variance += gi * gj * c[(i, j)];
+            }
+        }
+        variance.max(0.0).sqrt() / NM
+    });
+    TrajectoryPoint {
+        time_s: t,
+        displacement_m: drift.displacement(t),
+        sigma_m,
+    }
+}

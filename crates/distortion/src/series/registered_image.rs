@@ -1,0 +1,45 @@
+//! A frame's image registered into the session frame: every pixel placed by the series
+//! fit, resampled onto one common grid (the first frame's pixel grid turned into the
+//! instrument frame), so the frames of a session stack pixel on pixel.
+
+use dhct_scan::{ScanGeometry, ScanPass};
+use ndarray::Array2;
+
+use super::fit::SeriesFit;
+use super::frame::SeriesFeature;
+use crate::DistortionError;
+use crate::correction::resample_onto;
+
+/// `z` (an image of `pass` of a frame of `geometry` that started `start_s` into the
+/// session) resampled onto the grid of `grid` (the common frame: output pixel `(c, r)` is
+/// the instrument-frame point `grid.to_instrument((c·pitch_x, r·pitch_y))` displaced by
+/// nothing: the session frame fixed to the sample at the first frame's start). NaN where the
+/// frame did not reach.
+pub fn register_image(
+    fit: &SeriesFit,
+    geometry: &ScanGeometry,
+    start_s: f64,
+    pass: ScanPass,
+    z: &Array2<f64>,
+    grid: &ScanGeometry,
+) -> Result<Array2<f64>, DistortionError> {
+    let (rows, columns) = z.dim();
+    if rows != geometry.rows() || columns != geometry.columns() {
+        return Err(DistortionError::ShapeMismatch {
+            what: "image",
+            columns,
+            rows,
+            geometry_columns: geometry.columns(),
+            geometry_rows: geometry.rows(),
+        });
+    }
+    let place = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
+        for c in 0..xs.len() {
+            let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
+            let q = grid.from_instrument(fit.position_of(&f));
+            xs[c] = q[0] / grid.pitch_x();
+            ys[c] = q[1] / grid.pitch_y();
+        }
+    };
+    Ok(resample_onto(&place, z, (grid.rows(), grid.columns())))
+}
