@@ -21,7 +21,10 @@ use crate::scan::Scan;
 
 /// The config: `config_path`'s file (if any) overridden by the options given as JSON (the
 /// fields of `CorrectConfig`, as a TOML config names them).
-fn build_config(options_json: &str, config_path: Option<PathBuf>) -> PyResult<CorrectConfig> {
+pub(crate) fn build_config(
+    options_json: &str,
+    config_path: Option<PathBuf>,
+) -> PyResult<CorrectConfig> {
     let given: CorrectConfig = serde_json::from_str(options_json)
         .map_err(|e| OptionError::new_err(format!("invalid option: {e}")))?;
     given.check().map_err(|e| to_py::<OptionError>(&e))?;

@@ -5,6 +5,7 @@ mod correct;
 mod errors;
 mod points;
 mod scan;
+mod series;
 mod simulate;
 
 use std::path::PathBuf;
@@ -43,6 +44,8 @@ fn _dhct(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(correct::correct, module)?)?;
     module.add_function(wrap_pyfunction!(points::map_points, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::simulate, module)?)?;
+    module.add_function(wrap_pyfunction!(series::correct_series, module)?)?;
+    module.add_function(wrap_pyfunction!(series::simulate_sequence, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::presets, module)?)?;
     module.add_function(wrap_pyfunction!(simulate::lattices, module)?)?;
     module.add("__version__", env!("CARGO_PKG_VERSION"))?;

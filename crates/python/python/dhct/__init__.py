@@ -52,12 +52,14 @@ __all__ = [
     "WriteError",
     "__version__",
     "correct",
+    "correct_series",
     "diagnose",
     "lattices",
     "map_points",
     "presets",
     "read",
     "simulate",
+    "simulate_sequence",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -517,3 +519,53 @@ def simulate(preset_or_config: Union[str, PathLike, Mapping[str, Any]], seed: Op
     scan, truth, config = _dhct.simulate(*args, seed)
     return Simulation(scan=scan, truth=json.loads(truth), config=config)
 
+
+
+def correct_series(
+    frames: Union[PathLike, Sequence[PathLike]],
+    outdir: PathLike,
+    lattice: Optional[str] = None,
+    nn: Union[float, str, None] = None,
+    knots: Optional[int] = None,
+    **options: Any,
+) -> Dict[str, Any]:
+    """Fits one model to frames of one area taken one after another and registers them
+    into one sample frame, as ``dhct series`` does; writes its outputs into ``outdir``
+    (series.json, features.csv, trajectory.csv, registered/) and returns series.json's
+    content as a dict.
+
+    ``frames``: files, folders or glob patterns (a path or a list of them), ordered by the
+    start time each file records. ``lattice``, ``nn`` and the options are those of
+    :func:`correct` (every frame is first analysed alone with them). ``knots``: interior
+    knots of the drift spline over the session (default: chosen by cross-validation).
+
+    Raises OptionError, AnalysisError (e.g. fewer than two frames, frames of different
+    sizes, frames overlapping in time, a frame that cannot be analysed alone).
+    """
+    _check_names(options, tuple(name for name in _OPTIONS if name not in ("retrace", "progress")))
+    config = _config_options(lattice, nn, options)
+    if isinstance(frames, (str, os.PathLike)):
+        frames = [frames]
+    inputs = [os.fspath(f) for f in frames]
+    config_path = options.get("config")
+    raw = _dhct.correct_series(
+        inputs,
+        os.fspath(outdir),
+        json.dumps(config),
+        os.fspath(config_path) if config_path is not None else None,
+        knots,
+    )
+    return json.loads(raw)
+
+
+def simulate_sequence(preset_or_config: Union[str, PathLike], outdir: PathLike, seed: Optional[int] = None) -> List[str]:
+    """Simulates an image sequence (a preset such as ``"graphite-sequence"`` or a config
+    file with a ``[sequence]`` table, see docs/simulator.md) into ``outdir``, one frame at a
+    time: ``frame_NN.sm4`` and ``sequence_truth.json``. Returns the paths written. Raises
+    SimulationError."""
+    if isinstance(preset_or_config, str) and preset_or_config in presets():
+        return list(_dhct.simulate_sequence(os.fspath(outdir), preset_or_config, None, seed))
+    path = os.fspath(preset_or_config)
+    if not os.path.exists(path):
+        raise SimulationError(f"{path!r} is neither a preset ({', '.join(presets())}) nor a config file")
+    return list(_dhct.simulate_sequence(os.fspath(outdir), None, path, seed))

@@ -67,6 +67,19 @@ def correct(
     mask: Optional[npt.NDArray[np.bool_]] = None,
     progress: Optional[Callable[[str], Any]] = None,
 ) -> Correction: ...
+def correct_series(
+    inputs: List[str],
+    output: str,
+    options_json: str,
+    config_path: Optional[str] = None,
+    knots: Optional[int] = None,
+) -> str: ...
+def simulate_sequence(
+    output: str,
+    preset: Optional[str] = None,
+    path: Optional[str] = None,
+    seed: Optional[int] = None,
+) -> List[str]: ...
 def simulate(
     preset: Optional[str] = None,
     path: Optional[str] = None,
