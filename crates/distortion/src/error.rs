@@ -41,6 +41,29 @@ pub enum DistortionError {
     /// The features could not be indexed against the lattice for the global registration.
     #[error("the features cannot be indexed for the global registration: {0}")]
     Indexing(#[source] dhct_lattice::LatticeFitError),
+    /// The series' one model leaves a frame's features much farther off their sites than
+    /// the frame's own model does: the frames were not placed right (a lattice period off)
+    /// or the session is not one continuous drift.
+    #[error(
+        "the series model does not explain frame {frame}: its features lie {series_pm:.1} pm \
+         rms off their sites against {own_pm:.1} pm with the frame's own model (more than \
+         {limit}×). The frame was likely placed a lattice period off: the drift carried from \
+         the frame before was wrong by half a period or more (a slow-axis pixel-size error \
+         looks like a drift within one frame and is carried as error × frame height), or the \
+         drift is not continuous there (a move the headers do not record, a tip change). \
+         Fit the frames before and after it as separate series, or correct the scanner's \
+         calibration first"
+    )]
+    SeriesNotExplained {
+        /// The frame (time order).
+        frame: usize,
+        /// Its features' RMS deviation under the series model, picometres.
+        series_pm: f64,
+        /// Under its own single-frame model, picometres.
+        own_pm: f64,
+        /// The largest ratio accepted.
+        limit: f64,
+    },
     /// An argument is out of range.
     #[error("invalid parameter: {0}")]
     BadParameter(String),

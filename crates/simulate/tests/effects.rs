@@ -11,8 +11,8 @@ use common::{
 use dhct_scan::ScanPass;
 use dhct_simulate::effects::{
     AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, LineDrift,
-    LineJitter, LogCreep, PiezoNonlinearity, ScanCoupling, SessionDrift, SlowScanHysteresis,
-    ThermalDrift, TipChange, Vibration,
+    LineJitter, LogCreep, PiezoNonlinearity, ScanCoupling, ScannerGain, SessionDrift,
+    SlowScanHysteresis, ThermalDrift, TipChange, Vibration,
 };
 use dhct_simulate::{AcquisitionContext, Effect, EffectConfig, HysteresisLaw, Region, StepEdge};
 
@@ -732,10 +732,14 @@ fn every_effect_keeps_the_effect_contract() {
             frame_start_s: 88.0,
             scan_angle_rad: 0.5,
         }),
+        Box::new(ScannerGain {
+            gain: [1.02, 0.97],
+            scan_angle_rad: 0.3,
+        }),
     ];
     assert_eq!(
         effects.len(),
-        14,
+        15,
         "one per effect type (telegraph tip and strain bubble aside)"
     );
     for effect in effects {

@@ -62,6 +62,7 @@ fn sequence_config(size: usize) -> SimulationConfig {
             coefficient_m: [0.1e-9, 0.05e-9],
             t0_s: 5.0,
         }),
+        scanner_gain: [1.0, 1.0],
         moves: vec![MoveConfig {
             before_frame: 2,
             offset_m: [0.6e-9, -0.4e-9],

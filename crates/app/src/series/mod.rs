@@ -93,7 +93,8 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .collect();
     let (timed, notes) = order::order(&geometries)?;
     let fit = fit_frames(&corrected, &timed, request)?;
-
+    let mut notes = notes;
+    notes.extend(unexplained_frames(&fit, &timed));
     let mut summary = SeriesSummary {
         frames: timed
             .iter()
@@ -148,6 +149,37 @@ fn fit_frames(
     fit_series(&frames, lattice, &options).context("the series fit failed")
 }
 
+/// Frames whose features the session's model leaves far off their sites (a frame placed a
+/// lattice vector off, or something the model does not hold happened during it).
+fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<String> {
+    let mut sorted: Vec<f64> = fit
+        .frame_rms_m
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    sorted.sort_by(f64::total_cmp);
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return Vec::new();
+    };
+    fit.frame_rms_m
+        .iter()
+        .zip(timed)
+        .enumerate()
+        .filter(|(_, (rms, _))| **rms > 3.0 * median)
+        .map(|(k, (rms, t))| {
+            format!(
+                "warning: frame {k} ({}) deviates {} rms from the lattice, the frames' median is \
+                 {}: the session's model does not explain it (placed a lattice period off, a \
+                 tip change, or a move the headers do not record); check its registered image",
+                t.path.display(),
+                dhct_scan::quantity::length(*rms),
+                dhct_scan::quantity::length(median)
+            )
+        })
+        .collect()
+}
+
 fn frame_summary(t: &Timed, c: &Corrected) -> FrameSummary {
     let g = c.pair.geometry();
     let model = &c.analysis.dhct.model;
@@ -179,7 +211,11 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
     let fit = &summary.fit;
     let mut text = String::new();
     for note in &summary.notes {
-        let _ = writeln!(text, "note: {note}");
+        if note.starts_with("warning:") || note.starts_with("assumption:") {
+            let _ = writeln!(text, "{note}");
+        } else {
+            let _ = writeln!(text, "note: {note}");
+        }
     }
     let session = fit.trajectory.last().map_or(0.0, |p| p.time_s);
     let _ = writeln!(
@@ -208,13 +244,20 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
              ran to a bound): left out, the drift spline takes it"
         );
     }
+    let shown = |value: f64, sigma: f64| {
+        if sigma > 0.0 {
+            value_with_sigma(value, sigma, "m")
+        } else {
+            length(value)
+        }
+    };
     for (k, (frame, start)) in summary.frames.iter().zip(&fit.frame_starts).enumerate() {
         let _ = writeln!(
             text,
             "  frame {k:>2} at {:>7.1} s: D = ({}, {}) {}",
             frame.start_s,
-            value_with_sigma(start.displacement_m[0], start.sigma_m[0], "m"),
-            value_with_sigma(start.displacement_m[1], start.sigma_m[1], "m"),
+            shown(start.displacement_m[0], start.sigma_m[0]),
+            shown(start.displacement_m[1], start.sigma_m[1]),
             frame.file
         );
     }

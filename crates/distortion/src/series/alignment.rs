@@ -66,6 +66,24 @@ fn reduce(delta: [f64; 2], basis: &Matrix2<f64>) -> [f64; 2] {
     [best.x, best.y]
 }
 
+/// RMS deviation (metres) of each frame's features, placed by its own model, from one
+/// lattice fitted to that frame alone (each pass its own offset): what the frame's own
+/// model leaves, the yardstick for the series model.
+pub fn own_rms(frames: &[SeriesFrame], lattice: &dyn Lattice) -> Vec<f64> {
+    frames
+        .iter()
+        .map(|frame| {
+            let sets: Vec<Vec<[f64; 2]>> = kept(frame)
+                .iter()
+                .map(|pass| positions(frame, pass, [0.0; 2]))
+                .collect();
+            let refs: Vec<&[[f64; 2]]> = sets.iter().map(|s| s.as_slice()).collect();
+            fit_lattice(lattice, &refs, &LatticeFitOptions::default())
+                .map_or(f64::NAN, |fit| fit.rms_deviation_m)
+        })
+        .collect()
+}
+
 /// The start displacement `D(T_k)` of every frame (instrument frame, metres; 0 for the
 /// first): the previous frame's placement plus its own drift carried to this frame's start,
 /// corrected to the nearest translation that puts this frame's trace on the first frame's

@@ -9,9 +9,9 @@ use dhct_numerics::robust::mad_sigma_about;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::alignment::{frame_shifts, index_series};
+use super::alignment::{frame_shifts, index_series, own_rms};
 use super::frame::{SeriesFeature, SeriesFrame};
-use super::problem::{NM, SeriesProblem};
+use super::problem::{NM, SPLINE_AT, SeriesProblem};
 use super::session_drift::{MoveCreep, SessionDrift};
 use super::spline::SplineBasis;
 use crate::DistortionError;
@@ -78,6 +78,12 @@ pub struct SeriesFit {
     pub lattice_angle_rad: f64,
     /// Lattice origin in the instrument frame, metres.
     pub origin_m: [f64; 2],
+    /// The scanner's gain along the instrument's y relative to its x (true over stated
+    /// displacement; 1: the files' pixel aspect is right), with its 1σ. The x gain is taken
+    /// as stated: a common factor of both is the fast-axis hysteresis scale's.
+    pub gain_y: f64,
+    /// 1σ of [`SeriesFit::gain_y`] (NaN: undetermined).
+    pub gain_y_sigma: f64,
     /// The creeps' and the hysteresis law's parameters with 1σ.
     pub parameters: Vec<Parameter>,
     /// `D(T)` sampled over the session with its 1σ.
@@ -92,6 +98,15 @@ pub struct SeriesFit {
     pub features: usize,
     /// The knot counts tried and their held-out misfit (empty when fixed).
     pub knot_scores: Vec<KnotScore>,
+    /// Per frame: the RMS deviation of its fitted features from their sites, metres. A frame
+    /// far above the others was not explained by the session's model (misplaced by a
+    /// lattice vector, or something happened during it).
+    #[serde(default)]
+    pub frame_rms_m: Vec<f64>,
+    /// Per frame: the same under the frame's own single-frame model (one lattice fitted to
+    /// that frame alone), metres: the yardstick of [`SeriesFit::frame_rms_m`].
+    #[serde(default)]
+    pub own_rms_m: Vec<f64>,
     /// Session times of the moves (0: the one before the session) whose creep the data did
     /// not resolve (its time constant ran to a bound): left out of the model, the drift
     /// spline takes what there is of it.
@@ -100,6 +115,37 @@ pub struct SeriesFit {
 }
 
 impl SeriesFit {
+    /// Moves the session frame so that `D` is zero on average at `times` (the first frame's
+    /// features): the fit fixes `D(0) = 0` only at one instant, where a spline may take up
+    /// the noise of a few lines; the first frame as its files place it, on average, is a
+    /// steadier reference. The registered positions are unchanged but for that translation.
+    fn recentre_on(&mut self, times: &[f64]) {
+        if times.is_empty() {
+            return;
+        }
+        let sum = times.iter().fold([0.0; 2], |a, &t| {
+            let d = self.drift.displacement(t);
+            [a[0] + d[0], a[1] + d[1]]
+        });
+        let shift = [sum[0] / times.len() as f64, sum[1] / times.len() as f64];
+        // The clamped spline's basis sums to 1: one shift of every coefficient moves D.
+        for c in &mut self.drift.coefficients_m {
+            c[0] -= shift[0];
+            c[1] -= shift[1];
+        }
+        self.origin_m = [self.origin_m[0] - shift[0], self.origin_m[1] - shift[1]];
+        for p in self
+            .trajectory
+            .iter_mut()
+            .chain(self.frame_starts.iter_mut())
+        {
+            p.displacement_m = [
+                p.displacement_m[0] - shift[0],
+                p.displacement_m[1] - shift[1],
+            ];
+        }
+    }
+
     /// Session position (instrument frame, metres) of `f` under the fit.
     pub fn position_of(&self, f: &SeriesFeature) -> [f64; 2] {
         let lag = match f.pass {
@@ -110,9 +156,10 @@ impl SeriesFit {
             }
         };
         let d = self.drift.displacement(f.time_s);
+        let y = f.controller_m[1] + (self.gain_y - 1.0) * (f.controller_m[1] - f.centre_m[1]);
         [
             f.controller_m[0] + f.lag_direction_m_per_s[0] * lag + d[0],
-            f.controller_m[1] + f.lag_direction_m_per_s[1] * lag + d[1],
+            y + f.lag_direction_m_per_s[1] * lag + d[1],
         ]
     }
 }
@@ -175,7 +222,67 @@ pub fn fit_series(
         fit = better;
     }
     fit.knot_scores = knots.1;
+    let first: Vec<f64> = features
+        .iter()
+        .filter(|f| f.frame == 0)
+        .map(|f| f.time_s)
+        .collect();
+    fit.recentre_on(&first);
+    fit.frame_rms_m = frame_rms(&fit, &features, frames.len());
+    fit.own_rms_m = own_rms(frames, lattice);
+    check_explained(&fit)?;
     Ok(fit)
+}
+
+/// Largest ratio of a frame's RMS deviation under the series model to that under its own
+/// model: noise alone gives about 1 (the series model has fewer parameters per frame, the
+/// lattice fit of one frame more), a frame placed a lattice period off 5 or more.
+pub const MAX_UNEXPLAINED_RATIO: f64 = 2.0;
+
+/// An error naming the frame the series model explains worst, when it is past
+/// [`MAX_UNEXPLAINED_RATIO`].
+fn check_explained(fit: &SeriesFit) -> Result<(), DistortionError> {
+    let worst = fit
+        .frame_rms_m
+        .iter()
+        .zip(&fit.own_rms_m)
+        .enumerate()
+        .filter(|(_, (s, o))| s.is_finite() && o.is_finite() && **o > 0.0)
+        .max_by(|a, b| (a.1.0 / a.1.1).total_cmp(&(b.1.0 / b.1.1)));
+    match worst {
+        Some((frame, (series, own))) if series / own > MAX_UNEXPLAINED_RATIO => {
+            Err(DistortionError::SeriesNotExplained {
+                frame,
+                series_pm: series * 1e12,
+                own_pm: own * 1e12,
+                limit: MAX_UNEXPLAINED_RATIO,
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
+/// RMS deviation of each frame's features from their sites under `fit`, metres.
+fn frame_rms(fit: &SeriesFit, features: &[SeriesFeature], frames: usize) -> Vec<f64> {
+    let (s, c) = fit.lattice_angle_rad.sin_cos();
+    let mut sums = vec![(0.0, 0usize); frames];
+    for f in features {
+        let q = fit.position_of(f);
+        let [ux, uy] = f.site_m;
+        let dx = q[0] - fit.origin_m[0] - (c * ux - s * uy);
+        let dy = q[1] - fit.origin_m[1] - (s * ux + c * uy);
+        sums[f.frame].0 += dx * dx + dy * dy;
+        sums[f.frame].1 += 1;
+    }
+    sums.iter()
+        .map(|(sum, n)| {
+            if *n > 0 {
+                (sum / *n as f64).sqrt()
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
 }
 
 /// Frames a series can be fitted from: at least two, same size, pitch and line timing.
@@ -371,11 +478,14 @@ impl Setup {
         let features = thin(features, MAX_SERIES_FITTED);
         let problem = self.problem(&features, start.basis.clone());
         let law = previous.map_or_else(|| self.start_law.clone(), |p| p.hysteresis.clone());
-        let (theta, origin) = match previous {
-            Some(p) => (p.lattice_angle_rad, p.origin_m),
-            None => place(&features, start, &law, self.line_time_s),
+        let placed = match previous {
+            Some(p) => (p.lattice_angle_rad, p.origin_m, p.gain_y),
+            None => {
+                let (theta, origin) = place(&features, start, &law, self.line_time_s);
+                (theta, origin, 1.0)
+            }
         };
-        let p0 = problem.start(theta, origin, start, &law);
+        let p0 = problem.start(placed, start, &law);
         let (fit, weights) = robust_fit(&problem, p0, robust_rounds)?;
         Ok(self.result(&problem, &fit, &weights))
     }
@@ -385,7 +495,7 @@ impl Setup {
         let n = p.len();
         let sigma = scaled_sigmas(fit, weights, n);
         let drift = problem.drift(p);
-        let mut parameters = Vec::new();
+        let mut parameters = vec![parameter("gain_y", 1.0 + p[3], sigma[3], "1")];
         let at = problem.creep_at();
         for (k, creep) in drift.creeps.iter().enumerate() {
             let q = p[at + 3 * k + 2];
@@ -428,6 +538,8 @@ impl Setup {
             drift,
             lattice_angle_rad: p[0],
             origin_m: [p[1] / NM, p[2] / NM],
+            gain_y: 1.0 + p[3],
+            gain_y_sigma: sigma[3],
             parameters,
             trajectory,
             frame_starts,
@@ -436,6 +548,8 @@ impl Setup {
             features: m,
             knot_scores: Vec::new(),
             unresolved_creeps_s: Vec::new(),
+            frame_rms_m: Vec::new(),
+            own_rms_m: Vec::new(),
         }
     }
 
@@ -542,6 +656,8 @@ fn place(
         hysteresis: law.clone(),
         lattice_angle_rad: 0.0,
         origin_m: [0.0; 2],
+        gain_y: 1.0,
+        gain_y_sigma: f64::NAN,
         parameters: Vec::new(),
         trajectory: Vec::new(),
         frame_starts: Vec::new(),
@@ -550,6 +666,8 @@ fn place(
         features: 0,
         knot_scores: Vec::new(),
         unresolved_creeps_s: Vec::new(),
+        frame_rms_m: Vec::new(),
+        own_rms_m: Vec::new(),
     };
     let positions: Vec<[f64; 2]> = features.iter().map(|f| probe.position_of(f)).collect();
     let count = features.len().max(1) as f64;
@@ -647,7 +765,7 @@ fn trajectory_point(
             .iter()
             .enumerate()
             .skip(1)
-            .map(|(j, v)| (3 + axis * free + j - 1, *v))
+            .map(|(j, v)| (SPLINE_AT + axis * free + j - 1, *v))
             .collect();
         for (k, creep) in drift.creeps.iter().enumerate() {
             g.push((at + 3 * k + axis, creep.log_term(t)));

@@ -59,6 +59,8 @@ pub struct SeriesFeature {
     pub pass: ScanPass,
     /// `to_instrument(p_c)`, metres: the controller position in the instrument frame.
     pub controller_m: [f64; 2],
+    /// Its frame's centre in the instrument frame (the header offset), metres.
+    pub centre_m: [f64; 2],
     /// Session time of acquisition, seconds.
     pub time_s: f64,
     /// Seconds since its line start (its pass's direction).
@@ -101,6 +103,7 @@ impl SeriesFeature {
             feature_index: 0,
             pass,
             controller_m: g.to_instrument([x_px * g.pitch_x(), y_px * g.pitch_y()]),
+            centre_m: [g.offset().0, g.offset().1],
             time_s: start_s + time.since_frame_start,
             line_time_s: time.since_line_start,
             lag_direction_m_per_s: g.vector_to_instrument([-v * trace_fast[0], -v * trace_fast[1]]),

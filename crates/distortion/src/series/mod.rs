@@ -10,6 +10,8 @@
 //!   [`dhct_scan::ScanGeometry::to_instrument`]`(p)` (its centre to its offset, turned by its
 //!   scan angle).
 //! * **Session time** `T`: seconds since the first frame's start.
+//! * **Session frame**: the instrument frame fixed to the sample, placed where the first
+//!   frame's files put it on average (`D` averages to zero over the first frame's features).
 //! * The tip at controller position `p` of frame `k` at frame time `t`, line time `τ`, is at
 //!   sample position `to_instrument(p + h(τ)) + D(T_k + t)`: the hysteresis lag `h` acts
 //!   along the frame's own fast axis, the drift `D` ([`SessionDrift`]) in the instrument

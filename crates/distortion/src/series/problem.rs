@@ -1,8 +1,11 @@
 //! The series fit as a least-squares problem over every indexed feature of every frame.
 //!
-//! Parameters (nm, nm/s units): `[θ, o_x, o_y, c_x1 … c_x(B−1), c_y1 … c_y(B−1),
+//! Parameters (nm, nm/s units): `[θ, o_x, o_y, ε_y, c_x1 … c_x(B−1), c_y1 … c_y(B−1),
 //! (C_x, C_y, q(t0)) per creep, hysteresis law …]`, the spline's first coefficient fixed at 0
-//! (so `D(0) = 0` and the origin `o` is not degenerate with a constant drift). Residuals:
+//! (so `D(0) = 0` and the origin `o` is not degenerate with a constant drift). `ε_y` is the
+//! scanner's instrument-y gain error relative to its x (`g_y = 1 + ε_y`, `g_x = 1`): a
+//! common factor of both gains is the fast-axis hysteresis scale's, so only their ratio is
+//! fitted; the instrument x's pixel size is taken as the files state it. Residuals:
 //! the x deviations of every feature, then the y deviations, then two per creep (a weak
 //! prior that keeps an unresolved creep's amplitude near 0, as in the registration).
 
@@ -23,6 +26,9 @@ pub(super) const NM: f64 = 1e9;
 
 /// Scale of the creep amplitudes' prior, nm (see the registration's).
 const CREEP_PRIOR_NM: f64 = 10.0;
+
+/// Index of the first spline coefficient (after θ, the origin and `ε_y`).
+pub(super) const SPLINE_AT: usize = 4;
 
 /// One feature's spline row: the first basis index and the four non-zero values.
 #[derive(Debug, Clone, Copy)]
@@ -76,7 +82,7 @@ impl<'a> SeriesProblem<'a> {
 
     /// Index of the first creep parameter.
     pub fn creep_at(&self) -> usize {
-        3 + 2 * self.free_coefficients()
+        SPLINE_AT + 2 * self.free_coefficients()
     }
 
     /// Index of the first hysteresis parameter.
@@ -99,12 +105,11 @@ impl<'a> SeriesProblem<'a> {
     /// The parameter vector of a start.
     pub fn start(
         &self,
-        theta: f64,
-        origin_m: [f64; 2],
+        (theta, origin_m, gain_y): (f64, [f64; 2], f64),
         drift: &SessionDrift,
         law: &HysteresisLaw,
     ) -> Vec<f64> {
-        let mut p = vec![theta, origin_m[0] * NM, origin_m[1] * NM];
+        let mut p = vec![theta, origin_m[0] * NM, origin_m[1] * NM, gain_y - 1.0];
         for axis in 0..2 {
             p.extend(drift.coefficients_m[1..].iter().map(|c| c[axis] * NM));
         }
@@ -123,7 +128,7 @@ impl<'a> SeriesProblem<'a> {
     pub fn drift(&self, p: &[f64]) -> SessionDrift {
         let b = self.free_coefficients();
         let mut coefficients_m = vec![[0.0; 2]];
-        coefficients_m.extend((0..b).map(|j| [p[3 + j] / NM, p[3 + b + j] / NM]));
+        coefficients_m.extend((0..b).map(|j| [p[SPLINE_AT + j] / NM, p[SPLINE_AT + b + j] / NM]));
         let at = self.creep_at();
         let creeps = self
             .creep_starts
@@ -165,13 +170,14 @@ impl<'a> SeriesProblem<'a> {
         let lag = self.lag(law, f);
         let mut d = [
             f.controller_m[0] * NM + f.lag_direction_m_per_s[0] * NM * lag,
-            f.controller_m[1] * NM + f.lag_direction_m_per_s[1] * NM * lag,
+            (f.controller_m[1] + p[3] * (f.controller_m[1] - f.centre_m[1])) * NM
+                + f.lag_direction_m_per_s[1] * NM * lag,
         ];
         for (r, value) in row.values.iter().enumerate() {
             let j = row.first + r;
             if j > 0 {
-                d[0] += value * p[3 + j - 1];
-                d[1] += value * p[3 + b + j - 1];
+                d[0] += value * p[SPLINE_AT + j - 1];
+                d[1] += value * p[SPLINE_AT + b + j - 1];
             }
         }
         let at = self.creep_at();
@@ -244,12 +250,13 @@ impl Residuals for SeriesProblem<'_> {
                 row_y[0] = -(c * ux - s * uy);
                 row_x[1] = -1.0;
                 row_y[2] = -1.0;
+                row_y[3] = (f.controller_m[1] - f.centre_m[1]) * NM;
                 let spline = &self.rows[i];
                 for (r, value) in spline.values.iter().enumerate() {
                     let j = spline.first + r;
                     if j > 0 {
-                        row_x[3 + j - 1] = *value;
-                        row_y[3 + b + j - 1] = *value;
+                        row_x[SPLINE_AT + j - 1] = *value;
+                        row_y[SPLINE_AT + b + j - 1] = *value;
                     }
                 }
                 for (k, &start) in self.creep_starts.iter().enumerate() {

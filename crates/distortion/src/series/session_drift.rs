@@ -32,13 +32,13 @@ impl MoveCreep {
 
 /// `D(T)`: where the tip is relative to the sample, minus where the controller put it,
 /// metres, instrument frame (display axes of the unrotated scanner), at session time `T`
-/// (seconds since the start of the first frame's first line). `D(0) = 0`: the first frame
-/// fixes the session frame.
+/// (seconds since the start of the first frame's first line). `D` averages to zero over the
+/// first frame's features: the first frame fixes the session frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SessionDrift {
     /// The spline the smooth drift is expressed in.
     pub basis: SplineBasis,
-    /// Spline coefficients per axis, metres (`[x, y]` per basis function; the first is 0).
+    /// Spline coefficients per axis, metres (`[x, y]` per basis function).
     pub coefficients_m: Vec<[f64; 2]>,
     /// The creeps, in time order.
     pub creeps: Vec<MoveCreep>,

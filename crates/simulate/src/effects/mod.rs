@@ -20,6 +20,7 @@ mod drift;
 mod hysteresis;
 mod out_of_library;
 mod piezo;
+mod scanner_gain;
 mod session_drift;
 mod tip_change;
 mod vibration;
@@ -38,6 +39,7 @@ pub use drift::{LineDrift, ThermalDrift};
 pub use hysteresis::{AsymmetricHysteresis, FastScanHysteresis, HysteresisLaw, SlowScanHysteresis};
 pub use out_of_library::{LineJitter, StrainBubble, TelegraphTip};
 pub use piezo::PiezoNonlinearity;
+pub use scanner_gain::ScannerGain;
 pub use session_drift::SessionDrift;
 pub use tip_change::TipChange;
 pub use vibration::Vibration;
@@ -187,6 +189,8 @@ pub enum EffectConfig {
     /// The thermal drift of a session of frames as one frame sees it (written by
     /// [`crate::sequence`] into each frame's config).
     SessionDrift(SessionDrift),
+    /// A scanner whose piezo axes move the tip by a factor times what they were told.
+    ScannerGain(ScannerGain),
 }
 
 impl EffectConfig {
@@ -213,6 +217,7 @@ impl EffectConfig {
             EffectConfig::StrainBubble(e) => e,
             EffectConfig::LineJitter(e) => e,
             EffectConfig::SessionDrift(e) => e,
+            EffectConfig::ScannerGain(e) => e,
         }
     }
 
@@ -235,6 +240,7 @@ impl EffectConfig {
             EffectConfig::LineJitter(e) => e.validate(field),
             EffectConfig::PiezoNonlinearity(e) => e.validate(field),
             EffectConfig::SessionDrift(e) => e.validate(field),
+            EffectConfig::ScannerGain(e) => e.validate(field),
         }
     }
 
@@ -258,6 +264,7 @@ impl EffectConfig {
             EffectConfig::LineJitter(e) => Box::new(e.clone()),
             EffectConfig::PiezoNonlinearity(e) => Box::new(e.clone()),
             EffectConfig::SessionDrift(e) => Box::new(e.clone()),
+            EffectConfig::ScannerGain(e) => Box::new(e.clone()),
         })
     }
 

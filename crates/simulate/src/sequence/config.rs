@@ -68,6 +68,15 @@ pub struct SequenceConfig {
     /// Moves of the scan frame, in order.
     #[serde(default)]
     pub moves: Vec<MoveConfig>,
+    /// The scanner's true over stated displacement along the instrument's x and y
+    /// (`[1, 1]`: the files' pixel size is right); applied to every frame as a
+    /// `scanner-gain` effect turned by the frame's scan angle.
+    #[serde(default = "unit_gain")]
+    pub scanner_gain: [f64; 2],
+}
+
+fn unit_gain() -> [f64; 2] {
+    [1.0, 1.0]
 }
 
 fn default_start() -> i64 {
@@ -141,6 +150,14 @@ impl SequenceConfig {
             creep.validate("sequence.initial_creep")?;
         }
         self.validate_moves()?;
+        for (axis, gain) in self.scanner_gain.iter().enumerate() {
+            if !(gain.is_finite() && (0.5..=2.0).contains(gain)) {
+                return Err(invalid(
+                    format!("sequence.scanner_gain[{axis}]"),
+                    format!("must lie in 0.5 ..= 2, got {gain}"),
+                ));
+            }
+        }
         check_base(base)?;
         self.check_effect_count(base)?;
         self.check_dates(base)

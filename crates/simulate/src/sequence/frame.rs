@@ -83,12 +83,14 @@ impl FramePlacement {
 
 /// The config of frame `k`: the base config (without `[sequence]`) with its own noise seed,
 /// the lattice turned by `φ_k` and shifted to `from_instrument(o − D(T_k))`, and the
-/// effects `d_k` appended (`session-drift`, then one `creep` per creep under way).
+/// effects `d_k` appended (`session-drift`, then one `creep` per creep under way, then the
+/// `scanner-gain` when the scanner's gain is not 1).
 pub(crate) fn frame_config(
     base: &SimulationConfig,
     motion: &SessionMotion,
     placement: &FramePlacement,
     geometry: &ScanGeometry,
+    scanner_gain: [f64; 2],
 ) -> SimulationConfig {
     let mut config = base.clone();
     config.sequence = None;
@@ -105,6 +107,14 @@ pub(crate) fn frame_config(
     config.effects.push(EffectConfig::SessionDrift(
         motion.thermal_for_frame(placement.start_s, placement.scan_angle_rad),
     ));
+    if scanner_gain != [1.0, 1.0] {
+        config
+            .effects
+            .push(EffectConfig::ScannerGain(crate::effects::ScannerGain {
+                gain: scanner_gain,
+                scan_angle_rad: placement.scan_angle_rad,
+            }));
+    }
     for creep in motion.creeps_started_by(placement.start_s) {
         config.effects.push(EffectConfig::Creep(LogCreep {
             coefficient_m: geometry.vector_from_instrument(creep.coefficient_m),

@@ -109,7 +109,13 @@ impl SequenceSimulation {
     pub fn frame_simulation(&self, k: usize) -> Result<Simulation, SimulationError> {
         let placement = self.placement(k)?;
         let geometry = placement.geometry(&self.geometry)?;
-        let config = frame_config(&self.base, &self.motion, &placement, &geometry);
+        let config = frame_config(
+            &self.base,
+            &self.motion,
+            &placement,
+            &geometry,
+            self.sequence.scanner_gain,
+        );
         config.validate()?;
         Simulation::with_geometry(&config, geometry)
     }
