@@ -119,28 +119,14 @@ pub fn analyse(
         read_s,
     } = request;
     let geometry = pair.geometry().clone();
-    let mask = match (load_mask(&config, &geometry), given_mask) {
-        (Err(e), _) => return Err(CorrectError::Options(e)),
-        (Ok(Some(a)), Some(b)) => Some(
-            dhct_distortion::mask::intersect(&a, &b)
-                .map_err(|e| CorrectError::Options(anyhow::anyhow!("mask: {e}")))?,
-        ),
-        (Ok(a), b) => a.or(b),
-    };
-    let resolved = resolve(&config).map_err(CorrectError::Options)?;
+    let (mask, resolved) = resolve_for(&pair, &config, given_mask)?;
     let Resolved {
         lattice_name,
         nn_m,
         lattice,
         options,
         ..
-    } = with_measured_nn(resolved, &pair, mask.as_ref()).map_err(|e| match e {
-        MeasuredNnError::Mismatch(error) => CorrectError::InputMismatch {
-            error,
-            measuring_nn: true,
-        },
-        MeasuredNnError::Options(e) => CorrectError::Options(e),
-    })?;
+    } = resolved;
     let analysis = dhct_pipeline::run(&pair, lattice.as_ref(), mask.as_ref(), &options, on_stage)
         .map_err(|e| match e {
         PipelineError::Calibration(error) => CorrectError::InputMismatch {
@@ -169,6 +155,78 @@ pub fn analyse(
         analysis,
         summary,
         source: None,
+    })
+}
+
+/// The analysed area (the config's mask file and polygon, intersected with `given_mask`)
+/// and the config resolved against `pair` (lattice, constant — measured for `--nn auto` —
+/// and pipeline options).
+fn resolve_for(
+    pair: &ScanPair,
+    config: &CorrectConfig,
+    given_mask: Option<Array2<bool>>,
+) -> Result<(Option<Array2<bool>>, Resolved), CorrectError> {
+    let mask = match (load_mask(config, pair.geometry()), given_mask) {
+        (Err(e), _) => return Err(CorrectError::Options(e)),
+        (Ok(Some(a)), Some(b)) => Some(
+            dhct_distortion::mask::intersect(&a, &b)
+                .map_err(|e| CorrectError::Options(anyhow::anyhow!("mask: {e}")))?,
+        ),
+        (Ok(a), b) => a.or(b),
+    };
+    let resolved = resolve(config).map_err(CorrectError::Options)?;
+    let resolved = with_measured_nn(resolved, pair, mask.as_ref()).map_err(|e| match e {
+        MeasuredNnError::Mismatch(error) => CorrectError::InputMismatch {
+            error,
+            measuring_nn: true,
+        },
+        MeasuredNnError::Options(e) => CorrectError::Options(e),
+    })?;
+    Ok((mask, resolved))
+}
+
+/// What [`analyse_model_file`] keeps of one scan: its geometry, the lattice and options it
+/// was resolved to, and its features and model; no image (a series holds many frames).
+pub struct FrameModel {
+    /// The scan's geometry.
+    pub geometry: dhct_scan::ScanGeometry,
+    /// The lattice the run used.
+    pub lattice: Box<dyn Lattice + Send + Sync>,
+    /// The pipeline options the run used.
+    pub options: PipelineOptions,
+    /// The analysed area, if a mask was given.
+    pub mask: Option<Array2<bool>>,
+    /// The features and the model.
+    pub run: dhct_pipeline::ModelRun,
+}
+
+/// Reads `input` and runs the pipeline's stages 0–2 on it ([`dhct_pipeline::run_model`]):
+/// the calibration check, the features and the model, with the config resolved as
+/// `dhct correct` resolves it; errors in the command line's words.
+pub fn analyse_model_file(input: &Path, config: &CorrectConfig) -> Result<FrameModel> {
+    let pair = read_pair(input, None, &config.geometry, config.channel.as_deref())?;
+    let render = |e: CorrectError| anyhow::anyhow!(e.render(Spelling::CommandLine));
+    let (mask, resolved) = resolve_for(&pair, config, None).map_err(render)?;
+    let run = dhct_pipeline::run_model(
+        &pair,
+        resolved.lattice.as_ref(),
+        mask.as_ref(),
+        &resolved.options,
+        &|_| {},
+    )
+    .map_err(|e| match e {
+        PipelineError::Calibration(error) => render(CorrectError::InputMismatch {
+            error: *error,
+            measuring_nn: false,
+        }),
+        e => render(CorrectError::Analysis(e)),
+    })?;
+    Ok(FrameModel {
+        geometry: pair.geometry().clone(),
+        lattice: resolved.lattice,
+        options: resolved.options,
+        mask,
+        run,
     })
 }
 

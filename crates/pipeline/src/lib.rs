@@ -38,6 +38,7 @@ mod affine;
 mod analysis;
 mod calibration;
 mod error;
+mod model_run;
 mod options;
 mod region_fit;
 mod regions;
@@ -53,6 +54,7 @@ pub use calibration::{
     CorrectedImageCheck,
 };
 pub use error::PipelineError;
+pub use model_run::{ModelRun, run_model};
 pub use options::{CellSelection, PipelineOptions, RegionOptions, UnitCellOptions};
 pub use regions::label_regions;
 pub use results::{FeatureIndex, PassOutput, RegionFit, SkippedRegion, UnitCellAnalysis};

@@ -14,7 +14,7 @@ use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions,
 use dhct_distortion::{FitOptions, PassInput};
 use serde::Serialize;
 
-use crate::analysis::{Corrected, analyse_file};
+use crate::analysis::{FrameModel, analyse_model_file};
 use crate::setup::CorrectConfig;
 
 pub use order::Timed;
@@ -77,11 +77,13 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     }
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
-    let corrected: Vec<Corrected> = found
+    // Each frame keeps its features and model only: the images are read again when the
+    // registered ones are written, so memory holds one frame's images at a time.
+    let corrected: Vec<FrameModel> = found
         .scans
         .iter()
         .map(|input| {
-            analyse_file(&input.path, None, request.config.clone(), &|_| {})
+            analyse_model_file(&input.path, &request.config)
                 .with_context(|| format!("frame {} cannot be analysed alone", input.path.display()))
         })
         .collect::<Result<_>>()?;
@@ -89,7 +91,7 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     let geometries: Vec<(PathBuf, &dhct_scan::ScanGeometry)> = paths
         .iter()
         .zip(&corrected)
-        .map(|(p, c)| (p.clone(), c.pair.geometry()))
+        .map(|(p, c)| (p.clone(), &c.geometry))
         .collect();
     let (timed, notes) = order::order(&geometries)?;
     let fit = fit_frames(&corrected, &timed, request)?;
@@ -104,7 +106,8 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         notes,
         outputs: Vec::new(),
     };
-    summary.outputs = outputs::write_all(staged.path(), &summary, &corrected, &timed)?;
+    summary.outputs =
+        outputs::write_all(staged.path(), &summary, &corrected, &timed, &request.config)?;
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
@@ -112,7 +115,7 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
 
 /// The series fit of the analysed frames in time order.
 fn fit_frames(
-    corrected: &[Corrected],
+    corrected: &[FrameModel],
     timed: &[Timed],
     request: &SeriesRequest,
 ) -> Result<SeriesFit> {
@@ -121,17 +124,17 @@ fn fit_frames(
         .map(|t| {
             let c = &corrected[t.input];
             SeriesFrame {
-                geometry: c.pair.geometry(),
+                geometry: &c.geometry,
                 inputs: c
-                    .analysis
-                    .passes
+                    .run
+                    .features
                     .iter()
-                    .map(|p| PassInput {
-                        features: &p.features.features,
+                    .map(|set| PassInput {
+                        features: &set.features,
                         mask: c.mask.as_ref(),
                     })
                     .collect(),
-                model: &c.analysis.dhct.model,
+                model: &c.run.dhct.model,
                 start_s: t.start_s,
             }
         })
@@ -180,9 +183,9 @@ fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<String> {
         .collect()
 }
 
-fn frame_summary(t: &Timed, c: &Corrected) -> FrameSummary {
-    let g = c.pair.geometry();
-    let model = &c.analysis.dhct.model;
+fn frame_summary(t: &Timed, c: &FrameModel) -> FrameSummary {
+    let g = &c.geometry;
+    let model = &c.run.dhct.model;
     let drift_count = model
         .parameters
         .iter()
@@ -193,12 +196,7 @@ fn frame_summary(t: &Timed, c: &Corrected) -> FrameSummary {
         start_s: t.start_s,
         scan_angle_deg: g.scan_angle().to_degrees(),
         offset_m: [g.offset().0, g.offset().1],
-        features: c
-            .analysis
-            .passes
-            .iter()
-            .map(|p| p.features.features.len())
-            .sum(),
+        features: c.run.features.iter().map(|set| set.features.len()).sum(),
         own_hysteresis: model.parameters[drift_count..].to_vec(),
     }
 }

@@ -13,18 +13,20 @@ use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
 use ndarray::Array2;
 
 use super::{SeriesSummary, Timed};
-use crate::analysis::Corrected;
+use crate::analysis::FrameModel;
+use crate::setup::{CorrectConfig, read_pair};
 
 /// Writes every output but `series.json`; returns the names written.
 pub fn write_all(
     dir: &Path,
     summary: &SeriesSummary,
-    corrected: &[Corrected],
+    corrected: &[FrameModel],
     timed: &[Timed],
+    config: &CorrectConfig,
 ) -> Result<Vec<String>> {
     let mut written = vec![write_features(dir, summary, corrected, timed)?];
     written.push(write_trajectory(dir, summary)?);
-    written.extend(write_registered(dir, summary, corrected, timed)?);
+    written.extend(write_registered(dir, summary, corrected, timed, config)?);
     written.push(SERIES_JSON.to_string());
     Ok(written)
 }
@@ -51,7 +53,7 @@ fn csv_error(e: csv::Error) -> WriteError {
 fn write_features(
     dir: &Path,
     summary: &SeriesSummary,
-    corrected: &[Corrected],
+    corrected: &[FrameModel],
     timed: &[Timed],
 ) -> Result<String> {
     const NAME: &str = "features.csv";
@@ -70,9 +72,9 @@ fn write_features(
         .map_err(csv_error)?;
         for (k, t) in timed.iter().enumerate() {
             let c = &corrected[t.input];
-            let g = c.pair.geometry();
-            for pass in &c.analysis.passes {
-                for f in &pass.features.features {
+            let g = &c.geometry;
+            for set in &c.run.features {
+                for f in &set.features {
                     let at = SeriesFeature::at_pixel(g, t.start_s, f.pass, f.x_px, f.y_px);
                     let q = summary.fit.position_of(&at);
                     out.write_record([
@@ -119,20 +121,23 @@ fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
 }
 
 /// Every frame's images registered onto the first frame's grid, their stack and its mean.
+/// Each frame's file is read again here, one at a time.
 fn write_registered(
     dir: &Path,
     summary: &SeriesSummary,
-    corrected: &[Corrected],
+    corrected: &[FrameModel],
     timed: &[Timed],
+    config: &CorrectConfig,
 ) -> Result<Vec<String>> {
     let folder = dir.join("registered");
     std::fs::create_dir_all(&folder)
         .with_context(|| format!("cannot create {}", folder.display()))?;
-    let grid = corrected[timed[0].input].pair.geometry().clone();
+    let grid = corrected[timed[0].input].geometry.clone();
     let mut written = Vec::new();
     let mut pages: Vec<ImageChannel> = Vec::new();
     for (k, t) in timed.iter().enumerate() {
-        let pair = &corrected[t.input].pair;
+        let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+        let pair = &pair;
         for (pass, image) in pair.images() {
             let z = register_image(
                 &summary.fit,
