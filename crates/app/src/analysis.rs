@@ -202,11 +202,16 @@ pub struct FrameModel {
 
 /// Reads `input` and runs the pipeline's stages 0–2 on it ([`dhct_pipeline::run_model`]):
 /// the calibration check, the features and the model, with the config resolved as
-/// `dhct correct` resolves it; errors in the command line's words.
-pub fn analyse_model_file(input: &Path, config: &CorrectConfig) -> Result<FrameModel> {
+/// `dhct correct` resolves it, then `adjust`ed; errors in the command line's words.
+pub fn analyse_model_file(
+    input: &Path,
+    config: &CorrectConfig,
+    adjust: fn(&mut PipelineOptions),
+) -> Result<FrameModel> {
     let pair = read_pair(input, None, &config.geometry, config.channel.as_deref())?;
     let render = |e: CorrectError| anyhow::anyhow!(e.render(Spelling::CommandLine));
-    let (mask, resolved) = resolve_for(&pair, config, None).map_err(render)?;
+    let (mask, mut resolved) = resolve_for(&pair, config, None).map_err(render)?;
+    adjust(&mut resolved.options);
     let run = dhct_pipeline::run_model(
         &pair,
         resolved.lattice.as_ref(),

@@ -250,11 +250,17 @@ pub fn analyse_seeded(
                 .map_err(|_| local_error);
         }
     };
-    let (routes, route_note) =
+    let (routes, route_note) = if options.route == RoutePolicy::LocalOnly {
+        (
+            None,
+            Some("the global registration was not asked for".to_string()),
+        )
+    } else {
         match global_route(&inputs, &passes, geometry, lattice, &model, options) {
             Ok(routes) => (Some(routes), None),
             Err(e) => (None, Some(e.to_string())),
-        };
+        }
+    };
     if let Some(routes) = &routes
         && routes.chosen == ModelRoute::GlobalRegistration
     {

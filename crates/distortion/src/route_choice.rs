@@ -61,6 +61,10 @@ pub enum RoutePolicy {
     /// positions better while describing the scan worse; the local route, measuring
     /// derivatives, does not, which is why the diagnosis's base model is fitted this way.
     Local,
+    /// The paper's local route alone: the global registration is not fitted (only when the
+    /// local route cannot fit a model). The cheapest; a series of frames uses it for each
+    /// frame's own model, which only starts the series fit.
+    LocalOnly,
 }
 
 /// Both routes' cross-validated deviations and the one chosen.
@@ -157,7 +161,7 @@ pub fn compare_routes(
     let chosen = match policy {
         RoutePolicy::CrossValidated => better,
         RoutePolicy::Local if local.is_empty() => ModelRoute::GlobalRegistration,
-        RoutePolicy::Local => ModelRoute::LocalDistortion,
+        RoutePolicy::Local | RoutePolicy::LocalOnly => ModelRoute::LocalDistortion,
     };
     Ok(RouteComparison {
         chosen,
