@@ -4,7 +4,7 @@
 //! blocks of time.
 
 use dhct_lattice::Lattice;
-use dhct_numerics::lm::{LmOptions, ResidualFit, fit_residuals};
+use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals, fit_residuals_within};
 use dhct_numerics::robust::mad_sigma_about;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -23,6 +23,9 @@ use crate::thinning::thin;
 
 /// Most features the joint fit uses (evenly thinned in time beyond; all are placed).
 pub const MAX_SERIES_FITTED: usize = 24_000;
+
+/// Creep time constants profiled before a fit (log-spaced from two lines to two frames).
+const CREEP_T0_GRID: usize = 10;
 
 /// Features each cross-validation fit is scored on (evenly thinned in time).
 const CROSS_VALIDATION_FEATURES: usize = 4000;
@@ -52,7 +55,8 @@ pub struct SeriesOptions {
 pub struct KnotScore {
     /// Interior knots.
     pub interior_knots: usize,
-    /// RMS deviation of the held-out features from their sites, metres.
+    /// Robust RMS deviation (per axis the MAD scale) of the held-out features from their
+    /// sites, metres.
     pub held_out_rms_m: f64,
 }
 
@@ -189,23 +193,45 @@ pub fn fit_series(
         &setup.start_drift(frames, &shifts, knots.0),
         None,
     )?;
-    // A creep whose time constant ran to a bound is not resolved (the spline took it, or
-    // it was not there): fitted again without it, and said.
+    // A creep whose time constant ran to a bound, or whose amplitude the data do not fix
+    // (1σ beyond its value on both axes), is not resolved (the spline took it, or it was not
+    // there): fitted again without it, and said.
     let unresolved: Vec<f64> = fit
         .drift
         .creeps
         .iter()
-        .filter(|c| setup.t0_map.at_bound(setup.t0_map.parameter(c.t0_s)))
-        .map(|c| c.start_s)
+        .enumerate()
+        .filter(|(k, c)| {
+            let amplitude_loose = (0..2).all(|axis| {
+                let name = format!("creep{k}_C_{}", ["x", "y"][axis]);
+                fit.parameters
+                    .iter()
+                    .find(|p| p.name == name)
+                    .is_none_or(|p| !p.is_determined() || p.sigma >= p.value.abs())
+            });
+            setup.t0_map.at_bound(setup.t0_map.parameter(c.t0_s)) || amplitude_loose
+        })
+        .map(|(_, c)| c.start_s)
         .collect();
     if !unresolved.is_empty() {
+        // Left out only when the fit without it is as good: a creep the spline trades
+        // with may still be the one thing that follows a move's first seconds.
+        let kept = setup.creep_starts.clone();
         setup.creep_starts.retain(|s| !unresolved.contains(s));
-        fit = setup.fit(
-            &features,
-            &setup.start_drift(frames, &shifts, knots.0),
-            None,
-        )?;
-        fit.unresolved_creeps_s = unresolved;
+        let start = setup.start_drift(frames, &shifts, knots.0);
+        let worst = |f: &SeriesFit| {
+            frame_rms(f, &features, frames.len())
+                .into_iter()
+                .filter(|v| v.is_finite())
+                .fold(0.0, f64::max)
+        };
+        match setup.fit(&features, &start, None) {
+            Ok(without) if worst(&without) <= 1.05 * worst(&fit) => {
+                fit = without;
+                fit.unresolved_creeps_s = unresolved;
+            }
+            _ => setup.creep_starts = kept,
+        }
     }
     // Index again in the fitted frame while that indexes markedly more features.
     for _ in 0..2 {
@@ -347,6 +373,7 @@ struct Setup {
     t0_map: LogisticLog,
     start_law: HysteresisLaw,
     frame_starts_s: Vec<f64>,
+    frame_duration_s: f64,
 }
 
 impl Setup {
@@ -354,8 +381,10 @@ impl Setup {
         let g0 = frames[0].geometry;
         let last = frames.last().unwrap_or(&frames[0]);
         let end_s = last.start_s + last.geometry.frame_duration();
-        // A creep from before the session, and one after every move of the frame centre.
-        let mut creep_starts = vec![0.0];
+        // A creep after every move of the frame centre. The creep left from before the
+        // session is the drift spline's: a logarithm starting at the session's start trades
+        // with the spline without limit (nanometres of each) and sends the fit astray.
+        let mut creep_starts = Vec::new();
         for pair in frames.windows(2) {
             let (a, b) = (pair[0].geometry.offset(), pair[1].geometry.offset());
             if (a.0 - b.0).hypot(a.1 - b.1) > 0.5 * g0.pitch_x().min(g0.pitch_y()) {
@@ -370,6 +399,7 @@ impl Setup {
             t0_map: LogisticLog::for_frame(g0.line_scan_time(), g0.frame_duration()),
             start_law: frames[0].model.hysteresis.clone(),
             frame_starts_s: frames.iter().map(|f| f.start_s).collect(),
+            frame_duration_s: g0.frame_duration(),
         }
     }
 
@@ -395,10 +425,24 @@ impl Setup {
                     .find(|f| f.start_s >= start_s)
                     .unwrap_or(&frames[0]);
                 let own = &frame.model.drift;
-                MoveCreep {
-                    start_s,
-                    coefficient_m: frame.geometry.vector_to_instrument(own.creep_m),
-                    t0_s: own.t0_s,
+                let g = frame.geometry;
+                // A frame alone often cannot separate its creep from its drift (C of
+                // micrometres traded against v): such a start is taken as no creep.
+                let plausible = own.creep_m[0].hypot(own.creep_m[1])
+                    <= 0.1 * g.width().hypot(g.height())
+                    && !self.t0_map.at_bound(self.t0_map.parameter(own.t0_s));
+                if plausible {
+                    MoveCreep {
+                        start_s,
+                        coefficient_m: g.vector_to_instrument(own.creep_m),
+                        t0_s: own.t0_s,
+                    }
+                } else {
+                    MoveCreep {
+                        start_s,
+                        coefficient_m: [0.0; 2],
+                        t0_s: 0.05 * g.frame_duration(),
+                    }
                 }
             })
             .collect();
@@ -457,7 +501,61 @@ impl Setup {
         start: &SessionDrift,
         previous: Option<&SeriesFit>,
     ) -> Result<SeriesFit, DistortionError> {
-        self.fit_rounds(features, start, previous, self.options.fit.robust_rounds)
+        let start = match previous {
+            Some(_) => start.clone(),
+            None => self.best_creep_start(features, start),
+        };
+        self.fit_rounds(features, &start, previous, self.options.fit.robust_rounds)
+    }
+
+    /// `start` with the creeps' time constants profiled: `t0` is the one strongly
+    /// non-linear parameter (from a creep of amplitude 0 the fit cannot move it, and a free
+    /// `t0` trades with the spline towards a bound), so the plain fit is made with every
+    /// creep's `t0` held at each of [`CREEP_T0_GRID`] values (log-spaced from two lines to
+    /// two frames) and the lowest cost's fitted drift is the start.
+    fn best_creep_start(&self, features: &[SeriesFeature], start: &SessionDrift) -> SessionDrift {
+        if start.creeps.is_empty() {
+            return start.clone();
+        }
+        let features = thin(features, CROSS_VALIDATION_FEATURES);
+        let problem = self.problem(&features, start.basis.clone());
+        let law = self.start_law.clone();
+        let (low, high) = (2.0 * self.line_time_s, 2.0 * self.frame_duration_s);
+        (0..CREEP_T0_GRID)
+            .filter_map(|j| {
+                let t0 = low * (high / low).powf(j as f64 / (CREEP_T0_GRID - 1) as f64);
+                let mut candidate = start.clone();
+                for creep in &mut candidate.creeps {
+                    creep.coefficient_m = [0.0; 2];
+                    creep.t0_s = t0;
+                }
+                let (theta, origin) = place(&features, &candidate, &law, self.line_time_s);
+                let p0 = problem.start((theta, origin, 1.0), &candidate, &law);
+                let at = problem.creep_at();
+                let mut lower = vec![f64::NEG_INFINITY; p0.len()];
+                let mut upper = vec![f64::INFINITY; p0.len()];
+                for k in 0..candidate.creeps.len() {
+                    lower[at + 3 * k + 2] = p0[at + 3 * k + 2];
+                    upper[at + 3 * k + 2] = p0[at + 3 * k + 2];
+                }
+                let lm = LmOptions {
+                    max_iterations: 30,
+                    ..LmOptions::default()
+                };
+                let bounds = Some(Bounds { lower, upper });
+                let weights = problem.plain_weights();
+                let fit =
+                    fit_residuals_within(&problem, problem.rows(), &p0, &weights, bounds, &lm)?;
+                let cost: f64 = fit
+                    .residuals
+                    .iter()
+                    .zip(&weights)
+                    .map(|(r, w)| w * r * r)
+                    .sum();
+                cost.is_finite().then(|| (cost, problem.drift(&fit.params)))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or_else(|| start.clone(), |(_, drift)| drift)
     }
 
     /// [`Setup::fit`] with `robust_rounds` Huber rounds.
@@ -571,7 +669,7 @@ impl Setup {
         let mut scores = Vec::new();
         for &knots in &candidates {
             let start = self.start_drift(frames, shifts, knots);
-            let mut squares = (0.0, 0usize);
+            let (mut held_x, mut held_y) = (Vec::new(), Vec::new());
             for k in 0..5 {
                 let train: Vec<SeriesFeature> =
                     features.iter().filter(|f| fold(f) != k).copied().collect();
@@ -584,16 +682,18 @@ impl Setup {
                 for f in &test {
                     let q = fit.position_of(f);
                     let [ux, uy] = f.site_m;
-                    let dx = q[0] - fit.origin_m[0] - (c * ux - s * uy);
-                    let dy = q[1] - fit.origin_m[1] - (s * ux + c * uy);
-                    squares.0 += dx * dx + dy * dy;
-                    squares.1 += 1;
+                    held_x.push(q[0] - fit.origin_m[0] - (c * ux - s * uy));
+                    held_y.push(q[1] - fit.origin_m[1] - (s * ux + c * uy));
                 }
             }
-            if squares.1 > 0 {
+            // Robust: a block the training left out entirely (the first seconds of a
+            // creep) may be extrapolated far off; the score is the typical held-out feature.
+            if let (Some(sx), Some(sy)) =
+                (mad_sigma_about(&held_x, 0.0), mad_sigma_about(&held_y, 0.0))
+            {
                 scores.push(KnotScore {
                     interior_knots: knots,
-                    held_out_rms_m: (squares.0 / squares.1 as f64).sqrt(),
+                    held_out_rms_m: sx.hypot(sy),
                 });
             }
             if worse_twice(&scores) {
