@@ -229,7 +229,7 @@ pub fn correct_image(
 }
 
 /// `z`'s `(rows, columns)`, an error unless they are `geometry`'s.
-fn image_shape(
+pub(crate) fn image_shape(
     geometry: &ScanGeometry,
     z: &Array2<f64>,
 ) -> Result<(usize, usize), DistortionError> {

@@ -809,6 +809,35 @@ fn iterations(max_iterations: usize) -> LmOptions {
     }
 }
 
+/// Huber IRLS of a position fit from `p`: residuals the `m` x deviations, the `m` y
+/// deviations, then `rows − 2m` prior rows. The positions are weighted by each axis's own
+/// robust scale (Huber weights after the first round when `robust_rounds > 0`), the priors
+/// keep unit weight. Returns the last fit, its normal matrix evaluated once more with the
+/// final weights, and those weights. `what` names the fit in its error.
+pub(crate) fn position_irls<R: Residuals + ?Sized>(
+    problem: &R,
+    (rows, m): (usize, usize),
+    plain_weights: Vec<f64>,
+    mut p: Vec<f64>,
+    robust_rounds: usize,
+    what: &'static str,
+) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
+    let mut weights = plain_weights;
+    let mut last = None;
+    let lm = iterations(100);
+    for round in 0..=robust_rounds.max(1) {
+        let fit = fit_residuals(problem, rows, &p, &weights, &lm)
+            .ok_or(DistortionError::FitFailed(what))?;
+        p.clone_from(&fit.params);
+        weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);
+        weights.extend(std::iter::repeat_n(1.0, rows - 2 * m));
+        last = Some(fit);
+    }
+    let fit = last.ok_or(DistortionError::FitFailed(what))?;
+    let fit = fit_residuals(problem, rows, &fit.params, &weights, &iterations(0)).unwrap_or(fit);
+    Ok((fit, weights))
+}
+
 /// Weights of `2m` residuals, the `m` x ones then the `m` y ones: each axis by its own
 /// robust scale (`1/σ²`), times Huber weights when `huber`.
 pub(crate) fn axis_weights(residuals: &[f64], m: usize, huber: bool) -> Vec<f64> {

@@ -21,8 +21,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::fit::{
-    FitOptions, HysteresisChoice, LogisticLog, axis_weights, correlations, drift_diagnostics,
-    drift_parameters, hysteresis_parameters, scaled_sigmas,
+    FitOptions, HysteresisChoice, LogisticLog, correlations, drift_diagnostics, drift_parameters,
+    hysteresis_parameters, position_irls, scaled_sigmas,
 };
 use crate::hysteresis_problem::{Quantity, hysteresis_law, law_gradient, law_parameters};
 use crate::model::{DriftCreep, scan_basis};
@@ -307,7 +307,14 @@ pub fn register(
         StartQuality::Fitted => problem.start(start, theta, &origins),
         StartQuality::Rough => best_t0_start(&problem, start, theta, &origins)?,
     };
-    let (fit, weights) = robust_fit(&problem, p0, options.robust_rounds)?;
+    let (fit, weights) = position_irls(
+        &problem,
+        (problem.rows(), problem.features.len()),
+        problem.plain_weights(),
+        p0,
+        options.robust_rounds,
+        "global registration",
+    )?;
     problem.result(&fit, &weights)
 }
 
@@ -546,35 +553,4 @@ impl Residuals for RegistrationProblem<'_> {
             });
         DMatrix::from_row_slice(self.rows(), n, &rows)
     }
-}
-
-/// Huber IRLS from `p0`, x and y residuals each weighted by their own robust scale.
-fn robust_fit(
-    problem: &RegistrationProblem,
-    mut p: Vec<f64>,
-    robust_rounds: usize,
-) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
-    let m = problem.features.len();
-    let mut weights = problem.plain_weights();
-    let mut last = None;
-    let lm = LmOptions {
-        max_iterations: 100,
-        ..LmOptions::default()
-    };
-    for round in 0..=robust_rounds.max(1) {
-        let fit = fit_residuals(problem, problem.rows(), &p, &weights, &lm)
-            .ok_or(DistortionError::FitFailed("global registration"))?;
-        p.clone_from(&fit.params);
-        // The positions by their own scale; the creep prior keeps its unit weight.
-        weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);
-        weights.extend([1.0; 2]);
-        last = Some(fit);
-    }
-    let fit = last.ok_or(DistortionError::FitFailed("global registration"))?;
-    let once = LmOptions {
-        max_iterations: 0,
-        ..LmOptions::default()
-    };
-    let fit = fit_residuals(problem, problem.rows(), &fit.params, &weights, &once).unwrap_or(fit);
-    Ok((fit, weights))
 }

@@ -4,7 +4,7 @@
 //! blocks of time.
 
 use dhct_lattice::Lattice;
-use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals, fit_residuals_within};
+use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
 use dhct_numerics::robust::mad_sigma_about;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -16,7 +16,7 @@ use super::session_drift::{MoveCreep, SessionDrift};
 use super::spline::SplineBasis;
 use crate::DistortionError;
 use crate::fit::{
-    FitOptions, LogisticLog, axis_weights, hysteresis_parameters, parameter, scaled_sigmas,
+    FitOptions, LogisticLog, hysteresis_parameters, parameter, position_irls, scaled_sigmas,
 };
 use crate::model::{HysteresisLaw, Parameter};
 use crate::thinning::thin;
@@ -584,7 +584,17 @@ impl Setup {
             }
         };
         let p0 = problem.start(placed, start, &law);
-        let (fit, weights) = robust_fit(&problem, p0, robust_rounds)?;
+        let (fit, weights) = position_irls(
+            &problem,
+            (problem.rows(), problem.features.len()),
+            problem.plain_weights(),
+            p0,
+            robust_rounds,
+            "series",
+        )?;
+        if !fit.params.iter().all(|v| v.is_finite()) {
+            return Err(DistortionError::FitFailed("series"));
+        }
         Ok(self.result(&problem, &fit, &weights))
     }
 
@@ -796,40 +806,6 @@ fn place(
             mp[1] - (s * mu[0] + c * mu[1]),
         ],
     )
-}
-
-/// Huber IRLS from `p0`, each axis weighted by its own robust scale.
-fn robust_fit(
-    problem: &SeriesProblem,
-    mut p: Vec<f64>,
-    robust_rounds: usize,
-) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
-    let m = problem.features.len();
-    let priors = problem.rows() - 2 * m;
-    let mut weights = problem.plain_weights();
-    let lm = LmOptions {
-        max_iterations: 100,
-        ..LmOptions::default()
-    };
-    let mut last = None;
-    for round in 0..=robust_rounds.max(1) {
-        let fit = fit_residuals(problem, problem.rows(), &p, &weights, &lm)
-            .ok_or(DistortionError::FitFailed("series"))?;
-        p.clone_from(&fit.params);
-        weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);
-        weights.extend(std::iter::repeat_n(1.0, priors));
-        last = Some(fit);
-    }
-    let fit = last.ok_or(DistortionError::FitFailed("series"))?;
-    if !fit.params.iter().all(|v| v.is_finite()) {
-        return Err(DistortionError::FitFailed("series"));
-    }
-    let once = LmOptions {
-        max_iterations: 0,
-        ..LmOptions::default()
-    };
-    let fit = fit_residuals(problem, problem.rows(), &fit.params, &weights, &once).unwrap_or(fit);
-    Ok((fit, weights))
 }
 
 /// `σ̂²·(JᵀWJ)⁻¹`, nm units.

@@ -8,7 +8,7 @@ use ndarray::Array2;
 use super::fit::SeriesFit;
 use super::frame::SeriesFeature;
 use crate::DistortionError;
-use crate::correction::resample_onto;
+use crate::correction::{image_shape, resample_onto};
 
 /// `z` (an image of `pass` of a frame of `geometry` that started `start_s` into the
 /// session) resampled onto the grid of `grid` (the common frame: output pixel `(c, r)` is
@@ -23,16 +23,7 @@ pub fn register_image(
     z: &Array2<f64>,
     grid: &ScanGeometry,
 ) -> Result<Array2<f64>, DistortionError> {
-    let (rows, columns) = z.dim();
-    if rows != geometry.rows() || columns != geometry.columns() {
-        return Err(DistortionError::ShapeMismatch {
-            what: "image",
-            columns,
-            rows,
-            geometry_columns: geometry.columns(),
-            geometry_rows: geometry.rows(),
-        });
-    }
+    image_shape(geometry, z)?;
     let place = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
         for c in 0..xs.len() {
             let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
