@@ -125,16 +125,15 @@ pub fn run(
     progress: &(dyn Fn(Stage) + Sync),
 ) -> Result<Analysis, PipelineError> {
     let start = Instant::now();
-    options.validate()?;
     let geometry = pair.geometry();
-    check_mask(mask, geometry)?;
-    let mut timings = StageTimings::default();
-
-    // 0. The lattice the image shows, checked against the inputs.
-    progress(Stage::Calibration);
-    let calibration = timed(&mut timings.calibration_s, || {
-        calibration::measure(pair, lattice, mask, &options.calibration)
-    })?;
+    // 0–2. The lattice the image shows, checked against the inputs; the features; the model.
+    let model_run::ModelStages {
+        calibration,
+        found,
+        dhct,
+        model_failure,
+        mut timings,
+    } = model_run::model_stages(pair, lattice, mask, options, progress)?;
     let inputs = Inputs {
         pair,
         lattice,
@@ -142,16 +141,6 @@ pub fn run(
         options,
         calibration: &calibration,
     };
-
-    // 1. Features (the kernel sized from the lattice's spacing as the image shows it).
-    progress(Stage::Features);
-    let found = timed(&mut timings.features_s, || find_all_features(&inputs))?;
-
-    // 2. Model.
-    progress(Stage::Model);
-    let (dhct, model_failure) = timed(&mut timings.model_s, || {
-        fit_distortion_model(&inputs, &found)
-    })?;
 
     // 3–4. Features corrected by the model and fitted per region; the global affine
     // correction, fitted the same way, is the floor the model must beat.

@@ -11,8 +11,8 @@ use dhct_scan::ScanPair;
 use ndarray::Array2;
 
 use crate::{
-    Inputs, PipelineError, PipelineOptions, Stage, StageTimings, calibration, check_mask,
-    find_all_features, fit_distortion_model, timed,
+    FoundPass, Inputs, Measured, PipelineError, PipelineOptions, Stage, StageTimings, calibration,
+    check_mask, find_all_features, fit_distortion_model, timed,
 };
 
 /// What [`run_model`] found in one scan.
@@ -29,6 +29,55 @@ pub struct ModelRun {
     pub timings: StageTimings,
 }
 
+/// Stages 0–2 as [`crate::run`] continues from them: the calibration, the features with
+/// their correlation maps, the model.
+pub(crate) struct ModelStages {
+    pub calibration: Measured,
+    pub found: Vec<FoundPass>,
+    pub dhct: DhctResult,
+    pub model_failure: Option<String>,
+    pub timings: StageTimings,
+}
+
+/// Checks the options and mask, then runs stages 0 (the lattice the image shows, checked
+/// against the inputs), 1 (features, the kernel sized from the lattice's spacing as the
+/// image shows it) and 2 (the model).
+pub(crate) fn model_stages(
+    pair: &ScanPair,
+    lattice: &dyn Lattice,
+    mask: Option<&Array2<bool>>,
+    options: &PipelineOptions,
+    progress: &(dyn Fn(Stage) + Sync),
+) -> Result<ModelStages, PipelineError> {
+    options.validate()?;
+    check_mask(mask, pair.geometry())?;
+    let mut timings = StageTimings::default();
+    progress(Stage::Calibration);
+    let calibration = timed(&mut timings.calibration_s, || {
+        calibration::measure(pair, lattice, mask, &options.calibration)
+    })?;
+    let inputs = Inputs {
+        pair,
+        lattice,
+        mask,
+        options,
+        calibration: &calibration,
+    };
+    progress(Stage::Features);
+    let found = timed(&mut timings.features_s, || find_all_features(&inputs))?;
+    progress(Stage::Model);
+    let (dhct, model_failure) = timed(&mut timings.model_s, || {
+        fit_distortion_model(&inputs, &found)
+    })?;
+    Ok(ModelStages {
+        calibration,
+        found,
+        dhct,
+        model_failure,
+        timings,
+    })
+}
+
 /// Runs stages 0–2 of [`crate::run`] on `pair`: the same checks and errors, nothing after
 /// the model.
 pub fn run_model(
@@ -39,31 +88,13 @@ pub fn run_model(
     progress: &(dyn Fn(Stage) + Sync),
 ) -> Result<ModelRun, PipelineError> {
     let start = Instant::now();
-    options.validate()?;
-    check_mask(mask, pair.geometry())?;
-    let mut timings = StageTimings::default();
-    progress(Stage::Calibration);
-    let measured = timed(&mut timings.calibration_s, || {
-        calibration::measure(pair, lattice, mask, &options.calibration)
-    })?;
-    let inputs = Inputs {
-        pair,
-        lattice,
-        mask,
-        options,
-        calibration: &measured,
-    };
-    progress(Stage::Features);
-    let found = timed(&mut timings.features_s, || find_all_features(&inputs))?;
-    progress(Stage::Model);
-    let (dhct, model_failure) = timed(&mut timings.model_s, || {
-        fit_distortion_model(&inputs, &found)
-    })?;
+    let stages = model_stages(pair, lattice, mask, options, progress)?;
+    let mut timings = stages.timings;
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(ModelRun {
-        features: found.into_iter().map(|(set, _)| set).collect(),
-        dhct,
-        model_failure,
+        features: stages.found.into_iter().map(|(set, _)| set).collect(),
+        dhct: stages.dhct,
+        model_failure: stages.model_failure,
         timings,
     })
 }
