@@ -503,7 +503,10 @@ fn main() -> ExitCode {
             } else {
                 series::text_summary(&summary, output)
             };
-            diagnose::write_stdout(&text)
+            diagnose::write_stdout(&text)?;
+            // Warnings go to stderr whatever --quiet and --json say.
+            eprint!("{}", series::warning_lines(&summary));
+            Ok(())
         }),
         Command::Summarize { inputs, output } => {
             batch::summarize(inputs, output).and_then(|text| diagnose::write_stdout(&text))

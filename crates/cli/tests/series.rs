@@ -179,6 +179,29 @@ fn a_simulated_session_registers_every_frame_within_the_localisation_floor() {
             "{name}: σ {series_sigma:e} in the series, {best_frame:e} in the best frame"
         );
     }
+    // Every registered image shows the lattice given when its FFT is measured, as an
+    // outsider would check it; nothing is flagged in a session the model holds.
+    for (k, frame) in summary["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .enumerate()
+    {
+        let checks = frame["registered_checks"].as_array().expect("checks");
+        assert_eq!(checks.len(), 2, "frame {k}: {checks:?}");
+        for c in checks {
+            for scale in c["calibration"]["scale"].as_array().expect("scale") {
+                let scale = scale.as_f64().expect("number");
+                assert!((scale - 1.0).abs() <= 0.015, "frame {k}: {c}");
+            }
+        }
+    }
+    assert!(
+        summary["mean_check"].is_object(),
+        "{}",
+        summary["mean_check"]
+    );
+    assert_eq!(summary["warnings"], serde_json::json!([]));
     for file in [
         "trajectory.csv",
         "registered/stack.tif",

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::PipelineError;
+use crate::covered::{Window, covered_window, crop};
 
 /// Options of the calibration stage.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -87,6 +88,10 @@ pub struct CorrectedImageCheck {
 /// given before a warning is given.
 pub const CORRECTED_SCALE_TOLERANCE: f64 = 0.015;
 
+/// Fewest lattice periods (nearest-neighbour distances) the covered part of a corrected
+/// image must hold along x and along y for its lattice to be measured.
+pub const MIN_CHECKED_PERIODS: f64 = 4.0;
+
 /// Largest change of a lattice angle in a corrected image, degrees, before a warning.
 pub const CORRECTED_ANGLE_TOLERANCE_DEG: f64 = 1.0;
 
@@ -99,6 +104,33 @@ impl CorrectedImageCheck {
             .all(|k| (k - 1.0).abs() <= CORRECTED_SCALE_TOLERANCE)
             && self.angle_error_deg <= CORRECTED_ANGLE_TOLERANCE_DEG
     }
+
+    /// How far the image's lattice is from `lattice`: "`x` % × `y` % of the … lattice
+    /// along x × y with angles `a`° off".
+    pub fn describe(&self, lattice: &dyn Lattice) -> String {
+        let k = &self.calibration;
+        format!(
+            "{:.2} % × {:.2} % of the {} lattice along x × y with angles {:.2}° off",
+            100.0 * k.scale[0],
+            100.0 * k.scale[1],
+            lattice.name(),
+            self.angle_error_deg
+        )
+    }
+}
+
+/// The grid of `geometry` inside `window` (same pitch, directions and timing).
+fn window_geometry(geometry: &ScanGeometry, window: Window) -> Option<ScanGeometry> {
+    ScanGeometry::new(
+        window.columns(),
+        window.rows(),
+        geometry.pitch_x(),
+        geometry.pitch_y(),
+        geometry.pixel_period(),
+        geometry.trace_fast(),
+        geometry.slow_direction(),
+    )
+    .ok()
 }
 
 /// The largest change of the angles between `a1`, `a2` and `a2 − a1` of `lattice` (placed
@@ -135,15 +167,26 @@ fn corrected_bounds(geometry: &ScanGeometry, tolerance: f64) -> dhct_calibrate::
     bounds
 }
 
-/// Measures each corrected image's lattice (grid of `geometry`, sample units); images whose
-/// lattice cannot be measured are left out.
-pub(crate) fn check_corrected(
+/// Measures each corrected image's lattice (grid of `geometry`, sample units) by its
+/// Fourier transform, as an outside check would, against `lattice`, on the rectangle of
+/// the image that holds values; images whose lattice cannot be measured are left out.
+pub fn check_corrected_images(
     images: &[(ScanPass, &Array2<f64>)],
     geometry: &ScanGeometry,
     lattice: &dyn Lattice,
 ) -> Vec<CorrectedImageCheck> {
     let factor = binning_factor(geometry, lattice.nearest_neighbour_distance());
     let check = |&(pass, z): &(ScanPass, &Array2<f64>)| {
+        let window = covered_window(z.view())?;
+        let periods = |length: f64| length / lattice.nearest_neighbour_distance();
+        if periods(window.columns() as f64 * geometry.pitch_x())
+            .min(periods(window.rows() as f64 * geometry.pitch_y()))
+            < MIN_CHECKED_PERIODS
+        {
+            return None;
+        }
+        let (z, geometry) = (crop(z.view(), window), window_geometry(geometry, window)?);
+        let geometry = &geometry;
         let measured = measure_lattice_binned(z.view(), geometry, None, factor).ok()?;
         // Near the lattice given first (a corrected image should show it), then anywhere
         // within a factor 2 (so that one that went wrong is measured and flagged).

@@ -37,6 +37,7 @@
 mod affine;
 mod analysis;
 mod calibration;
+mod covered;
 mod error;
 mod model_run;
 mod options;
@@ -51,7 +52,7 @@ pub use affine::AffineComparison;
 pub use analysis::{Analysis, CorrectionSource};
 pub use calibration::{
     CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CalibrationOptions,
-    CorrectedImageCheck,
+    CorrectedImageCheck, MIN_CHECKED_PERIODS, check_corrected_images,
 };
 pub use error::PipelineError;
 pub use model_run::{ModelRun, run_model};
@@ -577,7 +578,7 @@ fn check_images(
     if inputs.calibration.is_ok() {
         let passes: Vec<(ScanPass, &Array2<f64>)> =
             sets.iter().map(|s| s.pass).zip(images.iter()).collect();
-        calibration::check_corrected(&passes, inputs.pair.geometry(), inputs.lattice)
+        calibration::check_corrected_images(&passes, inputs.pair.geometry(), inputs.lattice)
     } else {
         Vec::new()
     }
@@ -658,8 +659,7 @@ fn collect_warnings(
     fit_warnings: Vec<Warning>,
     model_failure: Option<String>,
 ) -> Vec<Warning> {
-    let mut warnings = warnings::calibration_warnings(&analysis.calibration);
-    warnings.extend(warnings::assumption_warnings(geometry));
+    let mut warnings = warnings::input_warnings(&analysis.calibration, geometry);
     warnings.extend(fit_warnings);
     warnings.extend(model_failure.map(warnings::model_failure_warning));
     warnings.extend(warnings::affine_warnings(

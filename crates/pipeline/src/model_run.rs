@@ -11,8 +11,8 @@ use dhct_scan::ScanPair;
 use ndarray::Array2;
 
 use crate::{
-    FoundPass, Inputs, Measured, PipelineError, PipelineOptions, Stage, StageTimings, calibration,
-    check_mask, find_all_features, fit_distortion_model, timed,
+    FoundPass, Inputs, Measured, PipelineError, PipelineOptions, Stage, StageTimings, Warning,
+    calibration, check_mask, find_all_features, fit_distortion_model, timed, warnings,
 };
 
 /// What [`run_model`] found in one scan.
@@ -25,6 +25,13 @@ pub struct ModelRun {
     pub dhct: DhctResult,
     /// Why the model could not be fitted, when it could not.
     pub model_failure: Option<String>,
+    /// What stage 0 found about the inputs (the file's pixel size calibrated from the
+    /// lattice, the lattice not measured) and what was assumed for what the file did not
+    /// state: the warnings of [`crate::run`] that do not depend on the correction.
+    pub input_warnings: Vec<Warning>,
+    /// Whether the image's lattice was measured from its Fourier transform (stage 0), so
+    /// that a corrected image of it can be checked the same way.
+    pub lattice_measured: bool,
     /// Seconds per stage.
     pub timings: StageTimings,
 }
@@ -92,6 +99,8 @@ pub fn run_model(
     let mut timings = stages.timings;
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(ModelRun {
+        input_warnings: warnings::input_warnings(&stages.calibration, pair.geometry()),
+        lattice_measured: stages.calibration.is_ok(),
         features: stages.found.into_iter().map(|(set, _)| set).collect(),
         dhct: stages.dhct,
         model_failure: stages.model_failure,

@@ -70,6 +70,9 @@ pub enum WarningCode {
     /// The drift model's corrected image was not the lattice given; the global affine
     /// correction, whose image did better, was kept.
     ModelImageOff,
+    /// One frame of a series deviates far more from the lattice than the others: the
+    /// session's model does not explain it.
+    FrameNotExplained,
 }
 
 /// An input the user can give to change a result. Each front end spells it its own way
@@ -122,7 +125,8 @@ pub struct Warning {
 }
 
 impl Warning {
-    fn new(code: WarningCode, message: String, what_to_do: &str) -> Warning {
+    /// A warning of `code`: what was found (`message`, with the numbers) and what to do.
+    pub fn new(code: WarningCode, message: String, what_to_do: &str) -> Warning {
         Warning {
             code,
             message,
@@ -133,13 +137,13 @@ impl Warning {
     }
 
     /// The same warning, advising a diagnosis of the gap.
-    fn suggesting_diagnosis(mut self) -> Warning {
+    pub fn suggesting_diagnosis(mut self) -> Warning {
         self.suggests_diagnosis = true;
         self
     }
 
     /// The same warning, naming the inputs its advice refers to.
-    fn with_inputs(mut self, inputs: &[UserInput]) -> Warning {
+    pub fn with_inputs(mut self, inputs: &[UserInput]) -> Warning {
         self.inputs = inputs.to_vec();
         self
     }
@@ -178,6 +182,7 @@ impl WarningCode {
             WarningCode::CorrectedImageUnchecked => "corrected_image_unchecked",
             WarningCode::ModelNotFitted => "model_not_fitted",
             WarningCode::ModelImageOff => "model_image_off",
+            WarningCode::FrameNotExplained => "frame_not_explained",
         }
     }
 }
@@ -228,6 +233,17 @@ pub(crate) fn calibration_warnings(found: &Result<PairCalibration, String>) -> V
         )
         .with_inputs(&[UserInput::NearestNeighbourDistance]),
     ]
+}
+
+/// What stage 0 found about the inputs: the calibration's warnings and the assumptions
+/// taken for what the file did not state.
+pub(crate) fn input_warnings(
+    calibration: &Result<PairCalibration, String>,
+    geometry: &ScanGeometry,
+) -> Vec<Warning> {
+    let mut warnings = calibration_warnings(calibration);
+    warnings.extend(assumption_warnings(geometry));
+    warnings
 }
 
 /// The scan timing or pixel size that the file did not state.
@@ -426,19 +442,6 @@ pub(crate) fn affine_warnings(comparisons: &[AffineComparison], fell_back: bool)
         .collect()
 }
 
-/// How far a corrected image's lattice is from `lattice`: "`x` % × `y` % of the … lattice
-/// along x × y with angles `a`° off".
-fn how_far_off(lattice: &dyn Lattice, c: &CorrectedImageCheck) -> String {
-    let k = &c.calibration;
-    format!(
-        "{:.2} % × {:.2} % of the {} lattice along x × y with angles {:.2}° off",
-        100.0 * k.scale[0],
-        100.0 * k.scale[1],
-        lattice.name(),
-        c.angle_error_deg
-    )
-}
-
 /// Whether two parameters are drift terms of one axis, or one of them and the creep's
 /// `t0`: their near-degeneracy is the nature of a single frame, not a fault.
 fn drift_family(a: &str, b: &str) -> bool {
@@ -469,7 +472,7 @@ pub(crate) fn corrected_image_warnings(
                     "corrected {}: its lattice, measured by FFT, is {} (more than {:.1} % or \
                      {:.0}° off)",
                     c.pass,
-                    how_far_off(lattice, c),
+                    c.describe(lattice),
                     100.0 * CORRECTED_SCALE_TOLERANCE,
                     CORRECTED_ANGLE_TOLERANCE_DEG
                 ),
@@ -532,7 +535,7 @@ pub(crate) fn model_image_warnings(
                      its corrected {}, measured by FFT, is {}: the global affine correction, \
                      whose images did better, was kept",
                     c.pass,
-                    how_far_off(lattice, c)
+                    c.describe(lattice)
                 ),
                 "take lengths from the corrected images, not drift values; a mask over the \
                  whole atomically resolved area, or a diagnosis of the gap, shows where the \

@@ -6,18 +6,22 @@
 
 mod order;
 mod outputs;
+mod trust;
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions, fit_series};
 use dhct_distortion::{FitOptions, PassInput};
+use dhct_pipeline::{CorrectedImageCheck, Warning};
 use serde::Serialize;
 
 use crate::analysis::{FrameModel, analyse_model_file};
+use crate::flags::warning_line;
 use crate::setup::CorrectConfig;
 
 pub use order::Timed;
+pub use trust::UNEXPLAINED_FRAME_RATIO;
 
 /// What `dhct series` was asked to do.
 pub struct SeriesRequest<'a> {
@@ -46,6 +50,11 @@ pub struct FrameSummary {
     pub features: usize,
     /// Its own model's hysteresis parameters (fitted to this frame alone).
     pub own_hysteresis: Vec<dhct_distortion::Parameter>,
+    /// What its analysis alone found about the inputs (its pixel size calibrated from the
+    /// lattice, its lattice not measured, its timing assumed).
+    pub warnings: Vec<Warning>,
+    /// Its registered images' lattices, measured by FFT (passes where one was measured).
+    pub registered_checks: Vec<CorrectedImageCheck>,
 }
 
 /// `series.json`: the frames, the fit and what was assumed.
@@ -55,6 +64,12 @@ pub struct SeriesSummary {
     pub frames: Vec<FrameSummary>,
     /// The series fit.
     pub fit: SeriesFit,
+    /// The mean registered image's lattice, measured by FFT (if it could be).
+    pub mean_check: Option<CorrectedImageCheck>,
+    /// What the series' results should not be trusted for: frames the session's model
+    /// does not explain, registered images whose lattice is off or not measurable. Each
+    /// frame's own warnings are in its [`FrameSummary::warnings`].
+    pub warnings: Vec<Warning>,
     /// Notes and assumptions (clock, order).
     pub notes: Vec<String>,
     /// Files written into the output directory.
@@ -95,19 +110,30 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .collect();
     let (timed, notes) = order::order(&geometries)?;
     let fit = fit_frames(&corrected, &timed, request)?;
-    let mut notes = notes;
-    notes.extend(unexplained_frames(&fit, &timed));
+    let warnings = trust::unexplained_frames(&fit, &timed);
     let mut summary = SeriesSummary {
         frames: timed
             .iter()
             .map(|t| frame_summary(t, &corrected[t.input]))
             .collect(),
         fit,
+        mean_check: None,
+        warnings,
         notes,
         outputs: Vec::new(),
     };
-    summary.outputs =
-        outputs::write_all(staged.path(), &summary, &corrected, &timed, &request.config)?;
+    let written = outputs::write_all(staged.path(), &summary, &corrected, &timed, &request.config)?;
+    let lattice = corrected[timed[0].input].lattice.as_ref();
+    summary.warnings.extend(trust::registered_image_warnings(
+        &written.checks,
+        &timed,
+        lattice,
+    ));
+    for (frame, checks) in summary.frames.iter_mut().zip(written.checks.frames) {
+        frame.registered_checks = checks;
+    }
+    summary.mean_check = written.checks.mean;
+    summary.outputs = written.files;
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
@@ -158,37 +184,6 @@ fn fit_frames(
     fit_series(&frames, lattice, &options).context("the series fit failed")
 }
 
-/// Frames whose features the session's model leaves far off their sites (a frame placed a
-/// lattice vector off, or something the model does not hold happened during it).
-fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<String> {
-    let mut sorted: Vec<f64> = fit
-        .frame_rms_m
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    sorted.sort_by(f64::total_cmp);
-    let Some(&median) = sorted.get(sorted.len() / 2) else {
-        return Vec::new();
-    };
-    fit.frame_rms_m
-        .iter()
-        .zip(timed)
-        .enumerate()
-        .filter(|(_, (rms, _))| **rms > 3.0 * median)
-        .map(|(k, (rms, t))| {
-            format!(
-                "warning: frame {k} ({}) deviates {} rms from the lattice, the frames' median is \
-                 {}: the session's model does not explain it (placed a lattice period off, a \
-                 tip change, or a move the headers do not record); check its registered image",
-                t.path.display(),
-                dhct_scan::quantity::length(*rms),
-                dhct_scan::quantity::length(median)
-            )
-        })
-        .collect()
-}
-
 fn frame_summary(t: &Timed, c: &FrameModel) -> FrameSummary {
     let g = &c.geometry;
     let model = &c.run.dhct.model;
@@ -204,7 +199,25 @@ fn frame_summary(t: &Timed, c: &FrameModel) -> FrameSummary {
         offset_m: [g.offset().0, g.offset().1],
         features: c.run.features.iter().map(|set| set.features.len()).sum(),
         own_hysteresis: model.parameters[drift_count..].to_vec(),
+        warnings: c.run.input_warnings.clone(),
+        registered_checks: Vec::new(),
     }
+}
+
+/// The warnings, for stderr: each frame's own (the inputs it was analysed with), then the
+/// series'.
+pub fn warning_lines(summary: &SeriesSummary) -> String {
+    let frames = summary.frames.iter().enumerate().flat_map(|(k, frame)| {
+        frame
+            .warnings
+            .iter()
+            .map(move |w| format!("warning: frame {k} ({}): {}\n", frame.file, warning_line(w)))
+    });
+    let series = summary
+        .warnings
+        .iter()
+        .map(|w| format!("warning: {}\n", warning_line(w)));
+    frames.chain(series).collect()
 }
 
 /// What `dhct series` prints: the frames, the drift, the hysteresis and where the outputs
@@ -215,7 +228,7 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
     let fit = &summary.fit;
     let mut text = String::new();
     for note in &summary.notes {
-        if note.starts_with("warning:") || note.starts_with("assumption:") {
+        if note.starts_with("assumption:") {
             let _ = writeln!(text, "{note}");
         } else {
             let _ = writeln!(text, "note: {note}");

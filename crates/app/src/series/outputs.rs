@@ -8,6 +8,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use dhct_distortion::series::{SeriesFeature, register_image};
+use dhct_pipeline::{CorrectedImageCheck, check_corrected_images};
 use dhct_scan::{ImageChannel, ScanPass};
 use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
 use ndarray::Array2;
@@ -16,19 +17,42 @@ use super::{SeriesSummary, Timed};
 use crate::analysis::FrameModel;
 use crate::setup::{CorrectConfig, read_pair};
 
-/// Writes every output but `series.json`; returns the names written.
+/// What [`write_all`] wrote and what the registered images showed.
+pub struct Written {
+    /// The files written, relative to the output directory.
+    pub files: Vec<String>,
+    /// The registered images' lattices, measured by FFT.
+    pub checks: RegisteredChecks,
+}
+
+/// The registered images' lattices, measured by their Fourier transform as an outside
+/// check would (empty when the first frame's raw lattice could not be measured).
+#[derive(Default)]
+pub struct RegisteredChecks {
+    /// Per frame in time order: the passes whose registered lattice was measured.
+    pub frames: Vec<Vec<CorrectedImageCheck>>,
+    /// Per frame in time order: the passes whose registered lattice could not be measured.
+    pub unmeasured: Vec<Vec<ScanPass>>,
+    /// The mean image's, if measured.
+    pub mean: Option<CorrectedImageCheck>,
+    /// Whether the checks were made.
+    pub made: bool,
+}
+
+/// Writes every output but `series.json`; returns the names written and the checks.
 pub fn write_all(
     dir: &Path,
     summary: &SeriesSummary,
     corrected: &[FrameModel],
     timed: &[Timed],
     config: &CorrectConfig,
-) -> Result<Vec<String>> {
-    let mut written = vec![write_features(dir, summary, corrected, timed)?];
-    written.push(write_trajectory(dir, summary)?);
-    written.extend(write_registered(dir, summary, corrected, timed, config)?);
-    written.push(SERIES_JSON.to_string());
-    Ok(written)
+) -> Result<Written> {
+    let mut files = vec![write_features(dir, summary, corrected, timed)?];
+    files.push(write_trajectory(dir, summary)?);
+    let (registered, checks) = write_registered(dir, summary, corrected, timed, config)?;
+    files.extend(registered);
+    files.push(SERIES_JSON.to_string());
+    Ok(Written { files, checks })
 }
 
 /// File name of the summary.
@@ -120,24 +144,37 @@ fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
     Ok(NAME.to_string())
 }
 
-/// Every frame's images registered onto the first frame's grid, their stack and its mean.
-/// Each frame's file is read again here, one at a time.
+/// Every frame's images registered onto the first frame's grid, their stack and its mean,
+/// each image's lattice measured by FFT (a frame that covers too little of the first
+/// frame's grid is measured on its own grid, moved with the sample). Each frame's file is
+/// read again here, one at a time.
 fn write_registered(
     dir: &Path,
     summary: &SeriesSummary,
     corrected: &[FrameModel],
     timed: &[Timed],
     config: &CorrectConfig,
-) -> Result<Vec<String>> {
+) -> Result<(Vec<String>, RegisteredChecks)> {
     let folder = dir.join("registered");
     std::fs::create_dir_all(&folder)
         .with_context(|| format!("cannot create {}", folder.display()))?;
-    let grid = corrected[timed[0].input].geometry.clone();
+    let first = &corrected[timed[0].input];
+    let grid = first.geometry.clone();
+    // A registered image is checked only where the raw image's lattice could be measured.
+    let lattice = first.lattice.as_ref();
+    let mut checks = RegisteredChecks {
+        made: first.run.lattice_measured,
+        ..RegisteredChecks::default()
+    };
+    let check = |pass: ScanPass, z: &Array2<f64>| -> Option<CorrectedImageCheck> {
+        check_corrected_images(&[(pass, z)], &grid, lattice).pop()
+    };
     let mut written = Vec::new();
     let mut pages: Vec<ImageChannel> = Vec::new();
     for (k, t) in timed.iter().enumerate() {
         let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
         let pair = &pair;
+        let (mut measured, mut unmeasured) = (Vec::new(), Vec::new());
         for (pass, image) in pair.images() {
             let z = register_image(
                 &summary.fit,
@@ -147,6 +184,26 @@ fn write_registered(
                 &image.z,
                 &grid,
             )?;
+            if checks.made {
+                let own_grid = || own_grid(summary, pair.geometry(), t.start_s);
+                let checked = check(pass, &z).or_else(|| {
+                    let grid = own_grid()?;
+                    let z = register_image(
+                        &summary.fit,
+                        pair.geometry(),
+                        t.start_s,
+                        pass,
+                        &image.z,
+                        &grid,
+                    )
+                    .ok()?;
+                    check_corrected_images(&[(pass, &z)], &grid, lattice).pop()
+                });
+                match checked {
+                    Some(c) => measured.push(c),
+                    None => unmeasured.push(pass),
+                }
+            }
             let name = format!("frame_{k:02}_{}", pass.name());
             let channel =
                 ImageChannel::new(format!("{} {name}", image.name), image.unit.clone(), z);
@@ -157,8 +214,13 @@ fn write_registered(
             written.push(file);
             pages.push(channel);
         }
+        checks.frames.push(measured);
+        checks.unmeasured.push(unmeasured);
     }
     let mean = mean_image(&pages);
+    if checks.made {
+        checks.mean = check(ScanPass::Trace, &mean);
+    }
     let unit = pages.first().map(|p| p.unit.clone()).unwrap_or_default();
     let mean = ImageChannel::new("mean of the registered frames", unit, mean);
     write_atomically(&dir.join("registered/mean.gsf"), |w| {
@@ -170,7 +232,19 @@ fn write_registered(
         tiff_file::write_f32_pages_with_pixel_size(&refs, [grid.pitch_x(), grid.pitch_y()], w)
     })?;
     written.push("registered/stack.tif".into());
-    Ok(written)
+    Ok((written, checks))
+}
+
+/// The frame's own grid moved with the sample to where the frame scanned it (by the
+/// session's drift at its start): its registered image there covers nearly all of it.
+fn own_grid(
+    summary: &SeriesSummary,
+    geometry: &dhct_scan::ScanGeometry,
+    start_s: f64,
+) -> Option<dhct_scan::ScanGeometry> {
+    let d = summary.fit.drift.displacement(start_s);
+    let (x, y) = geometry.offset();
+    geometry.clone().with_offset(x + d[0], y + d[1]).ok()
 }
 
 /// The mean of `pages` per pixel over the pages that hold a value there (NaN where none).

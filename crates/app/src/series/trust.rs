@@ -1,0 +1,196 @@
+//! What a series' results should not be trusted for: frames the session's model does not
+//! explain, and registered images whose lattice, measured by FFT as an outside check
+//! would, is not the lattice given. Each is a typed [`Warning`], as `dhct correct` gives.
+
+use dhct_distortion::series::SeriesFit;
+use dhct_lattice::Lattice;
+use dhct_pipeline::{
+    CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CorrectedImageCheck, UserInput,
+    Warning, WarningCode,
+};
+use dhct_scan::quantity::length;
+
+use super::Timed;
+use super::outputs::RegisteredChecks;
+
+/// A frame whose rms deviation from the lattice is more than this many times the frames'
+/// median is not explained by the session's model.
+pub const UNEXPLAINED_FRAME_RATIO: f64 = 3.0;
+
+/// Frames whose features the session's model leaves far off their sites (a frame placed a
+/// lattice vector off, or something the model does not hold happened during it).
+pub fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<Warning> {
+    let mut sorted: Vec<f64> = fit
+        .frame_rms_m
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    sorted.sort_by(f64::total_cmp);
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return Vec::new();
+    };
+    fit.frame_rms_m
+        .iter()
+        .zip(timed)
+        .enumerate()
+        .filter(|(_, (rms, _))| **rms > UNEXPLAINED_FRAME_RATIO * median)
+        .map(|(k, (rms, t))| {
+            Warning::new(
+                WarningCode::FrameNotExplained,
+                format!(
+                    "frame {k} ({}) deviates {} rms from the lattice, the frames' median is {}: \
+                     the session's model does not explain it (placed a lattice period off, a \
+                     tip change, or a move the headers do not record)",
+                    t.path.display(),
+                    length(*rms),
+                    length(median)
+                ),
+                "check its registered image; leave the frame out, or split the series where \
+                 the tip was moved",
+            )
+        })
+        .collect()
+}
+
+/// The registered images (each frame's, and their mean) whose lattice is not the lattice
+/// given, or could not be measured although the raw image's could.
+pub fn registered_image_warnings(
+    checks: &RegisteredChecks,
+    timed: &[Timed],
+    lattice: &dyn Lattice,
+) -> Vec<Warning> {
+    if !checks.made {
+        return Vec::new();
+    }
+    let mut warnings = Vec::new();
+    for (k, (measured, t)) in checks.frames.iter().zip(timed).enumerate() {
+        let what = format!("registered frame {k} ({})", t.path.display());
+        for c in measured.iter().filter(|c| !c.passes()) {
+            warnings.push(image_off(&format!("{what}, {}", c.pass), c, lattice));
+        }
+        if let Some(passes) = checks.unmeasured.get(k).filter(|p| !p.is_empty()) {
+            let passes: Vec<String> = passes.iter().map(|p| p.to_string()).collect();
+            warnings.push(image_unchecked(&format!(
+                "{what}, {}",
+                passes.join(" and ")
+            )));
+        }
+    }
+    match &checks.mean {
+        Some(c) if !c.passes() => warnings.push(image_off("the mean image", c, lattice)),
+        Some(_) => {}
+        None => warnings.push(image_unchecked("the mean image")),
+    }
+    warnings
+}
+
+/// `what` (a registered image) shows another lattice than the one given.
+fn image_off(what: &str, check: &CorrectedImageCheck, lattice: &dyn Lattice) -> Warning {
+    Warning::new(
+        WarningCode::CorrectedImageOff,
+        format!(
+            "{what}: its lattice, measured by FFT, is {} (more than {:.1} % or {:.0}° off)",
+            check.describe(lattice),
+            100.0 * CORRECTED_SCALE_TOLERANCE,
+            CORRECTED_ANGLE_TOLERANCE_DEG
+        ),
+        "do not take lengths from this image: check the frames' timing, scan angles and \
+         offsets, and the lattice constant given",
+    )
+    .with_inputs(&[
+        UserInput::LineTime,
+        UserInput::ScanDirections,
+        UserInput::NearestNeighbourDistance,
+    ])
+}
+
+/// `what` (a registered image) has no lattice an FFT can measure.
+fn image_unchecked(what: &str) -> Warning {
+    Warning::new(
+        WarningCode::CorrectedImageUnchecked,
+        format!(
+            "{what}: its lattice could not be measured by FFT (the raw first frame's could), \
+             so the registration is not checked against the image"
+        ),
+        "check lengths in this image against a known feature before taking them",
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dhct_calibrate::Calibration;
+    use dhct_lattice::Hexagonal;
+    use dhct_scan::ScanPass;
+    use std::path::PathBuf;
+
+    fn timed(n: usize) -> Vec<Timed> {
+        (0..n)
+            .map(|k| Timed {
+                input: k,
+                path: PathBuf::from(format!("f{k}.sm4")),
+                start_s: 60.0 * k as f64,
+            })
+            .collect()
+    }
+
+    fn check(pass: ScanPass, scale_y: f64) -> CorrectedImageCheck {
+        let mut calibration = Calibration::identity();
+        calibration.scale[1] = scale_y;
+        calibration.matrix[1][1] = scale_y;
+        CorrectedImageCheck {
+            pass,
+            calibration,
+            angle_error_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn registered_images_off_or_unmeasured_are_named_by_frame_and_pass() {
+        let lattice = Hexagonal::graphite();
+        let checks = RegisteredChecks {
+            frames: vec![
+                vec![check(ScanPass::Trace, 1.0), check(ScanPass::Retrace, 1.0)],
+                vec![check(ScanPass::Trace, 1.04)],
+            ],
+            unmeasured: vec![vec![], vec![ScanPass::Retrace]],
+            mean: Some(check(ScanPass::Trace, 1.0)),
+            made: true,
+        };
+        let warnings = registered_image_warnings(&checks, &timed(2), &lattice);
+        let codes: Vec<WarningCode> = warnings.iter().map(|w| w.code).collect();
+        assert_eq!(
+            codes,
+            [
+                WarningCode::CorrectedImageOff,
+                WarningCode::CorrectedImageUnchecked
+            ]
+        );
+        assert!(
+            warnings[0]
+                .message
+                .contains("registered frame 1 (f1.sm4), trace"),
+            "{}",
+            warnings[0].message
+        );
+        assert!(warnings[0].message.contains("104.00 %"), "{}", warnings[0]);
+        // A mean image off is named too; none of it when the raw lattice was not measured.
+        let off_mean = RegisteredChecks {
+            mean: Some(check(ScanPass::Trace, 0.97)),
+            ..RegisteredChecks::default()
+        };
+        assert!(registered_image_warnings(&off_mean, &timed(2), &lattice).is_empty());
+        let made = RegisteredChecks {
+            made: true,
+            ..off_mean
+        };
+        let warnings = registered_image_warnings(&made, &timed(2), &lattice);
+        assert_eq!(warnings.len(), 1);
+        assert!(
+            warnings[0].message.starts_with("the mean image"),
+            "{}",
+            warnings[0]
+        );
+    }
+}
