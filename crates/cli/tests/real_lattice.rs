@@ -256,3 +256,26 @@ fn dark_atoms_read_as_bright_are_named_with_the_other_polarity() {
         String::from_utf8_lossy(&output.stderr)
     );
 }
+
+/// FeSe (Nanonis, stmpy; a square Se lattice of 3.77 Å, the scan turned 45°) with a wrong
+/// constant: a 5 Å square cell turned 45° from the image's would put all of the image's
+/// peaks on its (1, 1) orders, with its own first orders absent (only scan noise near one
+/// of them). That is no explanation: the run stops and names the lattice the image shows.
+#[test]
+fn a_constant_whose_first_orders_are_absent_is_refused_naming_the_image_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = tests_data("real/fese_nanonis_20nm.sxm");
+    let out = dir.path().join("out");
+    let output = correct(&input, &["--lattice", "square", "--nn", "5A"], &out);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success(),
+        "a 5 Å square lattice was accepted"
+    );
+    assert!(
+        stderr.contains("the image shows a square lattice"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("cannot match"), "{stderr}");
+    assert!(!out.exists(), "nothing written on a refusal");
+}

@@ -532,7 +532,9 @@ def correct_series(
     """Fits one model to frames of one area taken one after another and registers them
     into one sample frame, as ``dhct series`` does; writes its outputs into ``outdir``
     (series.json, features.csv, trajectory.csv, registered/) and returns series.json's
-    content as a dict.
+    content as a dict. Its ``warnings`` (registered images whose lattice, measured by FFT,
+    is off; frames the session's model does not explain) and each frame's ``warnings``
+    (its pixel size calibrated, its timing assumed) say what not to trust.
 
     ``frames``: files, folders or glob patterns (a path or a list of them), ordered by the
     start time each file records. ``lattice``, ``nn`` and the options are those of
