@@ -102,6 +102,16 @@ pub fn explain(error: &PipelineError, spelling: Spelling) -> String {
             spelling.names(&[Lattice, Nn]),
             spelling.name(Mask)
         ),
+        PipelineError::CorrectedScale {
+            given_nn_m, scale, ..
+        } => format!(
+            "if the file's pixel size is right, use {} (or {}); if {} is right, the file's \
+             pixel size is off: give it with {}",
+            spelling.set(Nn, &length(given_nn_m * scale).replace(' ', "")),
+            spelling.set(Nn, "auto"),
+            length(*given_nn_m),
+            spelling.name(PixelSize)
+        ),
         PipelineError::Features(FeatureError::ImageTooSmall { .. }) => format!(
             "check {} and the pixel size ({})",
             spelling.name(Nn),

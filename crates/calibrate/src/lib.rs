@@ -59,8 +59,7 @@ pub use measure::{
     MAX_MEASURED_SIDE, MIN_BINNED_NN_PX, binning_factor, measure_lattice, measure_lattice_binned,
 };
 pub use named_fit::{
-    MIN_EXPLAINED_FRACTION, MIN_PRIMARY_COVERAGE, MIN_RELATIVE_CONTRAST, MapBounds,
-    STRONG_POWER_FRACTION, UnexplainedPeak,
+    MIN_EXPLAINED_FRACTION, MIN_PRIMARY_COVERAGE, MapBounds, STRONG_POWER_FRACTION, UnexplainedPeak,
 };
 pub use spectrum::{Peak, PowerSpectrum, SpectrumError};
 

@@ -56,14 +56,6 @@ pub const MIN_PRIMARY_COVERAGE: f64 = 0.6;
 /// motif may make a reflection weak that the named lattice predicts strong).
 pub const OBSERVED_CONTRAST: f64 = 4.0;
 
-/// A predicted reflection is observed only when its contrast is also at least this fraction
-/// of the contrast of the strongest peak the map explains. A named cell √2 or 2× the image's
-/// explains every peak as its higher orders while its own first orders are absent; noise or
-/// a scan artefact near one of them reaches [`OBSERVED_CONTRAST`] but stays thousands of
-/// times weaker than the reflections it does explain. (Power: 10⁻³ is an amplitude 30×
-/// weaker; unequal tips make equivalent reflections differ 10–60× in power.)
-pub const MIN_RELATIVE_CONTRAST: f64 = 1e-3;
-
 /// Reflections of the lattice up to this index (|h|, |k|) are considered.
 const MAX_INDEX: i64 = 8;
 
@@ -403,18 +395,15 @@ impl SpectrumWindow<'_> {
 }
 
 /// Fraction of the strongest shell's reflections visible in `window` under `basis` that
-/// are observed (1 when none is visible): contrast at least [`OBSERVED_CONTRAST`] and
-/// [`MIN_RELATIVE_CONTRAST`] of the strongest explained peak's (`strongest_contrast`).
+/// are observed peaks (1 when none is visible).
 fn primary_coverage(
     basis: &Matrix2<f64>,
     shells: &[PredictedShell],
     window: &SpectrumWindow,
-    strongest_contrast: f64,
 ) -> f64 {
     let Some(first) = shells.first() else {
         return 0.0;
     };
-    let threshold = OBSERVED_CONTRAST.max(MIN_RELATIVE_CONTRAST * strongest_contrast);
     let (mut visible, mut observed) = (0usize, 0usize);
     for h in &first.indices {
         let k = basis * Vector2::new(h[0] as f64, h[1] as f64);
@@ -423,7 +412,7 @@ fn primary_coverage(
             continue;
         }
         visible += 1;
-        if (window.contrast)([k.x, k.y]) >= threshold {
+        if (window.contrast)([k.x, k.y]) >= OBSERVED_CONTRAST {
             observed += 1;
         }
     }
@@ -432,20 +421,6 @@ fn primary_coverage(
     } else {
         observed as f64 / visible as f64
     }
-}
-
-/// The largest contrast of the peaks that have an index (0 when none has).
-fn strongest_explained_contrast(
-    peaks: &[Peak],
-    indices: &[Option<[i64; 2]>],
-    window: &SpectrumWindow,
-) -> f64 {
-    peaks
-        .iter()
-        .zip(indices)
-        .filter(|(_, index)| index.is_some())
-        .map(|(p, _)| (window.contrast)(p.k))
-        .fold(0.0, f64::max)
 }
 
 /// A peak farther than this many of its position uncertainties from its reflection under
@@ -582,14 +557,13 @@ fn refined(
     if covariance == Matrix4::zeros() {
         covariance = refine(&n, peaks, &refinable(&n, peaks, &found.indices))?.1;
     }
-    let strongest = strongest_explained_contrast(peaks, &found.indices, window);
     admit(&n).then_some(NamedFit {
         basis: n,
         covariance,
         indices: found.indices,
         explained_fraction: found.explained_fraction,
         independent: found.independent,
-        primary_coverage: primary_coverage(&n, shells, window, strongest),
+        primary_coverage: primary_coverage(&n, shells, window),
         top_explained: found.top_explained,
         score: found.score,
     })

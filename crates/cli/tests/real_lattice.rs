@@ -258,11 +258,13 @@ fn dark_atoms_read_as_bright_are_named_with_the_other_polarity() {
 }
 
 /// FeSe (Nanonis, stmpy; a square Se lattice of 3.77 Å, the scan turned 45°) with a wrong
-/// constant: a 5 Å square cell turned 45° from the image's would put all of the image's
-/// peaks on its (1, 1) orders, with its own first orders absent (only scan noise near one
-/// of them). That is no explanation: the run stops and names the lattice the image shows.
+/// constant: a 5 Å square cell turned 45° from the image's puts the image's peaks on its
+/// (1, 1) orders, so the calibration accepts it, but every corrected image then shows the
+/// lattice at 1/√2 of the constant given, alike along x and y. That is the constant being
+/// wrong (it exited 0 with a warning before): the run stops and names the one the image
+/// shows.
 #[test]
-fn a_constant_whose_first_orders_are_absent_is_refused_naming_the_image_lattice() {
+fn a_constant_whose_corrected_images_show_another_is_refused_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let input = tests_data("real/fese_nanonis_20nm.sxm");
     let out = dir.path().join("out");
@@ -273,9 +275,9 @@ fn a_constant_whose_first_orders_are_absent_is_refused_naming_the_image_lattice(
         "a 5 Å square lattice was accepted"
     );
     assert!(
-        stderr.contains("the image shows a square lattice"),
+        stderr.contains("every corrected image shows the square lattice 70.7 % as large"),
         "{stderr}"
     );
-    assert!(stderr.contains("cannot match"), "{stderr}");
+    assert!(stderr.contains("--nn 3.5"), "{stderr}");
     assert!(!out.exists(), "nothing written on a refusal");
 }

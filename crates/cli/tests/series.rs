@@ -202,11 +202,16 @@ fn a_simulated_session_registers_every_frame_within_the_localisation_floor() {
         summary["mean_check"]
     );
     assert_eq!(summary["warnings"], serde_json::json!([]));
+    let report = std::fs::read_to_string(out.join("report.html")).expect("report");
+    assert!(report.contains("Drift over the session") && report.contains("No warning"));
     for file in [
         "trajectory.csv",
         "registered/stack.tif",
         "registered/mean.gsf",
         "registered/frame_11_retrace.gsf",
+        "report.html",
+        "trajectory_x.svg",
+        "mean.png",
     ] {
         assert!(out.join(file).is_file(), "{file}");
     }

@@ -133,6 +133,54 @@ fn window_geometry(geometry: &ScanGeometry, window: Window) -> Option<ScanGeomet
     .ok()
 }
 
+/// A corrected image's lattice off by more than this fraction, by one scale along x and y
+/// (within [`CORRECTED_SCALE_TOLERANCE`] of each other, angles within
+/// [`CORRECTED_ANGLE_TOLERANCE_DEG`]), in every pass, is the constant given being wrong:
+/// timing, hysteresis and drift errors stretch one axis, not both alike.
+pub const UNIFORM_SCALE_ERROR: f64 = 0.05;
+
+/// The error when every corrected image in `checks` (at least one) shows `lattice` at one
+/// scale, the same along x and y, off by more than [`UNIFORM_SCALE_ERROR`].
+pub(crate) fn uniform_scale_error(
+    checks: &[CorrectedImageCheck],
+    lattice: &dyn Lattice,
+) -> Option<PipelineError> {
+    let uniform = |c: &CorrectedImageCheck| {
+        let [kx, ky] = c.calibration.scale;
+        let mean = 0.5 * (kx + ky);
+        ((kx - ky).abs() <= CORRECTED_SCALE_TOLERANCE * mean
+            && c.angle_error_deg <= CORRECTED_ANGLE_TOLERANCE_DEG
+            && (mean - 1.0).abs() > UNIFORM_SCALE_ERROR)
+            .then_some(mean)
+    };
+    let scales: Vec<f64> = checks.iter().map(uniform).collect::<Option<_>>()?;
+    let scale = scales.iter().sum::<f64>() / scales.len().max(1) as f64;
+    // One scale for every pass, not two passes off in opposite senses.
+    if scales.is_empty()
+        || scales
+            .iter()
+            .any(|s| (s - scale).abs() > CORRECTED_SCALE_TOLERANCE)
+    {
+        return None;
+    }
+    Some(PipelineError::CorrectedScale {
+        lattice: lattice.name().to_string(),
+        given_nn_m: lattice.nearest_neighbour_distance(),
+        scale,
+        passes: checks
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} {:.2} % × {:.2} %",
+                    c.pass,
+                    100.0 * c.calibration.scale[0],
+                    100.0 * c.calibration.scale[1]
+                )
+            })
+            .collect(),
+    })
+}
+
 /// The largest change of the angles between `a1`, `a2` and `a2 − a1` of `lattice` (placed
 /// with the calibration's rotation) under the calibration's `K`, degrees.
 fn angle_error_deg(lattice: &dyn Lattice, calibration: &Calibration) -> f64 {

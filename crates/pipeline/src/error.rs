@@ -86,6 +86,29 @@ pub enum PipelineError {
     /// image's Fourier transform before any feature is found).
     #[error("{0}")]
     Calibration(Box<dhct_calibrate::CalibrationError>),
+    /// Every corrected image shows the lattice at one other scale than the lattice given,
+    /// the same along x and y: the constant given is not the image's (the calibration
+    /// matched the image's peaks as other orders of the lattice given).
+    #[error(
+        "every corrected image shows the {lattice} lattice {:.1} % as large as given ({}): its \
+         nearest-neighbour distance in them is {} where {} was given, so the constant given \
+         is not the one the image shows (its peaks were matched as other orders of the \
+         lattice given)",
+        100.0 * .scale,
+        .passes.join(", "),
+        dhct_calibrate::length(.given_nn_m * .scale),
+        dhct_calibrate::length(*.given_nn_m)
+    )]
+    CorrectedScale {
+        /// The lattice given.
+        lattice: String,
+        /// Its nearest-neighbour distance as given, metres.
+        given_nn_m: f64,
+        /// The scale every corrected image shows it at (shown / given; mean of x and y).
+        scale: f64,
+        /// Each pass's measurement, in words ("trace 70.72 % × 70.70 %").
+        passes: Vec<String>,
+    },
     /// An option is out of range.
     #[error("invalid option: {0}")]
     BadOption(String),

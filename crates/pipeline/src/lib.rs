@@ -52,7 +52,7 @@ pub use affine::AffineComparison;
 pub use analysis::{Analysis, CorrectionSource};
 pub use calibration::{
     CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CalibrationOptions,
-    CorrectedImageCheck, MIN_CHECKED_PERIODS, check_corrected_images,
+    CorrectedImageCheck, MIN_CHECKED_PERIODS, UNIFORM_SCALE_ERROR, check_corrected_images,
 };
 pub use error::PipelineError;
 pub use model_run::{ModelRun, run_model};
@@ -161,6 +161,9 @@ pub fn run(
     // The images, with the correction chosen, and their lattices checked.
     let checked = correct_and_check(&inputs, &sets, chosen, &mut timings)?;
     let (chosen, images, image_checks) = (checked.chosen, checked.images, checked.checks);
+    if let Some(error) = calibration::uniform_scale_error(&image_checks, lattice) {
+        return Err(error);
+    }
 
     // 5. Unit cells.
     progress(Stage::UnitCells);

@@ -73,6 +73,8 @@ pub enum WarningCode {
     /// One frame of a series deviates far more from the lattice than the others: the
     /// session's model does not explain it.
     FrameNotExplained,
+    /// Two frames of a series, registered, do not line up pixel for pixel.
+    FramesDisagree,
 }
 
 /// An input the user can give to change a result. Each front end spells it its own way
@@ -183,6 +185,7 @@ impl WarningCode {
             WarningCode::ModelNotFitted => "model_not_fitted",
             WarningCode::ModelImageOff => "model_image_off",
             WarningCode::FrameNotExplained => "frame_not_explained",
+            WarningCode::FramesDisagree => "frames_disagree",
         }
     }
 }

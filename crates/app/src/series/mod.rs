@@ -6,6 +6,8 @@
 
 mod order;
 mod outputs;
+mod placement;
+mod report;
 mod trust;
 
 use std::path::{Path, PathBuf};
@@ -55,6 +57,24 @@ pub struct FrameSummary {
     pub warnings: Vec<Warning>,
     /// Its registered images' lattices, measured by FFT (passes where one was measured).
     pub registered_checks: Vec<CorrectedImageCheck>,
+    /// Its registered images' shifts against the first frame's registered trace (or the
+    /// frame before's), measured from the pixels alone.
+    pub registered_shifts: Vec<PassShift>,
+}
+
+/// A registered image's shift against another frame's registered trace: the sub-pixel
+/// shift that best maps one onto the other over their overlap (gain, offset and tilt
+/// fitted alongside); 0 when both are registered alike, blind to whole lattice periods.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct PassShift {
+    /// Trace or retrace.
+    pub pass: dhct_scan::ScanPass,
+    /// The frame whose registered trace it was measured against: the first, or the one
+    /// before where the first overlaps it too little.
+    pub against_frame: Option<usize>,
+    /// (columns, rows) of the first frame's grid, pixels; `None` when no frame overlaps it
+    /// enough to measure it.
+    pub shift_px: Option<[f64; 2]>,
 }
 
 /// `series.json`: the frames, the fit and what was assumed.
@@ -132,8 +152,35 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     for (frame, checks) in summary.frames.iter_mut().zip(written.checks.frames) {
         frame.registered_checks = checks;
     }
+    for shift in &written.checks.shifts {
+        summary.frames[shift.frame]
+            .registered_shifts
+            .push(PassShift {
+                pass: shift.pass,
+                against_frame: shift.reference,
+                shift_px: shift.shift.map(|s| s.shift_px),
+            });
+    }
     summary.mean_check = written.checks.mean;
-    summary.outputs = written.files;
+    let pitch = [written.grid.pitch_x(), written.grid.pitch_y()];
+    let shifted = trust::shift_warnings(&summary.frames, pitch);
+    summary.warnings.extend(shifted);
+    let mean = report::MeanImage {
+        channel: &written.mean,
+        grid: &written.grid,
+    };
+    let colormap = request
+        .config
+        .colormap
+        .unwrap_or(dhct_sm4_io::png_file::Colormap::Gold);
+    let mut files = written.files.clone();
+    files.extend(report::write_report(
+        staged.path(),
+        &summary,
+        &mean,
+        colormap,
+    )?);
+    summary.outputs = files;
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
@@ -201,6 +248,7 @@ fn frame_summary(t: &Timed, c: &FrameModel) -> FrameSummary {
         own_hysteresis: model.parameters[drift_count..].to_vec(),
         warnings: c.run.input_warnings.clone(),
         registered_checks: Vec::new(),
+        registered_shifts: Vec::new(),
     }
 }
 
@@ -218,6 +266,34 @@ pub fn warning_lines(summary: &SeriesSummary) -> String {
         .iter()
         .map(|w| format!("warning: {}\n", warning_line(w)));
     frames.chain(series).collect()
+}
+
+/// "registered images line up within … px": the largest pixel shift between registered
+/// images, measured from their pixels.
+fn shift_line(summary: &SeriesSummary) -> String {
+    let shifts: Vec<f64> = summary
+        .frames
+        .iter()
+        .flat_map(|f| &f.registered_shifts)
+        .filter_map(|s| s.shift_px.map(|d| d[0].hypot(d[1])))
+        .collect();
+    let missing = summary
+        .frames
+        .iter()
+        .flat_map(|f| &f.registered_shifts)
+        .filter(|s| s.shift_px.is_none())
+        .count();
+    let largest = shifts.iter().copied().fold(0.0, f64::max);
+    format!(
+        "registered images line up within {largest:.3} px of each other by their pixels ({} \
+         compared{})",
+        shifts.len(),
+        if missing > 0 {
+            format!(", {missing} overlapping too little")
+        } else {
+            String::new()
+        }
+    )
 }
 
 /// What `dhct series` prints: the frames, the drift, the hysteresis and where the outputs
@@ -286,6 +362,8 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
             value_with_sigma(p.value, p.sigma, &p.unit)
         );
     }
+    let _ = writeln!(text, "{}", shift_line(summary));
     let _ = writeln!(text, "outputs: {}", output.display());
+    let _ = writeln!(text, "report: {}", output.join("report.html").display());
     text
 }

@@ -13,6 +13,7 @@ use dhct_scan::{ImageChannel, ScanPass};
 use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
 use ndarray::Array2;
 
+use super::placement::{self, ImageShift};
 use super::{SeriesSummary, Timed};
 use crate::analysis::FrameModel;
 use crate::setup::{CorrectConfig, read_pair};
@@ -23,6 +24,10 @@ pub struct Written {
     pub files: Vec<String>,
     /// The registered images' lattices, measured by FFT.
     pub checks: RegisteredChecks,
+    /// The mean registered image.
+    pub mean: ImageChannel,
+    /// The grid the images were registered on (the first frame's).
+    pub grid: dhct_scan::ScanGeometry,
 }
 
 /// The registered images' lattices, measured by their Fourier transform as an outside
@@ -35,8 +40,25 @@ pub struct RegisteredChecks {
     pub unmeasured: Vec<Vec<ScanPass>>,
     /// The mean image's, if measured.
     pub mean: Option<CorrectedImageCheck>,
+    /// Every registered image's shift against the first frame's trace, measured from the
+    /// pixels (made whether or not the lattice was measured).
+    pub shifts: Vec<RegisteredShift>,
     /// Whether the checks were made.
     pub made: bool,
+}
+
+/// One registered image's shift against another frame's registered trace.
+#[derive(Debug, Clone, Copy)]
+pub struct RegisteredShift {
+    /// Its frame (time order).
+    pub frame: usize,
+    /// Its pass.
+    pub pass: ScanPass,
+    /// The frame whose registered trace it was measured against (the first, or the one
+    /// before where the first overlaps too little).
+    pub reference: Option<usize>,
+    /// The shift, if the two overlap enough to measure it.
+    pub shift: Option<ImageShift>,
 }
 
 /// Writes every output but `series.json`; returns the names written and the checks.
@@ -49,10 +71,15 @@ pub fn write_all(
 ) -> Result<Written> {
     let mut files = vec![write_features(dir, summary, corrected, timed)?];
     files.push(write_trajectory(dir, summary)?);
-    let (registered, checks) = write_registered(dir, summary, corrected, timed, config)?;
-    files.extend(registered);
+    let registered = write_registered(dir, summary, corrected, timed, config)?;
+    files.extend(registered.files);
     files.push(SERIES_JSON.to_string());
-    Ok(Written { files, checks })
+    Ok(Written {
+        files,
+        checks: registered.checks,
+        mean: registered.mean,
+        grid: corrected[timed[0].input].geometry.clone(),
+    })
 }
 
 /// File name of the summary.
@@ -145,61 +172,42 @@ fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
 }
 
 /// Every frame's images registered onto the first frame's grid, their stack and its mean,
-/// each image's lattice measured by FFT (a frame that covers too little of the first
-/// frame's grid is measured on its own grid, moved with the sample). Each frame's file is
-/// read again here, one at a time.
+/// each image's lattice measured by FFT ([`fft_check`]) and its shift against the first
+/// frame's trace measured from the pixels ([`placement::image_shift`]). Each frame's file
+/// is read again here, one at a time.
 fn write_registered(
     dir: &Path,
     summary: &SeriesSummary,
     corrected: &[FrameModel],
     timed: &[Timed],
     config: &CorrectConfig,
-) -> Result<(Vec<String>, RegisteredChecks)> {
+) -> Result<Registered> {
     let folder = dir.join("registered");
     std::fs::create_dir_all(&folder)
         .with_context(|| format!("cannot create {}", folder.display()))?;
     let first = &corrected[timed[0].input];
     let grid = first.geometry.clone();
     // A registered image is checked only where the raw image's lattice could be measured.
-    let lattice = first.lattice.as_ref();
     let mut checks = RegisteredChecks {
         made: first.run.lattice_measured,
         ..RegisteredChecks::default()
     };
-    let check = |pass: ScanPass, z: &Array2<f64>| -> Option<CorrectedImageCheck> {
-        check_corrected_images(&[(pass, z)], &grid, lattice).pop()
-    };
     let mut written = Vec::new();
-    let mut pages: Vec<ImageChannel> = Vec::new();
+    let mut pages: Vec<(usize, ScanPass, ImageChannel)> = Vec::new();
     for (k, t) in timed.iter().enumerate() {
         let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
-        let pair = &pair;
+        let frame = FrameRegistration {
+            summary,
+            geometry: pair.geometry(),
+            start_s: t.start_s,
+            grid: &grid,
+            lattice: first.lattice.as_ref(),
+        };
         let (mut measured, mut unmeasured) = (Vec::new(), Vec::new());
         for (pass, image) in pair.images() {
-            let z = register_image(
-                &summary.fit,
-                pair.geometry(),
-                t.start_s,
-                pass,
-                &image.z,
-                &grid,
-            )?;
+            let z = frame.register(pass, &image.z, &grid)?;
             if checks.made {
-                let own_grid = || own_grid(summary, pair.geometry(), t.start_s);
-                let checked = check(pass, &z).or_else(|| {
-                    let grid = own_grid()?;
-                    let z = register_image(
-                        &summary.fit,
-                        pair.geometry(),
-                        t.start_s,
-                        pass,
-                        &image.z,
-                        &grid,
-                    )
-                    .ok()?;
-                    check_corrected_images(&[(pass, &z)], &grid, lattice).pop()
-                });
-                match checked {
+                match fft_check(&frame, pass, &image.z, &z) {
                     Some(c) => measured.push(c),
                     None => unmeasured.push(pass),
                 }
@@ -212,19 +220,114 @@ fn write_registered(
                 gsf::write_pass(&channel, &grid, pass, w)
             })?;
             written.push(file);
-            pages.push(channel);
+            pages.push((k, pass, channel));
         }
         checks.frames.push(measured);
         checks.unmeasured.push(unmeasured);
     }
-    let mean = mean_image(&pages);
+    checks.shifts = shifts_against_first(&pages);
+    let pages: Vec<ImageChannel> = pages.into_iter().map(|(_, _, page)| page).collect();
+    let mean = write_stack_and_mean(dir, &pages, &grid, &mut written)?;
     if checks.made {
-        checks.mean = check(ScanPass::Trace, &mean);
+        checks.mean =
+            check_corrected_images(&[(ScanPass::Trace, &mean.z)], &grid, first.lattice.as_ref())
+                .pop();
     }
+    Ok(Registered {
+        files: written,
+        checks,
+        mean,
+    })
+}
+
+/// What registering one frame needs.
+struct FrameRegistration<'a> {
+    summary: &'a SeriesSummary,
+    geometry: &'a dhct_scan::ScanGeometry,
+    start_s: f64,
+    grid: &'a dhct_scan::ScanGeometry,
+    lattice: &'a dyn dhct_lattice::Lattice,
+}
+
+impl FrameRegistration<'_> {
+    /// `z` (an image of `pass`) resampled onto `grid` in the session frame.
+    fn register(
+        &self,
+        pass: ScanPass,
+        z: &Array2<f64>,
+        grid: &dhct_scan::ScanGeometry,
+    ) -> Result<Array2<f64>> {
+        Ok(register_image(
+            &self.summary.fit,
+            self.geometry,
+            self.start_s,
+            pass,
+            z,
+            grid,
+        )?)
+    }
+}
+
+/// The lattice of a registered image (`registered`, of raw image `raw`) measured by FFT:
+/// on the first frame's grid, or, where the frame covers too little of it, on the frame's
+/// own grid moved with the sample.
+fn fft_check(
+    frame: &FrameRegistration,
+    pass: ScanPass,
+    raw: &Array2<f64>,
+    registered: &Array2<f64>,
+) -> Option<CorrectedImageCheck> {
+    let on = |z: &Array2<f64>, grid: &dhct_scan::ScanGeometry| {
+        check_corrected_images(&[(pass, z)], grid, frame.lattice).pop()
+    };
+    on(registered, frame.grid).or_else(|| {
+        let grid = own_grid(frame.summary, frame.geometry, frame.start_s)?;
+        let z = frame.register(pass, raw, &grid).ok()?;
+        on(&z, &grid)
+    })
+}
+
+/// Each registered image's shift against the first frame's trace, from the pixels alone
+/// (in parallel), in page order; against the frame before's trace where the first frame's
+/// overlaps it too little.
+fn shifts_against_first(pages: &[(usize, ScanPass, ImageChannel)]) -> Vec<RegisteredShift> {
+    use rayon::prelude::*;
+    let trace_of = |frame: usize| {
+        pages
+            .iter()
+            .find(|(k, pass, _)| *k == frame && *pass == ScanPass::Trace)
+            .map(|(_, _, page)| page)
+    };
+    pages
+        .par_iter()
+        .skip(1)
+        .map(|(frame, pass, page)| {
+            let against = |reference: usize| {
+                let shift = placement::image_shift(&trace_of(reference)?.z, &page.z)?;
+                Some((reference, shift))
+            };
+            let found = against(0).or_else(|| against(frame.checked_sub(1)?));
+            RegisteredShift {
+                frame: *frame,
+                pass: *pass,
+                reference: found.map(|(reference, _)| reference),
+                shift: found.map(|(_, shift)| shift),
+            }
+        })
+        .collect()
+}
+
+/// Writes the stack (multi-page TIFF) and the mean (GSF) of `pages`; returns the mean.
+fn write_stack_and_mean(
+    dir: &Path,
+    pages: &[ImageChannel],
+    grid: &dhct_scan::ScanGeometry,
+    written: &mut Vec<String>,
+) -> Result<ImageChannel> {
     let unit = pages.first().map(|p| p.unit.clone()).unwrap_or_default();
-    let mean = ImageChannel::new("mean of the registered frames", unit, mean);
+    let mean = ImageChannel::new("mean of the registered frames", unit, mean_image(pages));
     write_atomically(&dir.join("registered/mean.gsf"), |w| {
-        gsf::write_pass(&mean, &grid, ScanPass::Trace, w)
+        gsf::write_pass(&mean, grid, ScanPass::Trace, w)
     })?;
     written.push("registered/mean.gsf".into());
     let refs: Vec<&ImageChannel> = pages.iter().collect();
@@ -232,7 +335,14 @@ fn write_registered(
         tiff_file::write_f32_pages_with_pixel_size(&refs, [grid.pitch_x(), grid.pitch_y()], w)
     })?;
     written.push("registered/stack.tif".into());
-    Ok((written, checks))
+    Ok(mean)
+}
+
+/// What [`write_registered`] wrote and measured.
+struct Registered {
+    files: Vec<String>,
+    checks: RegisteredChecks,
+    mean: ImageChannel,
 }
 
 /// The frame's own grid moved with the sample to where the frame scanned it (by the

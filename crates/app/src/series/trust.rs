@@ -10,8 +10,14 @@ use dhct_pipeline::{
 };
 use dhct_scan::quantity::length;
 
-use super::Timed;
 use super::outputs::RegisteredChecks;
+use super::{FrameSummary, Timed};
+
+/// A registered image shifted more than this (pixels of the first frame's grid) against
+/// the frame it is compared with does not line up with it. The registration's own error is
+/// ~0.01 px on simulated sessions (`crates/cli/tests/series.rs`), and the pixel measurement
+/// of it reads 0.01–0.035 px there.
+pub const SHIFT_WARNING_PX: f64 = 0.1;
 
 /// A frame whose rms deviation from the lattice is more than this many times the frames'
 /// median is not explained by the session's model.
@@ -51,6 +57,36 @@ pub fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<Warning> {
             )
         })
         .collect()
+}
+
+/// Registered images whose pixels are shifted more than [`SHIFT_WARNING_PX`] against the
+/// frame they were compared with.
+pub fn shift_warnings(frames: &[FrameSummary], pitch_m: [f64; 2]) -> Vec<Warning> {
+    let mut warnings = Vec::new();
+    for (k, frame) in frames.iter().enumerate() {
+        for s in &frame.registered_shifts {
+            let (Some(d), Some(against)) = (s.shift_px, s.against_frame) else {
+                continue;
+            };
+            if d[0].hypot(d[1]) <= SHIFT_WARNING_PX {
+                continue;
+            }
+            warnings.push(Warning::new(
+                WarningCode::FramesDisagree,
+                format!(
+                    "registered frame {k} ({}), {}: its pixels lie ({:.3}, {:.3}) px ({}) off                      frame {against}'s trace, more than {SHIFT_WARNING_PX} px: the two are                      not registered alike (a creep, tip change or move the session's model                      does not hold, or a placement a lattice period off)",
+                    frame.file,
+                    s.pass,
+                    d[0],
+                    d[1],
+                    length((d[0] * pitch_m[0]).hypot(d[1] * pitch_m[1]))
+                ),
+                "compare the frames in registered/stack.tif; leave the frame out, or split \
+                 the series where it changes",
+            ));
+        }
+    }
+    warnings
 }
 
 /// The registered images (each frame's, and their mean) whose lattice is not the lattice
@@ -157,6 +193,7 @@ mod tests {
             unmeasured: vec![vec![], vec![ScanPass::Retrace]],
             mean: Some(check(ScanPass::Trace, 1.0)),
             made: true,
+            shifts: Vec::new(),
         };
         let warnings = registered_image_warnings(&checks, &timed(2), &lattice);
         let codes: Vec<WarningCode> = warnings.iter().map(|w| w.code).collect();
@@ -191,6 +228,40 @@ mod tests {
             warnings[0].message.starts_with("the mean image"),
             "{}",
             warnings[0]
+        );
+    }
+
+    #[test]
+    fn frames_whose_pixels_do_not_line_up_are_named() {
+        let frame = |k: usize, d: Option<[f64; 2]>| FrameSummary {
+            file: format!("f{k}.sm4"),
+            start_s: 60.0 * k as f64,
+            scan_angle_deg: 0.0,
+            offset_m: [0.0; 2],
+            features: 100,
+            own_hysteresis: Vec::new(),
+            warnings: Vec::new(),
+            registered_checks: Vec::new(),
+            registered_shifts: vec![super::super::PassShift {
+                pass: ScanPass::Trace,
+                against_frame: Some(0),
+                shift_px: d,
+            }],
+        };
+        let frames = [
+            frame(1, Some([0.03, -0.02])),
+            frame(2, Some([0.12, 0.05])),
+            frame(3, None),
+        ];
+        let warnings = shift_warnings(&frames, [1e-11; 2]);
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert_eq!(warnings[0].code, WarningCode::FramesDisagree);
+        assert!(
+            warnings[0]
+                .message
+                .starts_with("registered frame 1 (f2.sm4), trace"),
+            "{}",
+            warnings[0].message
         );
     }
 }
