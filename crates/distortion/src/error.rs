@@ -64,6 +64,22 @@ pub enum DistortionError {
         /// The largest ratio accepted.
         limit: f64,
     },
+    /// The series fit ended at a scanner y gain no scanner has (a mirrored or collapsed
+    /// slow axis traded against a drift near the slow-scan speed).
+    #[error(
+        "the series fit ended at a scanner y gain of {gain:.3} relative to x, outside \
+         {low}…{high}: a drift near the slow-scan speed traded against the slow axis, not a \
+         scanner. The frames' placement or timing is likely wrong; check the frames' start \
+         times and scan directions, or fit fewer frames"
+    )]
+    ImplausibleGain {
+        /// The gain fitted.
+        gain: f64,
+        /// The lowest gain accepted.
+        low: f64,
+        /// The highest gain accepted.
+        high: f64,
+    },
     /// An argument is out of range.
     #[error("invalid parameter: {0}")]
     BadParameter(String),

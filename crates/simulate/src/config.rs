@@ -314,6 +314,10 @@ pub struct DefectConfig {
     /// indices, so it does not depend on the scanned area).
     #[serde(default)]
     pub vacancy_fraction: f64,
+    /// Seed of the vacancies' choice (default: the simulation's seed). A sequence sets it
+    /// to its own seed in every frame, so that each frame shows the same sites empty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vacancy_seed: Option<u64>,
     /// Sites to remove: the site nearest each point (within half the nearest-neighbour
     /// distance), metres, sample frame.
     #[serde(default)]
@@ -338,6 +342,7 @@ impl Default for DefectConfig {
     fn default() -> Self {
         DefectConfig {
             vacancy_fraction: 0.0,
+            vacancy_seed: None,
             vacancy_positions_m: Vec::new(),
             adatom_count: 0,
             adatom_positions_m: Vec::new(),

@@ -722,6 +722,7 @@ fn build_domain(
 
     let second_region = surface.second_domain.as_ref().map(|d| &d.region);
     let vacancy_fraction = surface.defects.vacancy_fraction;
+    let vacancy_seed = surface.defects.vacancy_seed.unwrap_or(seed);
     let mut entries = Vec::with_capacity(sites as usize);
     let mut max_strain: f64 = 0.0;
     for n in n0..n0 + n_count {
@@ -733,7 +734,7 @@ fn build_domain(
                     0 => !in_second,
                     _ => in_second,
                 } && (vacancy_fraction == 0.0
-                    || site_uniform(seed, domain, n, m, site) >= vacancy_fraction);
+                    || site_uniform(vacancy_seed, domain, n, m, site) >= vacancy_fraction);
                 let u = strain_displacement(surface, ideal);
                 max_strain = max_strain.max(u.norm());
                 entries.push(SiteEntry {

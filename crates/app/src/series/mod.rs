@@ -4,6 +4,7 @@
 //! does; its features and its own model start the series fit
 //! ([`dhct_distortion::series`]).
 
+mod correlation;
 mod order;
 mod outputs;
 mod placement;
@@ -129,7 +130,10 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .map(|(p, c)| (p.clone(), &c.geometry))
         .collect();
     let (timed, notes) = order::order(&geometries)?;
-    let fit = fit_frames(&corrected, &timed, request)?;
+    let (steps, mut notes) = (observed_steps(&corrected, &timed, &request.config)?, notes);
+    notes.extend(step_notes(&steps));
+    let steps: Vec<_> = steps.iter().map(|s| s.map(|s| s.step)).collect();
+    let fit = fit_frames(&corrected, &timed, &steps, request)?;
     let warnings = trust::unexplained_frames(&fit, &timed);
     let mut summary = SeriesSummary {
         frames: timed
@@ -192,15 +196,104 @@ fn frame_options(options: &mut dhct_pipeline::PipelineOptions) {
     options.dhct.route = dhct_distortion::RoutePolicy::LocalOnly;
 }
 
-/// The series fit of the analysed frames in time order.
+/// A frame's step from the frame before, seen in the two images.
+#[derive(Debug, Clone, Copy)]
+struct SeenStep {
+    /// The step, for the series fit.
+    step: dhct_distortion::series::ObservedStep,
+    /// The image shift it comes from, pixels.
+    shift_px: [f64; 2],
+    /// The correlation's next best peak over the best.
+    next_peak_ratio: f64,
+}
+
+/// Per frame in time order, the step its trace image shows against the frame before's
+/// ([`correlation::frame_offset`]) where the two share size, pitch and scan angle and one
+/// correlation peak stands out; `None` elsewhere (and for the first frame). The images are
+/// read again, two at a time.
+fn observed_steps(
+    corrected: &[FrameModel],
+    timed: &[Timed],
+    config: &CorrectConfig,
+) -> Result<Vec<Option<SeenStep>>> {
+    let trace = |t: &Timed| -> Result<ndarray::Array2<f64>> {
+        let pair =
+            crate::setup::read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+        Ok(pair
+            .images()
+            .next()
+            .map(|(_, image)| image.z.clone())
+            .unwrap_or_default())
+    };
+    let mut steps = vec![None];
+    let mut before = trace(&timed[0])?;
+    for k in 1..timed.len() {
+        let current = trace(&timed[k])?;
+        let (g0, g1) = (
+            &corrected[timed[k - 1].input].geometry,
+            &corrected[timed[k].input].geometry,
+        );
+        let comparable = (g0.columns(), g0.rows()) == (g1.columns(), g1.rows())
+            && g0.pitch_x() == g1.pitch_x()
+            && g0.pitch_y() == g1.pitch_y()
+            && g0.scan_angle() == g1.scan_angle();
+        // Blurred over half a nearest-neighbour distance: the lattice gone, defects kept.
+        let nn = corrected[timed[k].input]
+            .lattice
+            .nearest_neighbour_distance();
+        let blur_px = 0.5 * nn / g1.pitch_x().max(g1.pitch_y());
+        let found = comparable
+            .then(|| correlation::frame_offset(&before, &current, blur_px))
+            .flatten()
+            .map(|offset| SeenStep {
+                step: dhct_distortion::series::ObservedStep {
+                    step_m: correlation::displacement_step(g0, g1, offset.shift_px),
+                    frame_time_s: correlation::shared_time_s(g1, offset.shift_px),
+                },
+                shift_px: offset.shift_px,
+                next_peak_ratio: offset.next_peak_ratio,
+            });
+        steps.push(found);
+        before = current;
+    }
+    Ok(steps)
+}
+
+/// Which frames were placed from their images, for the notes.
+fn step_notes(steps: &[Option<SeenStep>]) -> Vec<String> {
+    steps
+        .iter()
+        .enumerate()
+        .filter_map(|(k, step)| {
+            let s = step.as_ref()?;
+            Some(format!(
+                "frame {k} placed from its image's correlation with frame {}: shifted ({:.2}, \
+                 {:.2}) px, D changed by ({}, {}) {:.0} s into both (the next correlation peak {:.0} % of the \
+                 best)",
+                k - 1,
+                s.shift_px[0],
+                s.shift_px[1],
+                dhct_scan::quantity::length(s.step.step_m[0]),
+                dhct_scan::quantity::length(s.step.step_m[1]),
+                s.step.frame_time_s,
+                100.0 * s.next_peak_ratio
+            ))
+        })
+        .collect()
+}
+
+/// The series fit of the analysed frames in time order, each placed from the frame before
+/// by `steps` where given.
 fn fit_frames(
     corrected: &[FrameModel],
     timed: &[Timed],
+    steps: &[Option<dhct_distortion::series::ObservedStep>],
     request: &SeriesRequest,
 ) -> Result<SeriesFit> {
     let frames: Vec<SeriesFrame> = timed
         .iter()
-        .map(|t| {
+        .zip(steps)
+        .map(|(t, &observed_step)| {
             let c = &corrected[t.input];
             SeriesFrame {
                 geometry: &c.geometry,
@@ -215,6 +308,7 @@ fn fit_frames(
                     .collect(),
                 model: &c.run.dhct.model,
                 start_s: t.start_s,
+                observed_step,
             }
         })
         .collect();

@@ -1,6 +1,7 @@
 //! Placing every frame in the session frame before the joint fit: each frame's start
-//! displacement `D(T_k)` predicted from the frame before it (its own drift carried over the
-//! frame and the pause), then moved to the lattice translation that puts its features on the
+//! displacement `D(T_k)` predicted from the frame before it (the step the two images show
+//! where their correlation has one clear peak, else its own drift carried over the frame
+//! and the pause), then moved to the lattice translation that puts its features on the
 //! first frame's lattice. A perfect lattice fixes the placement only modulo a lattice
 //! vector; the drift's continuity in time picks which one (the prediction must be right to
 //! half a cell).
@@ -85,8 +86,9 @@ pub fn own_rms(frames: &[SeriesFrame], lattice: &dyn Lattice) -> Vec<f64> {
 }
 
 /// The start displacement `D(T_k)` of every frame (instrument frame, metres; 0 for the
-/// first): the previous frame's placement plus its own drift carried to this frame's start,
-/// corrected to the nearest translation that puts this frame's trace on the first frame's
+/// first): the previous frame's placement plus the step its images show
+/// ([`SeriesFrame::observed_step`], less each frame's own drift up to when it was seen) or, without one, its own drift carried to this
+/// frame's start, corrected to the nearest translation that puts this frame's trace on the first frame's
 /// lattice.
 pub fn frame_shifts(
     frames: &[SeriesFrame],
@@ -98,7 +100,21 @@ pub fn frame_shifts(
     let mut shifts = vec![[0.0; 2]];
     for k in 1..frames.len() {
         let (before, frame) = (&frames[k - 1], &frames[k]);
-        let carried = before.own_drift(frame.start_s - before.start_s);
+        // The step seen at time τ into both frames, less what each frame's own drift did
+        // by then: the step between their starts.
+        let carried = match frame.observed_step {
+            Some(seen) => {
+                let (here, there) = (
+                    frame.own_drift(seen.frame_time_s),
+                    before.own_drift(seen.frame_time_s),
+                );
+                [
+                    seen.step_m[0] - here[0] + there[0],
+                    seen.step_m[1] - here[1] + there[1],
+                ]
+            }
+            None => before.own_drift(frame.start_s - before.start_s),
+        };
         let last = shifts[k - 1];
         let predicted = [last[0] + carried[0], last[1] + carried[1]];
         let this = kept(frame);

@@ -265,9 +265,21 @@ pub fn fit_series(
 /// lattice fit of one frame more), a frame placed a lattice period off 5 or more.
 pub const MAX_UNEXPLAINED_RATIO: f64 = 2.0;
 
+/// The scanner y gains (relative to x) a series fit may end at: a scanner's calibration
+/// is off by per cent, not by half.
+pub const GAIN_RANGE: (f64, f64) = (0.67, 1.5);
+
 /// An error naming the frame the series model explains worst, when it is past
-/// [`MAX_UNEXPLAINED_RATIO`].
+/// [`MAX_UNEXPLAINED_RATIO`], or the gain, when it is outside [`GAIN_RANGE`].
 fn check_explained(fit: &SeriesFit) -> Result<(), DistortionError> {
+    let (low, high) = GAIN_RANGE;
+    if !(low..=high).contains(&fit.gain_y) {
+        return Err(DistortionError::ImplausibleGain {
+            gain: fit.gain_y,
+            low,
+            high,
+        });
+    }
     let worst = fit
         .frame_rms_m
         .iter()
@@ -451,18 +463,43 @@ impl Setup {
             basis: basis.clone(),
             creeps,
         };
+        // Frames placed from their images: each frame's own drift may hold a slow-axis
+        // gain error as a fake drift (the images' steps do not), so the start is the drift
+        // between the frames' starts, linear over each frame, and the fit finds the gain.
+        let placed_by_images = frames.iter().any(|f| f.observed_step.is_some());
+        let between = |k: usize| -> [f64; 2] {
+            let (a, b) = match k + 1 < frames.len() {
+                true => (k, k + 1),
+                false if k > 0 => (k - 1, k),
+                false => return [0.0; 2],
+            };
+            let dt = (frames[b].start_s - frames[a].start_s).max(f64::MIN_POSITIVE);
+            [
+                (shifts[b][0] - shifts[a][0]) / dt,
+                (shifts[b][1] - shifts[a][1]) / dt,
+            ]
+        };
         let mut samples = Vec::new();
-        for (frame, shift) in frames.iter().zip(shifts) {
+        for (k, (frame, shift)) in frames.iter().zip(shifts).enumerate() {
             let duration = frame.geometry.frame_duration();
+            let velocity = between(k);
             for j in 0..=20 {
                 let t = duration * j as f64 / 20.0;
-                let own = frame.own_drift(t);
+                let own = if placed_by_images {
+                    [velocity[0] * t, velocity[1] * t]
+                } else {
+                    frame.own_drift(t)
+                };
                 let creep = with_creeps.displacement(frame.start_s + t);
-                let own_creep = frame.geometry.vector_to_instrument({
-                    let d = &frame.model.drift;
-                    let log = (t / d.t0_s).ln_1p();
-                    [d.creep_m[0] * log, d.creep_m[1] * log]
-                });
+                let own_creep = if placed_by_images {
+                    [0.0; 2]
+                } else {
+                    frame.geometry.vector_to_instrument({
+                        let d = &frame.model.drift;
+                        let log = (t / d.t0_s).ln_1p();
+                        [d.creep_m[0] * log, d.creep_m[1] * log]
+                    })
+                };
                 samples.push((
                     frame.start_s + t,
                     [

@@ -17,6 +17,21 @@ pub struct SeriesFrame<'a> {
     pub model: &'a DistortionModel,
     /// Session time of the frame's start, seconds since the first frame's start.
     pub start_s: f64,
+    /// Where this frame lies against the frame before, when the two images show it (their
+    /// correlation); `None`: the frame before's own drift is carried over instead.
+    pub observed_step: Option<ObservedStep>,
+}
+
+/// How far the sample moved under the tip from the frame before to this one, seen in the
+/// two images: the same sample point at controller positions `step_m` apart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObservedStep {
+    /// `D` of this frame minus `D` of the frame before, each at [`ObservedStep::frame_time_s`]
+    /// into its frame (instrument frame, metres).
+    pub step_m: [f64; 2],
+    /// When within both frames the step was seen (the middle of what they share), seconds
+    /// since each frame's start.
+    pub frame_time_s: f64,
 }
 
 impl SeriesFrame<'_> {

@@ -19,7 +19,8 @@
 //!
 //! A perfect lattice places a frame only modulo a lattice vector; the drift's continuity
 //! picks the vector ([`alignment`]), so a frame must follow the one before it closely enough
-//! that the drift carried over it is right to half a cell.
+//! that the drift carried over it is right to half a cell, unless the two images show where
+//! it lies ([`ObservedStep`]: defects, steps and the like, seen by correlation).
 
 pub mod alignment;
 mod fit;
@@ -30,9 +31,10 @@ mod session_drift;
 mod spline;
 
 pub use fit::{
-    KnotChoice, KnotScore, MAX_SERIES_FITTED, SeriesFit, SeriesOptions, TrajectoryPoint, fit_series,
+    GAIN_RANGE, KnotChoice, KnotScore, MAX_SERIES_FITTED, SeriesFit, SeriesOptions,
+    TrajectoryPoint, fit_series,
 };
-pub use frame::{SeriesFeature, SeriesFrame};
+pub use frame::{ObservedStep, SeriesFeature, SeriesFrame};
 pub use registered_image::register_image;
 pub use session_drift::{MoveCreep, SessionDrift};
 pub use spline::SplineBasis;

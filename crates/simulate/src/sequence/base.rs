@@ -44,7 +44,8 @@ fn refusal(effect: &EffectConfig) -> Option<&'static str> {
     }
 }
 
-/// Steps, strain, a second domain and defects would have to be placed per frame.
+/// Steps, strain, a second domain and placed defects would have to be placed per frame
+/// (vacancies chosen by fraction belong to lattice sites and follow the lattice).
 fn check_surface(base: &SimulationConfig) -> Result<(), SimulationError> {
     let surface = &base.surface;
     let defects = &surface.defects;
@@ -52,10 +53,6 @@ fn check_surface(base: &SimulationConfig) -> Result<(), SimulationError> {
         ("surface.steps", !surface.steps.is_empty()),
         ("surface.strain", !surface.strain.is_empty()),
         ("surface.second_domain", surface.second_domain.is_some()),
-        (
-            "surface.defects.vacancy_fraction",
-            defects.vacancy_fraction != 0.0,
-        ),
         (
             "surface.defects.vacancy_positions_m",
             !defects.vacancy_positions_m.is_empty(),

@@ -95,6 +95,9 @@ pub(crate) fn frame_config(
     let mut config = base.clone();
     config.sequence = None;
     config.seed = frame_seed(base.seed, placement.index);
+    // The same sites empty in every frame: the vacancies belong to the sample.
+    config.surface.defects.vacancy_seed =
+        Some(base.surface.defects.vacancy_seed.unwrap_or(base.seed));
     let [ox, oy] = base.surface.origin_m;
     let [dx, dy] = placement.displacement_at_start_m;
     config.surface.angle_rad = base.surface.angle_rad + placement.scan_angle_rad;

@@ -1,0 +1,220 @@
+//! Where a frame lies relative to the frame before, from the two raw images alone, to the
+//! half lattice period the lattice placement needs. A lattice correlates with itself at
+//! every lattice translation, so the images are first blurred over one lattice period
+//! (which removes the lattice and keeps what is not periodic: defects, steps, adsorbates,
+//! height variations) and then cross-correlated (FFT) over every shift that keeps a quarter
+//! of the frame in common. The shift is kept only when the best peak stands clearly above
+//! every other; else (a perfect lattice, noise alone) the placement is left to the drift
+//! carried over from the frame before.
+
+use dhct_features::correlate_same;
+use dhct_scan::ScanGeometry;
+use ndarray::Array2;
+
+/// A peak counts as distinct when the next best, outside the best one's width, reaches at
+/// most this fraction of it.
+pub const DISTINCT_PEAK_RATIO: f64 = 0.7;
+
+/// Fraction of the frame two shifted frames must share for their correlation to count.
+const MIN_SHARED_FRACTION: f64 = 0.4;
+
+/// The shift of one frame against the one before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameOffset {
+    /// `s` (columns, rows), pixels: what the frame shows at pixel `p`, the frame before
+    /// showed at `p + s` (to a fraction of the blur).
+    pub shift_px: [f64; 2],
+    /// The next best peak over the best (< [`DISTINCT_PEAK_RATIO`]).
+    pub next_peak_ratio: f64,
+}
+
+/// `current`'s shift against `previous` (same size), both blurred with a Gaussian of
+/// `blur_px` (about one lattice period, pixels), if one correlation peak stands out.
+pub fn frame_offset(
+    previous: &Array2<f64>,
+    current: &Array2<f64>,
+    blur_px: f64,
+) -> Option<FrameOffset> {
+    let (rows, columns) = previous.dim();
+    if current.dim() != (rows, columns) || blur_px.is_nan() || blur_px <= 0.0 {
+        return None;
+    }
+    let (a, b) = (smoothed(previous, blur_px), smoothed(current, blur_px));
+    let score = correlate_same(a.view(), b.view());
+    // Normalised cross-correlation: over the pixels the two share at each shift.
+    let ones = Array2::<f64>::ones((rows, columns));
+    let shared = correlate_same(ones.view(), ones.view());
+    let energy_a = correlate_same(a.mapv(|v| v * v).view(), ones.view());
+    let energy_b = correlate_same(ones.view(), b.mapv(|v| v * v).view());
+    let minimum = MIN_SHARED_FRACTION * (rows * columns) as f64;
+    let normalised = Array2::from_shape_fn((rows, columns), |(r, c)| {
+        let energy = (energy_a[[r, c]] * energy_b[[r, c]]).sqrt();
+        if shared[[r, c]] >= minimum && energy > 0.0 {
+            score[[r, c]] / energy
+        } else {
+            f64::NAN
+        }
+    });
+    let ((r, c), best) = normalised
+        .indexed_iter()
+        .filter(|(_, v)| v.is_finite())
+        .max_by(|x, y| x.1.total_cmp(y.1))
+        .map(|(at, &v)| (at, v))?;
+    if best <= 0.0 {
+        return None;
+    }
+    // Outside the best peak's width (twice the blur), the next best.
+    let width = 2.0 * blur_px;
+    let next = normalised
+        .indexed_iter()
+        .filter(|((i, j), v)| {
+            v.is_finite() && (*i as f64 - r as f64).hypot(*j as f64 - c as f64) > width
+        })
+        .map(|(_, &v)| v)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let ratio = (next / best).max(0.0);
+    if ratio > DISTINCT_PEAK_RATIO {
+        return None;
+    }
+    let (fr, fc) = (
+        vertex(&normalised, r, c, true),
+        vertex(&normalised, r, c, false),
+    );
+    Some(FrameOffset {
+        shift_px: [
+            c as f64 + fc - (columns / 2) as f64,
+            r as f64 + fr - (rows / 2) as f64,
+        ],
+        next_peak_ratio: ratio,
+    })
+}
+
+/// The sub-pixel vertex of the parabola through the peak at `(r, c)` and its neighbours
+/// along rows (`along_rows`) or columns, in −½…½ (0 at an edge).
+fn vertex(z: &Array2<f64>, r: usize, c: usize, along_rows: bool) -> f64 {
+    let at = |d: i64| {
+        let (i, j) = if along_rows {
+            (r as i64 + d, c as i64)
+        } else {
+            (r as i64, c as i64 + d)
+        };
+        if i < 0 || j < 0 {
+            return None;
+        }
+        z.get((i as usize, j as usize))
+            .copied()
+            .filter(|v| v.is_finite())
+    };
+    match (at(-1), at(0), at(1)) {
+        (Some(a), Some(b), Some(c)) if a - 2.0 * b + c < 0.0 => {
+            (0.5 * (a - c) / (a - 2.0 * b + c)).clamp(-0.5, 0.5)
+        }
+        _ => 0.0,
+    }
+}
+
+/// Each line minus its mean (line offsets and the slow-axis slope gone), NaN as 0, then
+/// blurred with a Gaussian of `sigma_px` along both axes, then minus its mean.
+fn smoothed(z: &Array2<f64>, sigma_px: f64) -> Array2<f64> {
+    let mut out = z.clone();
+    for mut line in out.rows_mut() {
+        let finite: Vec<f64> = line.iter().copied().filter(|v| v.is_finite()).collect();
+        let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
+        line.mapv_inplace(|v| if v.is_finite() { v - mean } else { 0.0 });
+    }
+    let radius = (3.0 * sigma_px).ceil() as i64;
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|d| (-0.5 * (d as f64 / sigma_px).powi(2)).exp())
+        .collect();
+    let blur_along = |z: &Array2<f64>, along_rows: bool| {
+        let (rows, columns) = z.dim();
+        Array2::from_shape_fn((rows, columns), |(r, c)| {
+            let (mut sum, mut weight) = (0.0, 0.0);
+            for (k, w) in kernel.iter().enumerate() {
+                let d = k as i64 - radius;
+                let (i, j) = if along_rows {
+                    (r as i64 + d, c as i64)
+                } else {
+                    (r as i64, c as i64 + d)
+                };
+                if i >= 0 && j >= 0 && (i as usize) < rows && (j as usize) < columns {
+                    sum += w * z[[i as usize, j as usize]];
+                    weight += w;
+                }
+            }
+            sum / weight
+        })
+    };
+    let blurred = blur_along(&blur_along(&out, false), true);
+    let mean = blurred.mean().unwrap_or(0.0);
+    blurred.mapv(|v| v - mean)
+}
+
+/// The change of the session displacement `D` (instrument frame, metres) from the frame
+/// before (`before`) to this one (`this`), when this frame shows at pixel `p` what the
+/// frame before showed at `p + s`: the same sample point under both controllers.
+pub fn displacement_step(
+    before: &ScanGeometry,
+    this: &ScanGeometry,
+    shift_px: [f64; 2],
+) -> [f64; 2] {
+    let there = before.to_instrument([
+        shift_px[0] * before.pitch_x(),
+        shift_px[1] * before.pitch_y(),
+    ]);
+    let here = this.to_instrument([0.0, 0.0]);
+    [there[0] - here[0], there[1] - here[1]]
+}
+
+/// When, within a frame of `geometry` (seconds since its start), it scanned the middle of
+/// what it shares with the frame before when shifted by `shift_px` against it (the trace,
+/// mid-line).
+pub fn shared_time_s(geometry: &ScanGeometry, shift_px: [f64; 2]) -> f64 {
+    let middle = |n: usize, s: f64| {
+        let n = n as f64;
+        0.5 * ((-s).max(0.0) + n.min(n - s)) - 0.5
+    };
+    let x = middle(geometry.columns(), shift_px[0]);
+    let y = middle(geometry.rows(), shift_px[1]);
+    geometry
+        .acquisition_time(dhct_scan::ScanPass::Trace, x, y)
+        .since_frame_start
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lattice (period 7 px) with a few vacancies, shifted by `shift` px, on a slope.
+    fn scene(shift: [f64; 2], defects: bool) -> Array2<f64> {
+        let k = 2.0 * std::f64::consts::PI / 7.0;
+        let vacancies = [[20.0, 30.0], [70.0, 15.0], [40.0, 80.0], [90.0, 95.0]];
+        Array2::from_shape_fn((128, 128), |(r, c)| {
+            let (x, y) = (c as f64 - shift[0], r as f64 - shift[1]);
+            let lattice = (k * x).cos() + (k * y).cos();
+            let dip: f64 = vacancies
+                .iter()
+                .map(|d| -3.0 * (-((x - d[0]).powi(2) + (y - d[1]).powi(2)) / 8.0).exp())
+                .sum();
+            lattice + if defects { dip } else { 0.0 } + 0.01 * r as f64
+        })
+    }
+
+    #[test]
+    fn a_frame_with_defects_is_found_where_the_one_before_saw_them() {
+        let previous = scene([0.0, 0.0], true);
+        let current = scene([-17.3, 9.6], true);
+        let found = frame_offset(&previous, &current, 7.0).expect("a distinct peak");
+        // current(p) = previous(p + (17.3, −9.6)); to well within half a period (3.5 px).
+        assert!(
+            (found.shift_px[0] - 17.3).abs() < 1.0 && (found.shift_px[1] + 9.6).abs() < 1.0,
+            "{found:?}"
+        );
+    }
+
+    #[test]
+    fn a_perfect_lattice_gives_no_shift() {
+        let found = frame_offset(&scene([0.0; 2], false), &scene([3.0, 1.0], false), 7.0);
+        assert!(found.is_none(), "{found:?}");
+    }
+}
