@@ -9,6 +9,7 @@ mod order;
 mod outputs;
 mod placement;
 mod report;
+mod steps;
 mod trust;
 
 use std::path::{Path, PathBuf};
@@ -130,8 +131,8 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .map(|(p, c)| (p.clone(), &c.geometry))
         .collect();
     let (timed, notes) = order::order(&geometries)?;
-    let (steps, mut notes) = (observed_steps(&corrected, &timed, &request.config)?, notes);
-    notes.extend(step_notes(&steps));
+    let (steps, mut notes) = (steps::observed(&corrected, &timed, &request.config)?, notes);
+    notes.extend(steps::notes(&steps));
     let steps: Vec<_> = steps.iter().map(|s| s.map(|s| s.step)).collect();
     let fit = fit_frames(&corrected, &timed, &steps, request)?;
     let warnings = trust::unexplained_frames(&fit, &timed);
@@ -194,92 +195,6 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
 /// the global registration and its cross-validation (a third of the cost of a frame).
 fn frame_options(options: &mut dhct_pipeline::PipelineOptions) {
     options.dhct.route = dhct_distortion::RoutePolicy::LocalOnly;
-}
-
-/// A frame's step from the frame before, seen in the two images.
-#[derive(Debug, Clone, Copy)]
-struct SeenStep {
-    /// The step, for the series fit.
-    step: dhct_distortion::series::ObservedStep,
-    /// The image shift it comes from, pixels.
-    shift_px: [f64; 2],
-    /// The correlation's next best peak over the best.
-    next_peak_ratio: f64,
-}
-
-/// Per frame in time order, the step its trace image shows against the frame before's
-/// ([`correlation::frame_offset`]) where the two share size, pitch and scan angle and one
-/// correlation peak stands out; `None` elsewhere (and for the first frame). The images are
-/// read again, two at a time.
-fn observed_steps(
-    corrected: &[FrameModel],
-    timed: &[Timed],
-    config: &CorrectConfig,
-) -> Result<Vec<Option<SeenStep>>> {
-    let trace = |t: &Timed| -> Result<ndarray::Array2<f64>> {
-        let pair =
-            crate::setup::read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
-        Ok(pair
-            .images()
-            .next()
-            .map(|(_, image)| image.z.clone())
-            .unwrap_or_default())
-    };
-    let mut steps = vec![None];
-    let mut before = trace(&timed[0])?;
-    for k in 1..timed.len() {
-        let current = trace(&timed[k])?;
-        let (g0, g1) = (
-            &corrected[timed[k - 1].input].geometry,
-            &corrected[timed[k].input].geometry,
-        );
-        let comparable = (g0.columns(), g0.rows()) == (g1.columns(), g1.rows())
-            && g0.pitch_x() == g1.pitch_x()
-            && g0.pitch_y() == g1.pitch_y()
-            && g0.scan_angle() == g1.scan_angle();
-        // Blurred over half a nearest-neighbour distance: the lattice gone, defects kept.
-        let nn = corrected[timed[k].input]
-            .lattice
-            .nearest_neighbour_distance();
-        let blur_px = 0.5 * nn / g1.pitch_x().max(g1.pitch_y());
-        let found = comparable
-            .then(|| correlation::frame_offset(&before, &current, blur_px))
-            .flatten()
-            .map(|offset| SeenStep {
-                step: dhct_distortion::series::ObservedStep {
-                    step_m: correlation::displacement_step(g0, g1, offset.shift_px),
-                    frame_time_s: correlation::shared_time_s(g1, offset.shift_px),
-                },
-                shift_px: offset.shift_px,
-                next_peak_ratio: offset.next_peak_ratio,
-            });
-        steps.push(found);
-        before = current;
-    }
-    Ok(steps)
-}
-
-/// Which frames were placed from their images, for the notes.
-fn step_notes(steps: &[Option<SeenStep>]) -> Vec<String> {
-    steps
-        .iter()
-        .enumerate()
-        .filter_map(|(k, step)| {
-            let s = step.as_ref()?;
-            Some(format!(
-                "frame {k} placed from its image's correlation with frame {}: shifted ({:.2}, \
-                 {:.2}) px, D changed by ({}, {}) {:.0} s into both (the next correlation peak {:.0} % of the \
-                 best)",
-                k - 1,
-                s.shift_px[0],
-                s.shift_px[1],
-                dhct_scan::quantity::length(s.step.step_m[0]),
-                dhct_scan::quantity::length(s.step.step_m[1]),
-                s.step.frame_time_s,
-                100.0 * s.next_peak_ratio
-            ))
-        })
-        .collect()
 }
 
 /// The series fit of the analysed frames in time order, each placed from the frame before
@@ -413,17 +328,7 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
         fit.features,
         length(fit.rms_deviation_m)
     );
-    let _ = writeln!(
-        text,
-        "drift: spline with {} interior knots{}; {} creep(s) after moves",
-        fit.drift.basis.interior_knots,
-        if fit.knot_scores.is_empty() {
-            " (as given)"
-        } else {
-            " (cross-validated)"
-        },
-        fit.drift.creeps.len()
-    );
+    let _ = writeln!(text, "drift: {}", report::drift_description(fit));
     for start in &fit.unresolved_creeps_s {
         let _ = writeln!(
             text,
@@ -431,20 +336,13 @@ pub fn text_summary(summary: &SeriesSummary, output: &Path) -> String {
              ran to a bound): left out, the drift spline takes it"
         );
     }
-    let shown = |value: f64, sigma: f64| {
-        if sigma > 0.0 {
-            value_with_sigma(value, sigma, "m")
-        } else {
-            length(value)
-        }
-    };
     for (k, (frame, start)) in summary.frames.iter().zip(&fit.frame_starts).enumerate() {
         let _ = writeln!(
             text,
             "  frame {k:>2} at {:>7.1} s: D = ({}, {}) {}",
             frame.start_s,
-            shown(start.displacement_m[0], start.sigma_m[0]),
-            shown(start.displacement_m[1], start.sigma_m[1]),
+            report::shown(start.displacement_m[0], start.sigma_m[0]),
+            report::shown(start.displacement_m[1], start.sigma_m[1]),
             frame.file
         );
     }

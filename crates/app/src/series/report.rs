@@ -296,23 +296,30 @@ fn parameters_section(html: &mut Html, summary: &SeriesSummary) {
     html.element("h2", "Model parameters").element(
         "p",
         &format!(
-            "Drift: a cubic spline in session time with {} interior knots{}, and {} creep(s) \
-             after moves; one hysteresis law for every frame; the scanner's y gain relative \
-             to x; 1σ from the fit's covariance.",
-            fit.drift.basis.interior_knots,
-            if fit.knot_scores.is_empty() {
-                " (as given)"
-            } else {
-                " (chosen by cross-validation)"
-            },
-            fit.drift.creeps.len()
+            "Drift: {}; one hysteresis law for every frame; the scanner's y gain relative to \
+             x; 1σ from the fit's covariance.",
+            drift_description(fit)
         ),
     );
     html.pairs("parameter", &rows);
 }
 
+/// "a cubic spline … with N interior knots (cross-validated); M creep(s) after moves".
+pub fn drift_description(fit: &dhct_distortion::series::SeriesFit) -> String {
+    format!(
+        "a cubic spline in session time with {} interior knots{}; {} creep(s) after moves",
+        fit.drift.basis.interior_knots,
+        if fit.knot_scores.is_empty() {
+            " (as given)"
+        } else {
+            " (cross-validated)"
+        },
+        fit.drift.creeps.len()
+    )
+}
+
 /// `value ± σ` in metres, or the value alone when σ is 0 (the session's reference).
-fn shown(value: f64, sigma: f64) -> String {
+pub fn shown(value: f64, sigma: f64) -> String {
     if sigma > 0.0 {
         value_with_sigma(value, sigma, "m")
     } else {
