@@ -81,7 +81,10 @@ fn residual_phase(
             }
             (re, im)
         };
-        (gaussian_blur(&re, sigma), gaussian_blur(&im, sigma))
+        (
+            dhct_features::gaussian_blur(&re, sigma),
+            dhct_features::gaussian_blur(&im, sigma),
+        )
     };
     // The mean phase gradient first (a slightly wrong g leaves a ramp of many turns), then
     // the remaining linear phase, fitted by least squares on the interior.
@@ -156,34 +159,6 @@ fn fit_plane(
     }
     let solution = normal.try_inverse()? * right;
     Some([solution[0] + centre, solution[1], solution[2]])
-}
-
-/// A separable Gaussian blur of width `sigma` pixels (edges: the kernel renormalised).
-fn gaussian_blur(z: &Array2<f64>, sigma: f64) -> Array2<f64> {
-    let radius = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-radius..=radius)
-        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
-        .collect();
-    let pass = |z: &Array2<f64>, along_rows: bool| {
-        let (rows, columns) = z.dim();
-        Array2::from_shape_fn((rows, columns), |(r, c)| {
-            let (mut sum, mut weight) = (0.0, 0.0);
-            for (k, w) in kernel.iter().enumerate() {
-                let offset = k as isize - radius;
-                let (rr, cc) = if along_rows {
-                    (r as isize, c as isize + offset)
-                } else {
-                    (r as isize + offset, c as isize)
-                };
-                if rr >= 0 && cc >= 0 && (rr as usize) < rows && (cc as usize) < columns {
-                    sum += w * z[[rr as usize, cc as usize]];
-                    weight += w;
-                }
-            }
-            sum / weight
-        })
-    };
-    pass(&pass(z, true), false)
 }
 
 #[cfg(test)]

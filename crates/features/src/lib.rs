@@ -35,6 +35,7 @@
 //! }
 //! ```
 
+mod blur;
 mod correlate;
 mod error;
 mod feature;
@@ -58,6 +59,7 @@ mod noise_correlation;
 mod options;
 mod watershed;
 
+pub use blur::gaussian_blur;
 pub use correlate::{Correlator, RealSpectrum, correlate_same};
 pub use error::FeatureError;
 pub use feature::{

@@ -154,12 +154,14 @@ pub(crate) fn uniform_scale_error(
             .then_some(mean)
     };
     let scales: Vec<f64> = checks.iter().map(uniform).collect::<Option<_>>()?;
-    let scale = scales.iter().sum::<f64>() / scales.len().max(1) as f64;
+    if scales.is_empty() {
+        return None;
+    }
+    let scale = scales.iter().sum::<f64>() / scales.len() as f64;
     // One scale for every pass, not two passes off in opposite senses.
-    if scales.is_empty()
-        || scales
-            .iter()
-            .any(|s| (s - scale).abs() > CORRECTED_SCALE_TOLERANCE)
+    if scales
+        .iter()
+        .any(|s| (s - scale).abs() > CORRECTED_SCALE_TOLERANCE)
     {
         return None;
     }

@@ -62,7 +62,7 @@ pub use results::{FeatureIndex, PassOutput, RegionFit, SkippedRegion, UnitCellAn
 pub use stage::{Stage, StageTimings};
 pub use warnings::{
     CALIBRATION_WARNING, DEVIATION_WARNING, INDEXED_WARNING, SCALE_WARNING, UserInput, Warning,
-    WarningCode,
+    WarningCode, image_off_message, image_unchecked_message,
 };
 
 use std::time::Instant;

@@ -460,6 +460,26 @@ fn drift_family(a: &str, b: &str) -> bool {
     }
 }
 
+/// "`what`: its lattice, measured by FFT, is … (more than 1.5 % or 1° off)": the message of
+/// a corrected (or registered) image whose FFT check `check` failed against `lattice`.
+pub fn image_off_message(what: &str, check: &CorrectedImageCheck, lattice: &dyn Lattice) -> String {
+    format!(
+        "{what}: its lattice, measured by FFT, is {} (more than {:.1} % or {:.0}° off)",
+        check.describe(lattice),
+        100.0 * CORRECTED_SCALE_TOLERANCE,
+        CORRECTED_ANGLE_TOLERANCE_DEG
+    )
+}
+
+/// "`what`: its lattice could not be measured by FFT …": the message of a corrected (or
+/// registered) image that could not be checked although the raw image could.
+pub fn image_unchecked_message(what: &str) -> String {
+    format!(
+        "{what}: its lattice could not be measured by FFT (the raw image's could), so the \
+         correction is not checked against the image"
+    )
+}
+
 /// Corrected images whose lattice, measured by FFT, is not the lattice given.
 pub(crate) fn corrected_image_warnings(
     lattice: &dyn Lattice,
@@ -471,14 +491,7 @@ pub(crate) fn corrected_image_warnings(
         .map(|c| {
             Warning::new(
                 WarningCode::CorrectedImageOff,
-                format!(
-                    "corrected {}: its lattice, measured by FFT, is {} (more than {:.1} % or \
-                     {:.0}° off)",
-                    c.pass,
-                    c.describe(lattice),
-                    100.0 * CORRECTED_SCALE_TOLERANCE,
-                    CORRECTED_ANGLE_TOLERANCE_DEG
-                ),
+                image_off_message(&format!("corrected {}", c.pass), c, lattice),
                 "do not take lengths from this image: check the scan timing and directions, \
                  mask steps and defects, or use the other pass",
             )
@@ -508,10 +521,7 @@ pub(crate) fn unchecked_image_warnings(
         .map(|pass| {
             Warning::new(
                 WarningCode::CorrectedImageUnchecked,
-                format!(
-                    "corrected {pass}: its lattice could not be measured by FFT (the raw \
-                     image's could), so the correction is not checked against the image"
-                ),
+                image_unchecked_message(&format!("corrected {pass}")),
                 "check lengths in this image against a known feature before taking them; \
                  a mask over the atomically resolved area, without defects and steps, helps \
                  the measurement",

@@ -122,30 +122,7 @@ fn smoothed(z: &Array2<f64>, sigma_px: f64) -> Array2<f64> {
         let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
         line.mapv_inplace(|v| if v.is_finite() { v - mean } else { 0.0 });
     }
-    let radius = (3.0 * sigma_px).ceil() as i64;
-    let kernel: Vec<f64> = (-radius..=radius)
-        .map(|d| (-0.5 * (d as f64 / sigma_px).powi(2)).exp())
-        .collect();
-    let blur_along = |z: &Array2<f64>, along_rows: bool| {
-        let (rows, columns) = z.dim();
-        Array2::from_shape_fn((rows, columns), |(r, c)| {
-            let (mut sum, mut weight) = (0.0, 0.0);
-            for (k, w) in kernel.iter().enumerate() {
-                let d = k as i64 - radius;
-                let (i, j) = if along_rows {
-                    (r as i64 + d, c as i64)
-                } else {
-                    (r as i64, c as i64 + d)
-                };
-                if i >= 0 && j >= 0 && (i as usize) < rows && (j as usize) < columns {
-                    sum += w * z[[i as usize, j as usize]];
-                    weight += w;
-                }
-            }
-            sum / weight
-        })
-    };
-    let blurred = blur_along(&blur_along(&out, false), true);
+    let blurred = dhct_features::gaussian_blur(&out, sigma_px);
     let mean = blurred.mean().unwrap_or(0.0);
     blurred.mapv(|v| v - mean)
 }

@@ -130,8 +130,8 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .zip(&corrected)
         .map(|(p, c)| (p.clone(), &c.geometry))
         .collect();
-    let (timed, notes) = order::order(&geometries)?;
-    let (steps, mut notes) = (steps::observed(&corrected, &timed, &request.config)?, notes);
+    let (timed, mut notes) = order::order(&geometries)?;
+    let steps = steps::observed(&corrected, &timed, &request.config)?;
     notes.extend(steps::notes(&steps));
     let steps: Vec<_> = steps.iter().map(|s| s.map(|s| s.step)).collect();
     let fit = fit_frames(&corrected, &timed, &steps, request)?;
@@ -157,22 +157,17 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     for (frame, checks) in summary.frames.iter_mut().zip(written.checks.frames) {
         frame.registered_checks = checks;
     }
-    for shift in &written.checks.shifts {
-        summary.frames[shift.frame]
-            .registered_shifts
-            .push(PassShift {
-                pass: shift.pass,
-                against_frame: shift.reference,
-                shift_px: shift.shift.map(|s| s.shift_px),
-            });
+    for (frame, shifts) in summary.frames.iter_mut().zip(written.checks.shifts) {
+        frame.registered_shifts = shifts;
     }
     summary.mean_check = written.checks.mean;
-    let pitch = [written.grid.pitch_x(), written.grid.pitch_y()];
+    let grid = &corrected[timed[0].input].geometry;
+    let pitch = [grid.pitch_x(), grid.pitch_y()];
     let shifted = trust::shift_warnings(&summary.frames, pitch);
     summary.warnings.extend(shifted);
     let mean = report::MeanImage {
         channel: &written.mean,
-        grid: &written.grid,
+        grid,
     };
     let colormap = request
         .config

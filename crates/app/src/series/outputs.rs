@@ -13,8 +13,8 @@ use dhct_scan::{ImageChannel, ScanPass};
 use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
 use ndarray::Array2;
 
-use super::placement::{self, ImageShift};
-use super::{SeriesSummary, Timed};
+use super::placement;
+use super::{PassShift, SeriesSummary, Timed};
 use crate::analysis::FrameModel;
 use crate::setup::{CorrectConfig, read_pair};
 
@@ -24,10 +24,8 @@ pub struct Written {
     pub files: Vec<String>,
     /// The registered images' lattices, measured by FFT.
     pub checks: RegisteredChecks,
-    /// The mean registered image.
+    /// The mean registered image (on the first frame's grid).
     pub mean: ImageChannel,
-    /// The grid the images were registered on (the first frame's).
-    pub grid: dhct_scan::ScanGeometry,
 }
 
 /// The registered images' lattices, measured by their Fourier transform as an outside
@@ -40,25 +38,12 @@ pub struct RegisteredChecks {
     pub unmeasured: Vec<Vec<ScanPass>>,
     /// The mean image's, if measured.
     pub mean: Option<CorrectedImageCheck>,
-    /// Every registered image's shift against the first frame's trace, measured from the
-    /// pixels (made whether or not the lattice was measured).
-    pub shifts: Vec<RegisteredShift>,
+    /// Per frame in time order: its registered images' shifts against the first frame's
+    /// trace (or the frame before's), measured from the pixels (made whether or not the
+    /// lattice was measured).
+    pub shifts: Vec<Vec<PassShift>>,
     /// Whether the checks were made.
     pub made: bool,
-}
-
-/// One registered image's shift against another frame's registered trace.
-#[derive(Debug, Clone, Copy)]
-pub struct RegisteredShift {
-    /// Its frame (time order).
-    pub frame: usize,
-    /// Its pass.
-    pub pass: ScanPass,
-    /// The frame whose registered trace it was measured against (the first, or the one
-    /// before where the first overlaps too little).
-    pub reference: Option<usize>,
-    /// The shift, if the two overlap enough to measure it.
-    pub shift: Option<ImageShift>,
 }
 
 /// Writes every output but `series.json`; returns the names written and the checks.
@@ -78,7 +63,6 @@ pub fn write_all(
         files,
         checks: registered.checks,
         mean: registered.mean,
-        grid: corrected[timed[0].input].geometry.clone(),
     })
 }
 
@@ -225,7 +209,7 @@ fn write_registered(
         checks.frames.push(measured);
         checks.unmeasured.push(unmeasured);
     }
-    checks.shifts = shifts_against_first(&pages);
+    checks.shifts = shifts_against_first(&pages, timed.len());
     let pages: Vec<ImageChannel> = pages.into_iter().map(|(_, _, page)| page).collect();
     let mean = write_stack_and_mean(dir, &pages, &grid, &mut written)?;
     if checks.made {
@@ -288,9 +272,12 @@ fn fft_check(
 }
 
 /// Each registered image's shift against the first frame's trace, from the pixels alone
-/// (in parallel), in page order; against the frame before's trace where the first frame's
-/// overlaps it too little.
-fn shifts_against_first(pages: &[(usize, ScanPass, ImageChannel)]) -> Vec<RegisteredShift> {
+/// (in parallel), per frame of `frames`; against the frame before's trace where the first
+/// frame's overlaps it too little.
+fn shifts_against_first(
+    pages: &[(usize, ScanPass, ImageChannel)],
+    frames: usize,
+) -> Vec<Vec<PassShift>> {
     use rayon::prelude::*;
     let trace_of = |frame: usize| {
         pages
@@ -298,7 +285,7 @@ fn shifts_against_first(pages: &[(usize, ScanPass, ImageChannel)]) -> Vec<Regist
             .find(|(k, pass, _)| *k == frame && *pass == ScanPass::Trace)
             .map(|(_, _, page)| page)
     };
-    pages
+    let found: Vec<(usize, PassShift)> = pages
         .par_iter()
         .skip(1)
         .map(|(frame, pass, page)| {
@@ -307,14 +294,19 @@ fn shifts_against_first(pages: &[(usize, ScanPass, ImageChannel)]) -> Vec<Regist
                 Some((reference, shift))
             };
             let found = against(0).or_else(|| against(frame.checked_sub(1)?));
-            RegisteredShift {
-                frame: *frame,
+            let shift = PassShift {
                 pass: *pass,
-                reference: found.map(|(reference, _)| reference),
-                shift: found.map(|(_, shift)| shift),
-            }
+                against_frame: found.map(|(reference, _)| reference),
+                shift_px: found.map(|(_, shift)| shift),
+            };
+            (*frame, shift)
         })
-        .collect()
+        .collect();
+    let mut per_frame = vec![Vec::new(); frames];
+    for (frame, shift) in found {
+        per_frame[frame].push(shift);
+    }
+    per_frame
 }
 
 /// Writes the stack (multi-page TIFF) and the mean (GSF) of `pages`; returns the mean.

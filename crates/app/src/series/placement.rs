@@ -29,21 +29,13 @@ const CONVERGED_PX: f64 = 1e-5;
 /// Fewest overlapping pixels a shift is measured on.
 const MIN_OVERLAP: usize = 400;
 
-/// The shift found between two registered images.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImageShift {
-    /// `d` (columns, rows), pixels: `moving(p) ≈ gain·reference(p + d) + offset + tilt·p`;
-    /// zero when the two are registered alike (beyond [`MAX_SHIFT_PX`]: at least this).
-    pub shift_px: [f64; 2],
-    /// Pixels it was measured on.
-    pub overlap: usize,
-}
-
-/// The shift of `moving` against `reference` (same grid; NaN where an image has no value),
-/// searched from zero; `None` when they overlap too little or the fit is singular.
+/// The shift `d` (columns, rows, pixels) of `moving` against `reference` (same grid; NaN
+/// where an image has no value): `moving(p) ≈ gain·reference(p + d) + offset + tilt·p`, 0
+/// when the two are registered alike (beyond [`MAX_SHIFT_PX`]: at least this). Searched
+/// from zero; `None` when they overlap too little or the fit is singular.
 /// Every sample stays inside the images: the shift is at most [`MAX_SHIFT_PX`] (plus one
 /// step) and [`MARGIN`] leaves room for it.
-pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<ImageShift> {
+pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<[f64; 2]> {
     let pixels = overlap(reference, moving);
     if pixels.len() < MIN_OVERLAP {
         return None;
@@ -59,10 +51,7 @@ pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<Imag
             break;
         }
     }
-    Some(ImageShift {
-        shift_px: d,
-        overlap: pixels.len(),
-    })
+    Some(d)
 }
 
 /// The pixels where both images, and every neighbour within [`MARGIN`], hold values.
@@ -186,11 +175,10 @@ mod tests {
         let found = image_shift(&reference, &moving).expect("a shift");
         // moving(p) = reference(p − s), so d = −s (read 2–4 % long on this 8 px period).
         assert!(
-            (found.shift_px[0] + 0.3).abs() < 0.05 * 0.3
-                && (found.shift_px[1] - 0.2).abs() < 0.05 * 0.2,
+            (found[0] + 0.3).abs() < 0.05 * 0.3 && (found[1] - 0.2).abs() < 0.05 * 0.2,
             "{found:?}"
         );
-        assert!(image_shift(&reference, &reference).expect("zero").shift_px[0].abs() < 1e-9);
+        assert!(image_shift(&reference, &reference).expect("zero")[0].abs() < 1e-9);
     }
 
     #[test]

@@ -5,8 +5,8 @@
 use dhct_distortion::series::SeriesFit;
 use dhct_lattice::Lattice;
 use dhct_pipeline::{
-    CORRECTED_ANGLE_TOLERANCE_DEG, CORRECTED_SCALE_TOLERANCE, CorrectedImageCheck, UserInput,
-    Warning, WarningCode,
+    CorrectedImageCheck, UserInput, Warning, WarningCode, image_off_message,
+    image_unchecked_message,
 };
 use dhct_scan::quantity::length;
 
@@ -125,12 +125,7 @@ pub fn registered_image_warnings(
 fn image_off(what: &str, check: &CorrectedImageCheck, lattice: &dyn Lattice) -> Warning {
     Warning::new(
         WarningCode::CorrectedImageOff,
-        format!(
-            "{what}: its lattice, measured by FFT, is {} (more than {:.1} % or {:.0}° off)",
-            check.describe(lattice),
-            100.0 * CORRECTED_SCALE_TOLERANCE,
-            CORRECTED_ANGLE_TOLERANCE_DEG
-        ),
+        image_off_message(what, check, lattice),
         "do not take lengths from this image: check the frames' timing, scan angles and \
          offsets, and the lattice constant given",
     )
@@ -145,10 +140,7 @@ fn image_off(what: &str, check: &CorrectedImageCheck, lattice: &dyn Lattice) -> 
 fn image_unchecked(what: &str) -> Warning {
     Warning::new(
         WarningCode::CorrectedImageUnchecked,
-        format!(
-            "{what}: its lattice could not be measured by FFT (the raw first frame's could), \
-             so the registration is not checked against the image"
-        ),
+        image_unchecked_message(what),
         "check lengths in this image against a known feature before taking them",
     )
 }

@@ -479,34 +479,34 @@ impl Setup {
                 (shifts[b][1] - shifts[a][1]) / dt,
             ]
         };
+        // The drift within frame `k`, `t` seconds after its start, less its creep.
+        let within = |k: usize, t: f64| -> [f64; 2] {
+            if placed_by_images {
+                let v = between(k);
+                return [v[0] * t, v[1] * t];
+            }
+            let frame = &frames[k];
+            let own = frame.own_drift(t);
+            let d = &frame.model.drift;
+            let log = (t / d.t0_s).ln_1p();
+            let creep = frame
+                .geometry
+                .vector_to_instrument([d.creep_m[0] * log, d.creep_m[1] * log]);
+            [own[0] - creep[0], own[1] - creep[1]]
+        };
         let mut samples = Vec::new();
         for (k, (frame, shift)) in frames.iter().zip(shifts).enumerate() {
             let duration = frame.geometry.frame_duration();
-            let velocity = between(k);
+            let at_start = with_creeps.displacement(frame.start_s);
             for j in 0..=20 {
                 let t = duration * j as f64 / 20.0;
-                let own = if placed_by_images {
-                    [velocity[0] * t, velocity[1] * t]
-                } else {
-                    frame.own_drift(t)
-                };
+                let drift = within(k, t);
                 let creep = with_creeps.displacement(frame.start_s + t);
-                let own_creep = if placed_by_images {
-                    [0.0; 2]
-                } else {
-                    frame.geometry.vector_to_instrument({
-                        let d = &frame.model.drift;
-                        let log = (t / d.t0_s).ln_1p();
-                        [d.creep_m[0] * log, d.creep_m[1] * log]
-                    })
-                };
                 samples.push((
                     frame.start_s + t,
                     [
-                        shift[0] + own[0] - own_creep[0] - creep[0]
-                            + with_creeps.displacement(frame.start_s)[0],
-                        shift[1] + own[1] - own_creep[1] - creep[1]
-                            + with_creeps.displacement(frame.start_s)[1],
+                        shift[0] + drift[0] - creep[0] + at_start[0],
+                        shift[1] + drift[1] - creep[1] + at_start[1],
                     ],
                 ));
             }
