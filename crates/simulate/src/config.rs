@@ -163,6 +163,10 @@ pub struct SurfaceConfig {
     /// Step edges: each raises its region by a height.
     #[serde(default)]
     pub steps: Vec<StepEdge>,
+    /// The sample's tilt as a height gradient `[∂z/∂x, ∂z/∂y]` (metres per metre, sample
+    /// frame): the plane a real sample never lies flat in, which moves with it under drift.
+    #[serde(default, skip_serializing_if = "is_flat_plane")]
+    pub plane_slope: [f64; 2],
     /// Regions of homogeneous sample strain.
     #[serde(default)]
     pub strain: Vec<StrainRegion>,
@@ -170,6 +174,10 @@ pub struct SurfaceConfig {
     /// charge-density wave's satellites, a period doubling, an incommensurate moiré.
     #[serde(default)]
     pub modulations: Vec<Modulation>,
+}
+
+fn is_flat_plane(slope: &[f64; 2]) -> bool {
+    *slope == [0.0, 0.0]
 }
 
 /// A height modulation `amplitude·cos(2π·G·(p − origin))` over the whole surface, with `G`
@@ -666,6 +674,7 @@ impl SurfaceConfig {
         })?;
         finite("surface.angle_rad", self.angle_rad)?;
         finite2("surface.origin_m", self.origin_m)?;
+        finite2("surface.plane_slope", self.plane_slope)?;
         self.feature.validate("surface.feature")?;
         self.defects.validate()?;
         check_len("surface.steps", &self.steps, MAX_LIST)?;

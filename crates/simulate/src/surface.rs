@@ -92,10 +92,12 @@ pub struct SurfaceFeature {
     pub amplitude: f64,
 }
 
-/// The terrace (step) height of the sample, without atomic corrugation.
+/// The terrace height of the sample without atomic corrugation: its steps on its tilted
+/// plane.
 #[derive(Debug, Clone)]
 pub struct Terrace {
     steps: Vec<(Region, f64)>,
+    plane_slope: Vector2<f64>,
     tip_sigma: f64,
 }
 
@@ -108,24 +110,28 @@ impl Terrace {
                 .iter()
                 .map(|s| (s.region.clone(), s.height_m))
                 .collect(),
+            plane_slope: Vector2::from(surface.plane_slope),
             tip_sigma,
         }
     }
 
-    /// Terrace height at sample point `p` (metres): the sum of the heights of the steps
-    /// whose upper terrace contains `p`, with an erf edge profile of width σ_tip.
+    /// Terrace height at sample point `p` (metres): the plane's height there (0 at the
+    /// sample origin) plus the heights of the steps whose upper terrace contains `p`, with
+    /// an erf edge profile of width σ_tip.
     pub fn height(&self, p: Vector2<f64>) -> f64 {
-        self.steps
+        let steps: f64 = self
+            .steps
             .iter()
             .map(|(region, height)| {
                 height * edge_profile(region.signed_distance(p), self.tip_sigma)
             })
-            .sum()
+            .sum();
+        self.plane_slope.dot(&p) + steps
     }
 
-    /// True if there are no steps.
+    /// True if there are no steps and no tilt.
     pub fn is_flat(&self) -> bool {
-        self.steps.is_empty()
+        self.steps.is_empty() && self.plane_slope == Vector2::zeros()
     }
 }
 

@@ -247,3 +247,26 @@ fn molecule_lobes_and_tip_broadening_shape_the_features() {
     let expected = 25e-12 * (1.0 + 4.0 * (-100.0f64 / 16.0).exp());
     assert!((z - expected).abs() < 1e-6 * expected, "{z} vs {expected}");
 }
+
+#[test]
+fn a_tilted_sample_adds_its_plane_to_every_pixel() {
+    let flat = run(&base_config());
+    let mut config = base_config();
+    let slope = [0.03, -0.05];
+    config.surface.plane_slope = slope;
+    let tilted = run(&config);
+    let (a, b) = (
+        &flat.pair.trace().unwrap().z,
+        &tilted.pair.trace().unwrap().z,
+    );
+    for (row, column) in [(0, 0), (10, 90), (64, 64), (127, 3)] {
+        let expected = slope[0] * column as f64 * PITCH + slope[1] * row as f64 * PITCH;
+        let added = b[[row, column]] - a[[row, column]];
+        assert!(
+            (added - expected).abs() < 1e-15,
+            "({row}, {column}): {added} vs {expected}"
+        );
+    }
+    // The features themselves stay where they were.
+    assert_eq!(flat.truth.features.len(), tilted.truth.features.len());
+}

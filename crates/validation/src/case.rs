@@ -104,6 +104,15 @@ fn slow_hysteresis(
     SlowScanHysteresis { law }
 }
 
+/// A height gradient of magnitude in `band` (metres per metre) in a direction drawn from
+/// `seed`.
+fn tilted_plane(seed: u64, [lo, hi]: [f64; 2]) -> [f64; 2] {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x71_17);
+    let slope = uniform(&mut rng, lo, hi);
+    let azimuth = uniform(&mut rng, 0.0, std::f64::consts::TAU);
+    [slope * azimuth.cos(), slope * azimuth.sin()]
+}
+
 /// Adds `candidate`'s effect to `config` (magnitudes from `rng`); `false` if it has no
 /// simulator effect (higher-order drift, local strain).
 fn add_effect(
@@ -183,7 +192,10 @@ fn add_effect(
         Candidate::TipChange => EffectConfig::TipChange(TipChange {
             time_s: uniform(rng, 0.15, 0.85) * frame,
             jump_m: [sign(rng) * m * 25e-12, sign(rng) * m * 20e-12],
-            height_offset_m: 0.0,
+            height_offset_m: match scans.tip_height_m {
+                Some([lo, hi]) => sign(rng) * uniform(rng, lo, hi),
+                None => 0.0,
+            },
             contrast: 1.0,
         }),
         Candidate::HeightCoupling => {
@@ -232,6 +244,9 @@ impl ValidationCase {
         };
         if scans.images {
             rendered_look(&mut config, seed);
+        }
+        if let Some(band) = scans.plane_slope {
+            config.surface.plane_slope = tilted_plane(seed, band);
         }
         let mut rng = Self::rng(seed, 0x5EED);
         let mut truth = Vec::new();

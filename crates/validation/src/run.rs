@@ -214,7 +214,11 @@ fn noise_free_visibility(case: &ValidationCase, floor_m: [f64; 2]) -> Option<f64
 pub fn validate(options: &ValidationOptions) -> ValidationReport {
     let mut jobs: Vec<(ValidationCase, bool, u64)> = Vec::new();
     for set in &options.sets {
-        for &c in &options.effects {
+        let added = set
+            .added_effects
+            .iter()
+            .filter(|c| !options.effects.contains(c));
+        for &c in options.effects.iter().chain(added) {
             for &s in &set.seeds {
                 let images = set.scans.images;
                 jobs.push((ValidationCase::single(c, s, set), images, s));

@@ -89,6 +89,14 @@ pub struct ScanForm {
     pub magnitude: Vec<[f64; 2]>,
     /// Band of a vibration's frequency, Hz.
     pub vibration_hz: [f64; 2],
+    /// Band of the sample's tilt, |∇z| (metres per metre; azimuth drawn per seed): the
+    /// plane every real image has, below the line offsets. None: flat.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_slope: Option<[f64; 2]>,
+    /// Band of the height jump at a tip change, metres (sign drawn per seed). None: the
+    /// tip jumps laterally only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tip_height_m: Option<[f64; 2]>,
 }
 
 /// One validation set: its scans' form and its seeds.
@@ -108,6 +116,9 @@ pub struct ValidationSet {
     /// Seeds of the single-effect cases (each effect, each seed).
     #[serde(deserialize_with = "seeds")]
     pub seeds: Vec<u64>,
+    /// Effects this set simulates one at a time besides the sweep's.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub added_effects: Vec<Candidate>,
     /// Seeds of the effect-free cases.
     #[serde(deserialize_with = "seeds")]
     pub null_seeds: Vec<u64>,
@@ -231,6 +242,24 @@ impl ValidationSet {
                 self.scans.vibration_hz
             )));
         }
+        if let Some(band) = self
+            .scans
+            .plane_slope
+            .filter(|b| !band_ok(*b) || b[1] > 1.0)
+        {
+            return Err(invalid(format!(
+                "plane slope band {band:?} is not 0 < low < high ≤ 1"
+            )));
+        }
+        if let Some(band) = self
+            .scans
+            .tip_height_m
+            .filter(|b| !band_ok(*b) || b[1] > 1e-9)
+        {
+            return Err(invalid(format!(
+                "tip height band {band:?} m is not 0 < low < high ≤ 1 nm"
+            )));
+        }
         Ok(())
     }
 }
@@ -242,7 +271,7 @@ mod tests {
     #[test]
     fn shipped_sets_parse_with_unique_names_and_ranges_expanded() {
         let catalogue = Catalogue::parse(SHIPPED).expect("parses");
-        assert_eq!(catalogue.sets.len(), 12);
+        assert_eq!(catalogue.sets.len(), 14);
         let held_out = catalogue.named("held-out").expect("exists");
         assert_eq!(held_out.null_seeds.len(), 40);
         assert_eq!(held_out.null_seeds[0], 12101);
@@ -272,5 +301,15 @@ mod tests {
         assert!(matches!(huge, Err(SetError::Syntax(_))), "{huge:?}");
         let unknown = Catalogue::shipped().named("nope").expect_err("unknown");
         assert!(unknown.to_string().contains("held-out"), "{unknown}");
+        let steep = SHIPPED.replacen("plane_slope = [0.02, 0.08]", "plane_slope = [0.5, 2.0]", 1);
+        let err = Catalogue::parse(&steep).expect_err("a slope of 2");
+        assert!(err.to_string().contains("`tilted-dev`"), "{err}");
+        let tall = SHIPPED.replacen(
+            "tip_height_m = [20e-12, 80e-12]",
+            "tip_height_m = [0.1, 1.0]",
+            1,
+        );
+        let err = Catalogue::parse(&tall).expect_err("a 1 m tip jump");
+        assert!(err.to_string().contains("tip height"), "{err}");
     }
 }

@@ -48,6 +48,7 @@ pub fn base_config() -> SimulationConfig {
             defects: DefectConfig::default(),
             second_domain: None,
             steps: Vec::new(),
+            plane_slope: [0.0, 0.0],
             strain: Vec::new(),
             modulations: Vec::new(),
         },
