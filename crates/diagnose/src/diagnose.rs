@@ -12,7 +12,9 @@ use crate::DiagnoseError;
 use crate::evidence::heights::HeightView;
 use crate::evidence::location::locate;
 use crate::evidence::noise::{NoiseFloor, estimate, robust_sigma};
-use crate::model::base::{BaseChoice, DECISIVE_BIC, chi2_and_bic, choose_base};
+use crate::model::base::{
+    BaseChoice, ChosenBase, DECISIVE_BIC, WholeModelScore, chi2_and_bic, choose_base,
+};
 use crate::model::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
 use crate::model::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::model::global::{GlobalModel, LatticeParams, Term, sim_term};
@@ -135,6 +137,10 @@ struct BaseFit {
     base: Fitted,
     /// The same with DHCT's log creep, when the data chose another creep form.
     log_base: Option<Fitted>,
+    /// The base model with each other hysteresis law worth trying with effects
+    /// ([`reconsidered`]; with DHCT's log creep), fitted in full to the same features at
+    /// the same floor, by law name.
+    law_bases: Vec<(&'static str, Fitted)>,
     /// The final noise floor.
     noise: NoiseFloor,
     /// Range of the base creep's `t0`, seconds.
@@ -142,12 +148,24 @@ struct BaseFit {
 }
 
 /// What the greedy selection found (besides the final model).
+#[derive(Clone)]
 struct Greedy {
     rounds: Vec<GreedyRound>,
     added: Vec<AddedEffect>,
     /// The first round's best refitted candidate, and the gap/noise with it.
     top: Option<Candidate>,
     top_gap: Option<f64>,
+}
+
+impl Greedy {
+    /// The selection as it stood after its first round.
+    fn first_round(&self) -> Greedy {
+        let mut first = self.clone();
+        first.rounds.truncate(1);
+        let accepted = first.rounds.iter().filter(|r| r.accepted.is_some()).count();
+        first.added.truncate(accepted);
+        first
+    }
 }
 
 /// Diagnoses the sim-to-real gap of one scan.
@@ -238,6 +256,29 @@ fn diagnose_from(
             (base, current, greedy) = (log_base, log_current, log_greedy);
         }
     }
+    let chosen = Selection {
+        base,
+        current,
+        greedy,
+    };
+    let (chosen, other_law, scores) = reconsider_laws(
+        chosen,
+        &fitted.base_choice.hysteresis_law,
+        &fitted.law_bases,
+        &context,
+        options,
+    )?;
+    if let Some(law) = other_law {
+        fitted.base_choice.choose_law(law);
+    }
+    if scores.len() > 1 {
+        fitted.base_choice.hysteresis_whole_model = scores;
+    }
+    let Selection {
+        base,
+        current,
+        greedy,
+    } = chosen;
     let base_summary = summary(base, sigma);
     let location = options
         .locate
@@ -340,6 +381,78 @@ fn start_model(prepared: &Prepared, fit_lattice_scale: bool) -> GlobalModel {
     }
 }
 
+/// A base model and the greedy selection run from it.
+struct Selection<'a> {
+    base: &'a Fitted,
+    current: Fitted,
+    greedy: Greedy,
+}
+
+/// The selection `chosen` (from the base with the law `chosen_law`) against the same from
+/// each base of `law_bases` (the laws [`reconsidered`]), as whole models: the better one
+/// (the chosen stays unless another is lower by more than [`DECISIVE_BIC`]), the other
+/// law's name if that one won, and every whole model's score. A law is tried only where
+/// it falls short of the chosen base by less than that base's own excess over the floor
+/// (what effects are there to explain: beyond, its effects would have to explain more than
+/// the chosen law leaves), and followed past its first effect only where that puts it
+/// ahead of the chosen law's first effect (later rounds add less than the first).
+fn reconsider_laws<'a>(
+    chosen: Selection<'a>,
+    chosen_law: &str,
+    law_bases: &'a [(&'static str, Fitted)],
+    context: &dyn Fn(&'a Fitted) -> Current<'a>,
+    options: &DiagnoseOptions,
+) -> Result<(Selection<'a>, Option<&'static str>, Vec<WholeModelScore>), DiagnoseError> {
+    let sigma = context(chosen.base).sigma;
+    let n = 2.0 * context(chosen.base).observations.len() as f64;
+    let chi2 = |f: &Fitted| chi2_and_bic(f, sigma).0;
+    let excess = chi2(chosen.base) - n;
+    let worth_trying = |f: &Fitted| excess > 0.0 && chi2(f) - chi2(chosen.base) < excess;
+    let whole = |s: &Selection| whole_model_bic(s.base, &s.greedy, sigma);
+    let first_round = whole_model_bic(chosen.base, &chosen.greedy.first_round(), sigma);
+    let mut others: Vec<(&'static str, Selection<'a>)> = Vec::new();
+    for (law, law_base) in law_bases.iter().filter(|(_, f)| worth_trying(f)) {
+        let (_, first) = select_up_to(&context(law_base), options, 1)?;
+        if whole_model_bic(law_base, &first, sigma) >= first_round {
+            continue;
+        }
+        let (current, greedy) = select_effects(&context(law_base), options)?;
+        let base = law_base;
+        others.push((
+            law,
+            Selection {
+                base,
+                current,
+                greedy,
+            },
+        ));
+    }
+    let chosen_bic = whole(&chosen);
+    let winner = (0..others.len())
+        .filter(|&k| whole(&others[k].1) < chosen_bic - DECISIVE_BIC)
+        .min_by(|&a, &b| whole(&others[a].1).total_cmp(&whole(&others[b].1)));
+    let best_bic = winner.map_or(chosen_bic, |k| whole(&others[k].1));
+    let score = |law: &str, s: &Selection| WholeModelScore {
+        law: law.to_string(),
+        delta_bic: whole(s) - best_bic,
+        effects: s
+            .greedy
+            .added
+            .iter()
+            .map(|a| a.candidate.name().into())
+            .collect(),
+    };
+    let mut scores = vec![score(chosen_law, &chosen)];
+    scores.extend(others.iter().map(|(law, s)| score(law, s)));
+    Ok(match winner {
+        Some(k) => {
+            let (law, selection) = others.swap_remove(k);
+            (selection, Some(law), scores)
+        }
+        None => (chosen, None, scores),
+    })
+}
+
 /// The BIC of the greedy selection's whole model: `base`'s at the floor `sigma`, plus
 /// each added effect's ΔBIC as scored when it was accepted (with the price of its shape
 /// search).
@@ -376,7 +489,12 @@ fn fit_base(
     let t0_bounds = creep_t0_bounds(geometry, all);
     // The hysteresis law and creep form chosen by the data (BIC), part of the base model
     // from here on.
-    let (first, base_choice, log_form) = choose_base(
+    let ChosenBase {
+        best: first,
+        choice: base_choice,
+        log_form,
+        other_laws,
+    } = choose_base(
         &start,
         &prepared.dhct_model.hysteresis,
         geometry,
@@ -423,10 +541,10 @@ fn fit_base(
         iterations,
         t0_bounds,
     )?;
-    // A failed fit of the log form leaves the chosen form unchallenged.
-    let log_base = log_form.and_then(|log| {
+    // A failed fit of the log form (or of another law) leaves the choice unchallenged.
+    let refit_kept = |model: GlobalModel| {
         refit(
-            log.model,
+            model,
             geometry,
             &observations,
             noise.sigma_m,
@@ -434,7 +552,13 @@ fn fit_base(
             t0_bounds,
         )
         .ok()
-    });
+    };
+    let log_base = log_form.and_then(|log| refit_kept(log.model));
+    let law_bases = other_laws
+        .into_iter()
+        .filter(|(name, _)| reconsidered(&base_choice.hysteresis_law, name))
+        .filter_map(|(name, f)| Some((name, refit_kept(f.model)?)))
+        .collect();
     Ok(BaseFit {
         first,
         base_choice,
@@ -442,9 +566,19 @@ fn fit_base(
         observations,
         base,
         log_base,
+        law_bases,
         noise,
         t0_bounds,
     })
+}
+
+/// Whether the law `other` is tried again with effects when the base chose `chosen`: a
+/// polynomial law (quartic, cubic) is flexible enough to take part of an effect the base
+/// leaves out (a piezo non-linearity's odd part, a turnaround transient) and win the
+/// base's comparison for it; the rigid laws (power, exponential) cannot, so they are
+/// tried again when a polynomial was chosen.
+fn reconsidered(chosen: &str, other: &str) -> bool {
+    matches!(chosen, "quartic" | "cubic") && matches!(other, "power" | "exponential")
 }
 
 /// Which residuals (metres) are not outliers: within `outlier_sigma` (both axes combined)
@@ -489,6 +623,15 @@ fn select_effects(
     context: &Current,
     options: &DiagnoseOptions,
 ) -> Result<(Fitted, Greedy), DiagnoseError> {
+    select_up_to(context, options, options.selection.max_effects)
+}
+
+/// [`select_effects`] for at most `max_rounds` rounds.
+fn select_up_to(
+    context: &Current,
+    options: &DiagnoseOptions,
+    max_rounds: usize,
+) -> Result<(Fitted, Greedy), DiagnoseError> {
     let sigma = context.sigma;
     let mut current = context.fitted.clone();
     let mut remaining = options.candidates.clone();
@@ -498,7 +641,7 @@ fn select_effects(
         top: None,
         top_gap: None,
     };
-    for k in 0..options.selection.max_effects {
+    for k in 0..max_rounds.min(options.selection.max_effects) {
         if remaining.is_empty() {
             break;
         }

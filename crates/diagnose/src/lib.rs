@@ -128,7 +128,7 @@ pub use image_view::sub_feature::{
     ACROSS_SCATTER_LIMIT, MAX_SCATTER_LEFT, MIN_PASS_AGREEMENT, MIN_PERIODS_PER_LINE_ACROSS,
     OUTLIER_READING, PassImage, SliceVibration, SubFeatureView, sub_feature_view,
 };
-pub use model::base::{BaseChoice, LawScore, PassLevelling};
+pub use model::base::{BaseChoice, LawScore, PassLevelling, WholeModelScore};
 pub use model::data::{MIN_FEATURES, Observation};
 pub use model::fit::FittedParameter;
 pub use report::diagnosis::{DiagnosisReport, GreedyRound, ModelSummary};

@@ -1,8 +1,10 @@
 //! A piezo non-linearity (the scanner's displacement not proportional to its drive) is the
 //! same in trace and retrace at the same commanded position. Within one pair of images its
-//! quadratic part along the fast axis is what can be fitted, and an asymmetric fast-scan
-//! hysteresis explains that part about as well: the diagnosis names one of the two and
-//! reports the other as not told apart.
+//! fast-axis curve is what can be fitted: the quadratic part always, the cubic part where
+//! the base's hysteresis law is rigid (power, exponential; a polynomial law takes it whole).
+//! A polynomial law also wins the base's comparison by taking that odd part, so the rigid
+//! laws are tried again with effects, as whole models: with the right law the piezo
+//! non-linearity is named, not an asymmetric hysteresis (two polynomial laws can mimic it).
 
 use dhct_diagnose::{Candidate, DiagnoseOptions};
 use dhct_simulate::EffectConfig;
@@ -22,7 +24,7 @@ fn a_piezo_nonlinearity_is_named_or_reported_as_not_told_apart() {
             .effects
             .iter()
             .find_map(|e| match e {
-                EffectConfig::PiezoNonlinearity(p) => Some(p.quadratic_m[0]),
+                EffectConfig::PiezoNonlinearity(p) => Some([p.quadratic_m[0], p.cubic_m[0]]),
                 _ => None,
             })
             .expect("the case holds a piezo non-linearity");
@@ -32,35 +34,49 @@ fn a_piezo_nonlinearity_is_named_or_reported_as_not_told_apart() {
             .expect("diagnoses");
         println!("{report}");
         let first = report.added.first().expect("an effect is named");
-        assert!(
-            first.candidate == Candidate::PiezoNonlinearity
-                || first.about_as_good.contains(&Candidate::PiezoNonlinearity),
-            "seed {seed}: {:?} {:?}",
-            first.candidate,
-            first.about_as_good
-        );
-        if first.candidate == Candidate::PiezoNonlinearity {
-            named_first += 1;
-            let fitted = &first.parameters[0];
-            assert_eq!(fitted.name, "quadratic_x_m");
-            // Only q_x is free: the rest of the curve is the base model's.
-            assert!(first.parameters[1..].iter().all(|p| p.sigma.is_none()));
-            let error = (fitted.value - truth).abs();
+        if first.candidate != Candidate::PiezoNonlinearity {
+            // Reported as not told apart, never silently another effect.
             assert!(
-                error < 0.15 * truth.abs() + 3.0 * fitted.sigma.unwrap(),
-                "seed {seed}: q_x {} ± {:?}, truth {truth}",
-                fitted.value,
-                fitted.sigma
+                first.about_as_good.contains(&Candidate::PiezoNonlinearity)
+                    && report
+                        .verdict_details
+                        .summary
+                        .contains("do not tell them apart"),
+                "seed {seed}: {:?} {:?}",
+                first.candidate,
+                first.about_as_good
             );
-        } else {
+            continue;
+        }
+        named_first += 1;
+        let fitted = &first.parameters[0];
+        assert_eq!(fitted.name, "quadratic_x_m");
+        let error = (fitted.value - truth[0]).abs();
+        assert!(
+            error < 0.15 * truth[0].abs() + 3.0 * fitted.sigma.unwrap(),
+            "seed {seed}: q_x {} ± {:?}, truth {truth:?}",
+            fitted.value,
+            fitted.sigma
+        );
+        // q_y is drift; c_x is fitted where the chosen law is rigid.
+        let cubic = &first.parameters[2];
+        assert_eq!(cubic.name, "cubic_x_m");
+        let rigid = matches!(
+            report.base_choice.hysteresis_law.as_str(),
+            "power" | "exponential"
+        );
+        assert_eq!(cubic.sigma.is_some(), rigid, "seed {seed}");
+        if rigid {
+            let error = (cubic.value - truth[1]).abs();
             assert!(
-                report
-                    .verdict_details
-                    .summary
-                    .contains("do not tell them apart")
+                error < 0.15 * truth[1].abs() + 3.0 * cubic.sigma.unwrap(),
+                "seed {seed}: c_x {} ± {:?}, truth {truth:?}",
+                cubic.value,
+                cubic.sigma
             );
         }
     }
-    // Measured: named first on seed 1, asymmetric hysteresis first on seeds 2–4.
-    assert!(named_first >= 1);
+    // Measured: named first on every seed (before the rigid laws were tried again with
+    // effects, only on seed 1: an asymmetric hysteresis of two quartic laws came first).
+    assert!(named_first >= 3, "named first on {named_first} of 4 seeds");
 }

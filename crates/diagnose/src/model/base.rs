@@ -70,6 +70,14 @@ pub struct BaseChoice {
     /// `−6`.
     #[serde(default)]
     pub creep_form_whole_model_delta_bic: Option<f64>,
+    /// Each other hysteresis law's whole model (its base and the effects its own selection
+    /// named) against the chosen law's: the BIC difference, negative where it fits better.
+    /// An effect the base leaves unmodelled can make another law fit the base better (a
+    /// polynomial law takes a piezo non-linearity's odd part); the law the base chose is
+    /// kept unless another whole model is lower by more than 6, and then that law is named
+    /// `hysteresis_law`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hysteresis_whole_model: Vec<WholeModelScore>,
     /// How each image's scan lines were levelled before its features were fitted, on the
     /// evidence of its line levels (empty when the diagnosis was given positions, not
     /// images).
@@ -77,7 +85,33 @@ pub struct BaseChoice {
     pub line_levelling: Vec<PassLevelling>,
 }
 
+/// One alternative base's whole model against the chosen one's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WholeModelScore {
+    /// The alternative (a hysteresis law's name).
+    pub law: String,
+    /// Its whole model's BIC minus the chosen whole model's (negative = fits better).
+    pub delta_bic: f64,
+    /// The effects its selection named, in order.
+    pub effects: Vec<String>,
+}
+
 impl BaseChoice {
+    /// Names `law` the base model's hysteresis law (the whole models' comparison chose
+    /// it), with the alternatives' BIC differences measured from it.
+    pub(crate) fn choose_law(&mut self, law: &str) {
+        self.hysteresis_law = law.into();
+        let chosen = self
+            .hysteresis
+            .iter()
+            .find(|c| c.law == law)
+            .map(|c| c.delta_bic);
+        for c in &mut self.hysteresis {
+            c.chosen = c.law == law;
+            c.delta_bic -= chosen.unwrap_or(0.0);
+        }
+    }
+
     /// Marks DHCT's log creep as the chosen form (the whole models' comparison kept it).
     pub(crate) fn keep_log_creep(&mut self) {
         self.creep_form = "log".into();
@@ -291,16 +325,20 @@ fn chosen_name(scores: &[LawScore]) -> String {
         .map_or_else(String::new, |s| s.law.clone())
 }
 
+/// The chosen alternative's fit, every alternative's score (lowest BIC first) and the
+/// other alternatives' fits by name.
+type Chosen = (Fitted, Vec<LawScore>, Vec<(&'static str, Fitted)>);
+
 /// Fits every alternative (`None`: it could not be built; failed fits are left out) and
-/// returns the chosen fit with every alternative's score, lowest BIC first. The chosen one
-/// has the lowest BIC, unless `preferred` is within [`DECISIVE_BIC`] of it. `what` names
-/// the alternatives in the error when none could be fitted.
+/// returns the chosen fit with every alternative's score, lowest BIC first, and the other
+/// fits. The chosen one has the lowest BIC, unless `preferred` is within [`DECISIVE_BIC`]
+/// of it. `what` names the alternatives in the error when none could be fitted.
 fn best_by_bic(
     alternatives: Vec<(&'static str, Option<Result<Fitted, DiagnoseError>>)>,
     sigma: [f64; 2],
     what: &str,
     preferred: Option<&str>,
-) -> Result<(Fitted, Vec<LawScore>), DiagnoseError> {
+) -> Result<Chosen, DiagnoseError> {
     let mut results: Vec<Scored> = Vec::new();
     let mut last_error = None;
     for (name, fitted) in alternatives {
@@ -334,13 +372,28 @@ fn best_by_bic(
             chosen: k == chosen,
         })
         .collect();
-    Ok((results.swap_remove(chosen).fitted, scores))
+    let best = results.remove(chosen).fitted;
+    let others = results.into_iter().map(|r| (r.name, r.fitted)).collect();
+    Ok((best, scores, others))
+}
+
+/// The base model the data chose before any effect, and what else was fitted.
+pub(crate) struct ChosenBase {
+    /// The fit with the chosen hysteresis law and creep form.
+    pub best: Fitted,
+    /// The choice with every alternative's score.
+    pub choice: BaseChoice,
+    /// The chosen law with DHCT's log creep, when another creep form was chosen.
+    pub log_form: Option<Fitted>,
+    /// Every other hysteresis law's fit (with DHCT's log creep), by name.
+    pub other_laws: Vec<(&'static str, Fitted)>,
 }
 
 /// Fits the base model with every hysteresis law and keeps the best by BIC, then fits
 /// that with every form of the creep from frame start and keeps the best of those;
-/// returns that fit with the scores, and the fit with DHCT's log creep if another form
-/// was chosen. `fitted` is the DHCT fit's law (its scale curve seeds the others).
+/// returns that fit with the scores, the fit with DHCT's log creep if another form was
+/// chosen, and the other laws' fits. `fitted` is the DHCT fit's law (its scale curve
+/// seeds the others).
 pub(crate) fn choose_base(
     base: &GlobalModel,
     fitted: &HysteresisLaw,
@@ -349,7 +402,7 @@ pub(crate) fn choose_base(
     sigma: [f64; 2],
     iterations: usize,
     t0_bounds: (f64, f64),
-) -> Result<(Fitted, BaseChoice, Option<Fitted>), DiagnoseError> {
+) -> Result<ChosenBase, DiagnoseError> {
     let fit_one =
         |m: GlobalModel| fit_profiled(m, geometry, observations, sigma, iterations, t0_bounds);
     let line = geometry.line_scan_time();
@@ -359,7 +412,7 @@ pub(crate) fn choose_base(
             .into_iter()
             .map(|(name, law, free)| (name, with_law(base, Some((law, free))).map(fit_one))),
     );
-    let (with_log, hysteresis) = best_by_bic(laws, sigma, "hysteresis law", None)?;
+    let (with_log, hysteresis, other_laws) = best_by_bic(laws, sigma, "hysteresis law", None)?;
     let hysteresis_law = chosen_name(&hysteresis);
     let frame = geometry.frame_duration();
     let other_form = |form: &str| with_creep_form(&with_log.model, form, frame).map(fit_one);
@@ -369,20 +422,22 @@ pub(crate) fn choose_base(
         ("exponential", other_form("exponential")),
         ("log", Some(Ok(with_log))),
     ];
-    let (best, creep) = best_by_bic(forms, sigma, "creep form", Some("log"))?;
+    let (best, creep, _) = best_by_bic(forms, sigma, "creep form", Some("log"))?;
     let log_form = (chosen_name(&creep) != "log").then_some(log_fit);
-    Ok((
+    Ok(ChosenBase {
         best,
-        BaseChoice {
+        choice: BaseChoice {
             hysteresis_law,
             hysteresis,
             creep_form: chosen_name(&creep),
             creep,
             creep_form_whole_model_delta_bic: None,
+            hysteresis_whole_model: Vec::new(),
             line_levelling: Vec::new(),
         },
         log_form,
-    ))
+        other_laws,
+    })
 }
 
 #[cfg(test)]

@@ -248,6 +248,25 @@ impl DiagnosisReport {
                 }
             )?;
         }
+        if !self.base_choice.hysteresis_whole_model.is_empty() {
+            let wholes: Vec<String> = self
+                .base_choice
+                .hysteresis_whole_model
+                .iter()
+                .map(|w| {
+                    let effects = match w.effects.as_slice() {
+                        [] => "no effect".to_string(),
+                        e => e.join(" + "),
+                    };
+                    format!("{} ΔBIC {:.1} with {effects}", w.law, w.delta_bic)
+                })
+                .collect();
+            writeln!(
+                f,
+                "  whole models, each law with the effects its own selection named: {}",
+                wholes.join("; ")
+            )?;
+        }
         for p in &self.base_choice.line_levelling {
             writeln!(f, "line levelling, {}: {}", p.pass, p.levelling)?;
         }

@@ -7,8 +7,8 @@
 use dhct_scan::ScanGeometry;
 use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{
-    AsymmetricHysteresis, ExponentialCreep, HeightCoupling, HysteresisLaw, LineDrift, LogCreep,
-    PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, TipChange, Vibration,
+    AsymmetricHysteresis, ExponentialCreep, FastScanHysteresis, HeightCoupling, HysteresisLaw,
+    LineDrift, LogCreep, PiezoNonlinearity, ScanCoupling, SlowScanHysteresis, TipChange, Vibration,
 };
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -339,19 +339,28 @@ fn zero_term_proposal(
     )
 }
 
-/// A fast-axis piezo non-linearity with only its quadratic part `q_x` free: within one
-/// trace/retrace pair the rest cannot be told from the base model. The cubic part along x
-/// is odd in position, which a symmetric fast-scan hysteresis law mirrors between trace and
-/// retrace exactly as it is (a cubic or quartic law takes it whole: the fit then wanders
-/// along the valley, e.g. to 2.5 mm for a true 33 pm); along y the commanded position
-/// follows the slow-scan time, so that part is drift.
+/// A fast-axis piezo non-linearity: its quadratic part `q_x` free, and its cubic part
+/// `c_x` too unless the model's fast-scan hysteresis law is a polynomial. The cubic part
+/// along x is odd in position, which a symmetric fast-scan hysteresis law mirrors between
+/// trace and retrace exactly as it is: a cubic or quartic law takes it whole (both free,
+/// the fit wanders along the valley, e.g. to 2.5 mm for a true 33 pm), while a power or
+/// exponential law cannot, and would leave it to an asymmetric law's extra freedom. Along
+/// y the commanded position follows the slow-scan time, so that part is drift.
 fn piezo_nonlinearity_proposal(ctx: &Context) -> Option<Proposal> {
     let candidate = Candidate::PiezoNonlinearity;
     let effect = sim_term(&EffectConfig::PiezoNonlinearity(PiezoNonlinearity {
         quadratic_m: [0.0; 2],
         cubic_m: [0.0; 2],
     }))?;
-    let free = vec![true, false, false, false];
+    let polynomial_law = ctx.model.terms.iter().any(|t| {
+        matches!(
+            t.effect.config(),
+            Some(EffectConfig::FastHysteresis(FastScanHysteresis {
+                law: HysteresisLaw::Quartic { .. }
+            }))
+        )
+    });
+    let free = vec![true, false, !polynomial_law, false];
     let term = Term::new(effect, free.clone(), candidate.name());
     term_proposal(candidate, String::new(), ctx, term, free, None, 0)
 }
