@@ -70,12 +70,12 @@ pub struct BaseChoice {
     /// `−6`.
     #[serde(default)]
     pub creep_form_whole_model_delta_bic: Option<f64>,
-    /// Each other hysteresis law's whole model (its base and the effects its own selection
-    /// named) against the chosen law's: the BIC difference, negative where it fits better.
-    /// An effect the base leaves unmodelled can make another law fit the base better (a
-    /// polynomial law takes a piezo non-linearity's odd part); the law the base chose is
-    /// kept unless another whole model is lower by more than 6, and then that law is named
-    /// `hysteresis_law`.
+    /// When the base chose a polynomial law: its whole model (base and the effects its
+    /// selection named) and each rigid law's that was followed through the selection, as
+    /// BIC differences from the best (0). An effect the base leaves unmodelled can make a
+    /// polynomial law fit the base better (it takes a piezo non-linearity's odd part); the
+    /// law the base chose is kept unless another whole model is lower by more than 6, and
+    /// then that law is named `hysteresis_law`. Empty when no other law was followed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub hysteresis_whole_model: Vec<WholeModelScore>,
     /// How each image's scan lines were levelled before its features were fitted, on the
