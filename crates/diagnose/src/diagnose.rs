@@ -412,18 +412,19 @@ fn reconsider_laws<'a>(
     let first_round = whole_model_bic(chosen.base, &chosen.greedy.first_round(), sigma);
     let mut others: Vec<(&'static str, Selection<'a>)> = Vec::new();
     for (law, law_base) in law_bases.iter().filter(|(_, f)| worth_trying(f)) {
-        let (_, first) = select_up_to(&context(law_base), options, 1)?;
-        if whole_model_bic(law_base, &first, sigma) >= first_round {
+        let law_context = context(law_base);
+        let start = Progress::start(&law_context, options);
+        let first = advance(&law_context, options, start, 1)?;
+        if whole_model_bic(law_base, &first.greedy, sigma) >= first_round {
             continue;
         }
-        let (current, greedy) = select_effects(&context(law_base), options)?;
-        let base = law_base;
+        let done = advance(&law_context, options, first, usize::MAX)?;
         others.push((
             law,
             Selection {
-                base,
-                current,
-                greedy,
+                base: law_base,
+                current: done.current,
+                greedy: done.greedy,
             },
         ));
     }
@@ -623,34 +624,65 @@ fn select_effects(
     context: &Current,
     options: &DiagnoseOptions,
 ) -> Result<(Fitted, Greedy), DiagnoseError> {
-    select_up_to(context, options, options.selection.max_effects)
+    let done = advance(
+        context,
+        options,
+        Progress::start(context, options),
+        usize::MAX,
+    )?;
+    Ok((done.current, done.greedy))
 }
 
-/// [`select_effects`] for at most `max_rounds` rounds.
-fn select_up_to(
+/// A greedy selection under way: the model so far, what it found, the candidates still in
+/// the running, and whether it has ended (a round passed nothing).
+struct Progress {
+    current: Fitted,
+    greedy: Greedy,
+    remaining: Vec<Candidate>,
+    ended: bool,
+}
+
+impl Progress {
+    /// Before the first round: `context.fitted` and every candidate of `options`.
+    fn start(context: &Current, options: &DiagnoseOptions) -> Progress {
+        Progress {
+            current: context.fitted.clone(),
+            greedy: Greedy {
+                rounds: Vec::new(),
+                added: Vec::new(),
+                top: None,
+                top_gap: None,
+            },
+            remaining: options.candidates.clone(),
+            ended: false,
+        }
+    }
+}
+
+/// [`select_effects`]'s rounds, at most `rounds` more of them, from `progress`.
+fn advance(
     context: &Current,
     options: &DiagnoseOptions,
-    max_rounds: usize,
-) -> Result<(Fitted, Greedy), DiagnoseError> {
+    mut progress: Progress,
+    rounds: usize,
+) -> Result<Progress, DiagnoseError> {
     let sigma = context.sigma;
-    let mut current = context.fitted.clone();
-    let mut remaining = options.candidates.clone();
-    let mut greedy = Greedy {
-        rounds: Vec::new(),
-        added: Vec::new(),
-        top: None,
-        top_gap: None,
-    };
-    for k in 0..max_rounds.min(options.selection.max_effects) {
-        if remaining.is_empty() {
+    for _ in 0..rounds {
+        let Progress {
+            current,
+            greedy,
+            remaining,
+            ended,
+        } = &mut progress;
+        if *ended || greedy.rounds.len() >= options.selection.max_effects || remaining.is_empty() {
             break;
         }
         let state = Current {
-            fitted: &current,
+            fitted: current,
             ..*context
         };
-        let scored = round(&state, &remaining, &options.selection);
-        if k == 0
+        let scored = round(&state, remaining, &options.selection);
+        if greedy.rounds.is_empty()
             && let Some(s) = scored.iter().find(|s| s.fitted.is_some())
         {
             greedy.top = Some(s.score.candidate);
@@ -666,10 +698,10 @@ fn select_up_to(
                 .fitted
                 .clone()
                 .unwrap_or_else(|| unreachable!("filtered on Some"));
-            let mut added = added_effect(w, &f, &current, sigma);
+            let mut added = added_effect(w, &f, current, sigma);
             added.about_as_good = about_as_good(w, &scored);
             greedy.added.push(added);
-            current = refit(
+            *current = refit(
                 f.model,
                 context.geometry,
                 context.observations,
@@ -685,11 +717,9 @@ fn select_up_to(
             scores: scored.into_iter().map(|s| s.score).collect(),
             accepted,
         });
-        if accepted.is_none() {
-            break;
-        }
+        *ended = accepted.is_none();
     }
-    Ok((current, greedy))
+    Ok(progress)
 }
 
 /// The other refitted, passing candidates of `scored` whose χ² reduction comes within
