@@ -351,16 +351,22 @@ fn a_pair_without_drift_or_hysteresis_is_registered_by_the_identity() {
     );
 }
 
-#[test]
-fn frames_the_drift_cannot_place_are_refused_not_registered_a_period_off() {
-    // A 6 % slow-axis pixel-size error looks like a drift within each 4 nm frame and is
-    // carried as 240 pm to the next: past half a lattice period, so the frames are placed
-    // a period off. The series model then cannot explain them, and says so.
+/// Four frames at 0° from a scanner whose slow axis moves 6 % further than told.
+fn slow_axis_gain_session() -> dhct_simulate::SimulationConfig {
     let mut config = pair_config();
     let sequence = config.sequence.as_mut().expect("sequence");
     sequence.frames = 4;
     sequence.scan_angles_deg = vec![0.0];
     sequence.scanner_gain = [1.0, 1.06];
+    config
+}
+
+#[test]
+fn frames_the_drift_cannot_place_are_refused_not_registered_a_period_off() {
+    // A 6 % slow-axis pixel-size error looks like a drift within each 4 nm frame and is
+    // carried as 240 pm to the next: past half a lattice period, so the frames are placed
+    // a period off. The series model then cannot explain them, and says so.
+    let config = slow_axis_gain_session();
     let dir = tempfile::tempdir().expect("tempdir");
     let frames = dir.path().join("frames");
     simulate(&config, &frames);
@@ -379,23 +385,9 @@ fn frames_with_vacancies_are_placed_by_their_images_where_the_drift_cannot_place
     // off between frames), with 2 % of the sites empty: the vacancies, the same in every
     // frame, place each frame against the one before from the two images alone; the fit
     // then measures the gain and registers every frame.
-    let mut config = pair_config();
+    let mut config = slow_axis_gain_session();
     config.surface.defects.vacancy_fraction = 0.02;
-    let sequence = config.sequence.as_mut().expect("sequence");
-    sequence.frames = 4;
-    sequence.scan_angles_deg = vec![0.0];
-    sequence.scanner_gain = [1.0, 1.06];
     let dir = tempfile::tempdir().expect("tempdir");
-    {
-        let frames = dir.path().join("probe");
-        let truth = simulate(&config, &frames);
-        for f in &truth.frames {
-            eprintln!(
-                "DEBUG truth start D {:?}",
-                f.placement.displacement_at_start_m
-            );
-        }
-    }
     let (truth, found, summary) = run_pair(&config, dir.path());
     let notes = summary["notes"].to_string();
     assert!(

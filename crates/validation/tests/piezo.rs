@@ -49,31 +49,27 @@ fn a_piezo_nonlinearity_is_named_or_reported_as_not_told_apart() {
             continue;
         }
         named_first += 1;
-        let fitted = &first.parameters[0];
-        assert_eq!(fitted.name, "quadratic_x_m");
-        let error = (fitted.value - truth[0]).abs();
-        assert!(
-            error < 0.15 * truth[0].abs() + 3.0 * fitted.sigma.unwrap(),
-            "seed {seed}: q_x {} ± {:?}, truth {truth:?}",
-            fitted.value,
-            fitted.sigma
-        );
+        let near = |index: usize, name: &str, truth: f64| {
+            let fitted = &first.parameters[index];
+            assert_eq!(fitted.name, name);
+            let error = (fitted.value - truth).abs();
+            assert!(
+                error < 0.15 * truth.abs() + 3.0 * fitted.sigma.unwrap(),
+                "seed {seed}: {name} {} ± {:?}, truth {truth}",
+                fitted.value,
+                fitted.sigma
+            );
+        };
+        near(0, "quadratic_x_m", truth[0]);
         // q_y is drift; c_x is fitted where the chosen law is rigid.
-        let cubic = &first.parameters[2];
-        assert_eq!(cubic.name, "cubic_x_m");
         let rigid = matches!(
             report.base_choice.hysteresis_law.as_str(),
             "power" | "exponential"
         );
-        assert_eq!(cubic.sigma.is_some(), rigid, "seed {seed}");
+        assert_eq!(first.parameters[2].name, "cubic_x_m");
+        assert_eq!(first.parameters[2].sigma.is_some(), rigid, "seed {seed}");
         if rigid {
-            let error = (cubic.value - truth[1]).abs();
-            assert!(
-                error < 0.15 * truth[1].abs() + 3.0 * cubic.sigma.unwrap(),
-                "seed {seed}: c_x {} ± {:?}, truth {truth:?}",
-                cubic.value,
-                cubic.sigma
-            );
+            near(2, "cubic_x_m", truth[1]);
         }
     }
     // Measured: named first on every seed (before the rigid laws were tried again with
