@@ -9,7 +9,8 @@
 //! Options, any of: `keep=hdc` (the base effects kept: h hysteresis, d drift, c creep; all
 //! by default), `offsets=PM` (the line offsets' rms in pm), `no-pink`, `no-white`, `flat`
 //! (no tilted plane), `true-levels` (the true offsets subtracted before the features are
-//! found), `levelling=lattice|median|none` (lattice by default).
+//! found), `levelling=lattice|median|none` (lattice by default), `levels-from-fits` (the
+//! lines' levels fitted jointly with the features afterwards: `line_levels_from_fits`).
 
 use dhct_features::{FeatureOptions, FeatureSet, LineCorrection, find_features_in_pair};
 use dhct_scan::{ImageChannel, ScanPair};
@@ -66,6 +67,7 @@ fn main() -> Result<(), Failure> {
     let lattice = config.surface.lattice.build()?;
     let options = FeatureOptions {
         line_correction: levelling,
+        line_levels_from_fits: flag("levels-from-fits"),
         ..FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
     };
     for (pass, set) in find_features_in_pair(&output.pair, &options)?
