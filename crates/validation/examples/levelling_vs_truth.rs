@@ -50,9 +50,17 @@ fn main() -> Result<(), Failure> {
         config.surface.plane_slope = [0.0, 0.0];
     }
     let levelling = match option("levelling=") {
-        Some("median") => LineCorrection::Median,
-        Some("none") => LineCorrection::None,
-        _ => LineCorrection::Lattice,
+        None => LineCorrection::Lattice,
+        Some(name) => [
+            LineCorrection::None,
+            LineCorrection::Median,
+            LineCorrection::Tapered,
+            LineCorrection::Lattice,
+            LineCorrection::Linear,
+        ]
+        .into_iter()
+        .find(|l| l.name() == name)
+        .ok_or_else(|| format!("no line levelling is called {name:?}"))?,
     };
     println!(
         "{} #{seed}: effects kept {keep:?}, line offsets {:.2} pm, lattice rows at {:.4} rad",
@@ -70,11 +78,8 @@ fn main() -> Result<(), Failure> {
         line_levels_from_fits: flag("levels-from-fits"),
         ..FeatureOptions::for_neighbour_distance(lattice.nearest_neighbour_distance())
     };
-    for (pass, set) in find_features_in_pair(&output.pair, &options)?
-        .iter()
-        .enumerate()
-    {
-        report_pass(pass, set, &output);
+    for set in find_features_in_pair(&output.pair, &options)? {
+        report_pass(&set, &output);
     }
     Ok(())
 }
@@ -105,19 +110,20 @@ fn without_true_offsets(
     )?)
 }
 
-/// Prints pass `pass`'s centres against the truth across the lines (pm): mean, rms, and the
-/// mean in each quarter along the lines (a shear shows as a trend).
-fn report_pass(pass: usize, set: &FeatureSet, output: &SimulationOutput) {
+/// Prints the centres of `set` (one pass) against the truth across the lines (pm): mean,
+/// rms, and the mean in each quarter along the lines (a shear shows as a trend).
+fn report_pass(set: &FeatureSet, output: &SimulationOutput) {
     let geometry = &output.truth.geometry;
     let (columns, pitch_pm) = (geometry.columns() as f64, geometry.pitch_y() * 1e12);
     let errors: Vec<(f64, f64)> = set
         .features
         .iter()
         .filter_map(|f| {
-            let truth = output.truth.features.iter().map(|t| {
-                let a = if pass == 0 { &t.trace } else { &t.retrace };
-                a.controller_position_px
-            });
+            let truth = output
+                .truth
+                .features
+                .iter()
+                .map(|t| t.acquisition(set.pass).controller_position_px);
             let distance2 = |p: &[f64; 2]| (p[0] - f.x_px).powi(2) + (p[1] - f.y_px).powi(2);
             let nearest = truth.min_by(|a, b| distance2(a).total_cmp(&distance2(b)))?;
             (distance2(&nearest) < 4.0).then(|| (f.x_px, (f.y_px - nearest[1]) * pitch_pm))
@@ -138,8 +144,9 @@ fn report_pass(pass: usize, set: &FeatureSet, output: &SimulationOutput) {
         })
         .collect();
     println!(
-        "pass {pass}: {} of {} matched; across the lines mean {all_mean:.2} pm, rms {rms:.2} pm; \
+        "{}: {} of {} matched; across the lines mean {all_mean:.2} pm, rms {rms:.2} pm; \
          by quarter along the lines {quarters:?} pm\n  {}",
+        set.pass,
         errors.len(),
         set.features.len(),
         set.line_levelling
