@@ -69,16 +69,27 @@ fn normal_equations(
                 params[3] * (-sin * v.x - cos * v.y),
                 params[4] * (cos * v.x - sin * v.y),
             );
+            // The gradient's non-zeros only: a long series has hundreds of sets, and a
+            // dense outer product per point would cost the square of that.
             for axis in 0..2 {
-                let mut g = DVector::<f64>::zeros(count);
-                g[axis] = 1.0;
-                g[2] = d_theta[axis];
-                g[3 + axis] = rotated[axis];
-                if set > 0 {
-                    g[5 + 2 * (set - 1) + axis] = 1.0;
+                let mut g = [
+                    (axis, 1.0),
+                    (2, d_theta[axis]),
+                    (3 + axis, rotated[axis]),
+                    (0, 0.0),
+                ];
+                let used = if set > 0 {
+                    g[3] = (5 + 2 * (set - 1) + axis, 1.0);
+                    4
+                } else {
+                    3
+                };
+                for &(a, ga) in &g[..used] {
+                    eq.rhs[a] += ga * r[axis];
+                    for &(b, gb) in &g[..used] {
+                        eq.normal[(a, b)] += ga * gb;
+                    }
                 }
-                eq.normal += &g * g.transpose();
-                eq.rhs += &g * r[axis];
             }
         }
     }

@@ -8,6 +8,7 @@
 //! - [`crlb`]: the Cramér–Rao bound on a 2-D Gaussian's centre.
 //! - [`moments`]: plain moments of point sets.
 //! - [`special`]: the error function and the normal upper tail.
+//! - [`sparse_rows`]: normal equations from a Jacobian given as its non-zeros per row.
 //! - [`series`]: `ln(1 + u)` for small `u` in hot loops (the correction of every pixel).
 //!
 //! Why our own LM and not `argmin` or `levenberg-marquardt`: the feature fit needs bound
@@ -37,4 +38,5 @@ pub mod lm;
 pub mod moments;
 pub mod robust;
 pub mod series;
+pub mod sparse_rows;
 pub mod special;

@@ -189,6 +189,13 @@ pub trait Residuals: Sync {
     fn jacobian(&self, p: &[f64], r0: &[f64]) -> DMatrix<f64> {
         forward_difference(self, p, r0)
     }
+
+    /// `JᵀWJ`, `JᵀWr` and the cost at `p` (`r`: the residuals there, `w`: their weights),
+    /// from the dense [`Residuals::jacobian`] unless the problem forms them itself (a
+    /// Jacobian with few non-zeros per row: [`crate::sparse_rows`]).
+    fn normal_equations(&self, p: &[f64], r: &[f64], w: &[f64]) -> NormalEquations {
+        weighted_normal_equations(&self.jacobian(p, r), r, w)
+    }
 }
 
 impl<F: Fn(&[f64], &mut [f64]) + Sync> Residuals for F {
@@ -304,8 +311,8 @@ impl<R: Residuals + ?Sized> LmProblem for ResidualProblem<'_, R> {
     }
 
     fn normal_equations(&mut self, p: &[f64]) -> NormalEquations {
-        let jacobian = self.jacobian_at(p);
-        weighted_normal_equations(&jacobian, &self.r, &self.weights)
+        self.residuals_at(p);
+        self.residuals.normal_equations(p, &self.r, &self.weights)
     }
 
     fn project(&self, p: &mut [f64]) -> bool {

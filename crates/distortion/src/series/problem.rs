@@ -9,7 +9,8 @@
 //! the x deviations of every feature, then the y deviations, then two per creep (a weak
 //! prior that keeps an unresolved creep's amplitude near 0, as in the registration).
 
-use dhct_numerics::lm::Residuals;
+use dhct_numerics::lm::{NormalEquations, Residuals};
+use dhct_numerics::sparse_rows::sparse_normal_equations;
 use dhct_scan::ScanPass;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -193,6 +194,108 @@ impl<'a> SeriesProblem<'a> {
     }
 }
 
+/// What every Jacobian row at one parameter vector shares.
+struct RowContext {
+    law: HysteresisLaw,
+    /// The law's gradient of the excess integral over a whole line (the retrace's lag).
+    end: [f64; 5],
+    /// Hysteresis parameters fitted.
+    hysteresis_count: usize,
+    sin_theta: f64,
+    cos_theta: f64,
+}
+
+impl SeriesProblem<'_> {
+    fn row_context(&self, p: &[f64]) -> RowContext {
+        let law = self.law(p);
+        let hysteresis_count = p.len() - self.hysteresis_at();
+        let mut end = [0.0; 5];
+        law_gradient(
+            &law,
+            self.line_time_s,
+            Quantity::ExcessIntegral,
+            &mut end[..hysteresis_count],
+        );
+        let (sin_theta, cos_theta) = p[0].sin_cos();
+        RowContext {
+            law,
+            end,
+            hysteresis_count,
+            sin_theta,
+            cos_theta,
+        }
+    }
+
+    /// Row `i` of `∂r/∂p` as its non-zero entries (the residuals' order: every feature's
+    /// x, every feature's y, then the creeps' priors).
+    fn jacobian_row(
+        &self,
+        p: &[f64],
+        context: &RowContext,
+        i: usize,
+        entries: &mut Vec<(usize, f64)>,
+    ) {
+        let m = self.features.len();
+        let at = self.creep_at();
+        if i >= 2 * m {
+            let k = i - 2 * m;
+            entries.push((at + 3 * (k / 2) + k % 2, 1.0 / CREEP_PRIOR_NM));
+            return;
+        }
+        let axis = i / m;
+        let f = &self.features[i % m];
+        let [ux, uy] = [f.site_m[0] * NM, f.site_m[1] * NM];
+        let (s, c) = (context.sin_theta, context.cos_theta);
+        if axis == 0 {
+            entries.extend([(0, s * ux + c * uy), (1, -1.0)]);
+        } else {
+            entries.extend([
+                (0, -(c * ux - s * uy)),
+                (2, -1.0),
+                (3, (f.controller_m[1] - f.centre_m[1]) * NM),
+            ]);
+        }
+        let spline = &self.rows[i % m];
+        let axis_at = SPLINE_AT + axis * self.free_coefficients();
+        for (r, value) in spline.values.iter().enumerate() {
+            let j = spline.first + r;
+            if j > 0 {
+                entries.push((axis_at + j - 1, *value));
+            }
+        }
+        for (k, &start) in self.creep_starts.iter().enumerate() {
+            let elapsed = f.time_s - start;
+            if elapsed <= 0.0 {
+                continue;
+            }
+            let q = p[at + 3 * k + 2];
+            let t0 = self.t0_map.t0(q);
+            let log = (elapsed / t0).ln_1p();
+            let dlog = -elapsed / (t0 * (t0 + elapsed)) * self.t0_map.derivative(q);
+            entries.extend([
+                (at + 3 * k + axis, log),
+                (at + 3 * k + 2, p[at + 3 * k + axis] * dlog),
+            ]);
+        }
+        let mut lag = [0.0; 5];
+        let count = context.hysteresis_count;
+        law_gradient(
+            &context.law,
+            f.line_time_s,
+            Quantity::ExcessIntegral,
+            &mut lag[..count],
+        );
+        let h_at = self.hysteresis_at();
+        for (j, (lag, end)) in lag[..count].iter().zip(&context.end).enumerate() {
+            let g = match f.pass {
+                ScanPass::Trace => *lag,
+                ScanPass::Retrace => end - lag,
+            };
+            entries.push((h_at + j, f.lag_direction_m_per_s[axis] * NM * g));
+        }
+    }
+}
+
 impl Residuals for SeriesProblem<'_> {
     fn residuals(&self, p: &[f64], r: &mut [f64]) {
         let m = self.features.len();
@@ -218,77 +321,100 @@ impl Residuals for SeriesProblem<'_> {
     }
 
     fn jacobian(&self, p: &[f64], _r0: &[f64]) -> DMatrix<f64> {
-        let (m, n) = (self.features.len(), p.len());
-        let b = self.free_coefficients();
-        let at = self.creep_at();
-        let h_at = self.hysteresis_at();
-        let law = self.law(p);
-        let hysteresis_count = n - h_at;
-        let mut end = [0.0; 5];
-        law_gradient(
-            &law,
-            self.line_time_s,
-            Quantity::ExcessIntegral,
-            &mut end[..hysteresis_count],
-        );
-        let (s, c) = p[0].sin_cos();
-        let mut rows = vec![0.0; self.rows() * n];
-        let (positions, prior) = rows.split_at_mut(2 * m * n);
-        for k in 0..self.creep_starts.len() {
-            prior[2 * k * n + at + 3 * k] = 1.0 / CREEP_PRIOR_NM;
-            prior[(2 * k + 1) * n + at + 3 * k + 1] = 1.0 / CREEP_PRIOR_NM;
+        let n = p.len();
+        let context = self.row_context(p);
+        let mut dense = vec![0.0; self.rows() * n];
+        dense.par_chunks_mut(n).enumerate().for_each(|(i, row)| {
+            let mut entries = Vec::new();
+            self.jacobian_row(p, &context, i, &mut entries);
+            for (k, value) in entries {
+                row[k] = value;
+            }
+        });
+        DMatrix::from_row_slice(self.rows(), n, &dense)
+    }
+
+    /// From the Jacobian's few non-zeros per row (θ, the origin, `ε_y`, four spline
+    /// coefficients, the creeps, the law): a long session's hundreds of spline coefficients
+    /// would make a dense Jacobian's products the whole fit's cost.
+    fn normal_equations(&self, p: &[f64], r: &[f64], w: &[f64]) -> NormalEquations {
+        let context = self.row_context(p);
+        sparse_normal_equations(p.len(), r, w, |i, entries| {
+            self.jacobian_row(p, &context, i, entries)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dhct_numerics::lm::{forward_difference, weighted_normal_equations};
+
+    /// Features of two frames, both passes, with sites and times spread over a session.
+    fn features() -> Vec<SeriesFeature> {
+        (0..60)
+            .map(|i| {
+                let t = i as f64 * 1.7;
+                SeriesFeature {
+                    frame: i / 30,
+                    input: i % 2,
+                    feature_index: i,
+                    pass: if i % 2 == 0 {
+                        ScanPass::Trace
+                    } else {
+                        ScanPass::Retrace
+                    },
+                    controller_m: [1e-9 * (i % 7) as f64, 1e-9 * (i / 7) as f64],
+                    centre_m: [3e-9, 4e-9],
+                    time_s: t,
+                    line_time_s: 0.001 + 0.018 * ((i * 5) % 11) as f64 / 11.0,
+                    lag_direction_m_per_s: [-2e-7, 3e-8],
+                    site_m: [0.25e-9 * (i % 7) as f64, 0.2e-9 * (i / 7) as f64],
+                }
+            })
+            .collect()
+    }
+
+    /// The analytic Jacobian (the rows the sparse normal equations use) equals forward
+    /// differences, and the sparse normal equations equal the dense ones, with a creep
+    /// that starts mid-session and two hysteresis laws.
+    #[test]
+    fn jacobian_rows_match_forward_differences_and_the_dense_products() {
+        let features = features();
+        let basis = SplineBasis {
+            start_s: 0.0,
+            end_s: 100.0,
+            interior_knots: 3,
+        };
+        let t0_map = LogisticLog::for_frame(0.02, 50.0);
+        for (choice, law) in [
+            (HysteresisChoice::Power, vec![0.9, -0.03]),
+            (HysteresisChoice::Exponential, vec![0.05, (0.004f64).ln()]),
+        ] {
+            let problem =
+                SeriesProblem::new(&features, basis.clone(), vec![40.0], choice, 0.02, t0_map);
+            let mut p = vec![0.1, 0.3, -0.2, 0.01];
+            p.extend((0..2 * (basis.len() - 1)).map(|j| 0.05 * j as f64 - 0.2));
+            p.extend([0.4, -0.3, 0.5]);
+            p.extend(law);
+            let mut r0 = vec![0.0; problem.rows()];
+            problem.residuals(&p, &mut r0);
+            let analytic = problem.jacobian(&p, &r0);
+            let numeric = forward_difference(&problem, &p, &r0);
+            for (k, (a, b)) in analytic
+                .column_iter()
+                .zip(numeric.column_iter())
+                .enumerate()
+            {
+                let size = b.amax();
+                assert!(size > 0.0, "{choice:?}: parameter {k} moves nothing");
+                assert!((a - b).amax() <= 1e-4 * size, "{choice:?}: parameter {k}");
+            }
+            let w: Vec<f64> = (0..r0.len()).map(|i| 1.0 + (i % 4) as f64).collect();
+            let sparse = problem.normal_equations(&p, &r0, &w);
+            let dense = weighted_normal_equations(&analytic, &r0, &w);
+            assert!((sparse.jtwj - &dense.jtwj).amax() <= 1e-12 * dense.jtwj.amax());
+            assert!((sparse.jtwr - &dense.jtwr).amax() <= 1e-12 * dense.jtwj.amax());
         }
-        let (x_rows, y_rows) = positions.split_at_mut(m * n);
-        x_rows
-            .par_chunks_mut(n)
-            .zip(y_rows.par_chunks_mut(n))
-            .enumerate()
-            .for_each(|(i, (row_x, row_y))| {
-                let f = &self.features[i];
-                let [ux, uy] = [f.site_m[0] * NM, f.site_m[1] * NM];
-                row_x[0] = s * ux + c * uy;
-                row_y[0] = -(c * ux - s * uy);
-                row_x[1] = -1.0;
-                row_y[2] = -1.0;
-                row_y[3] = (f.controller_m[1] - f.centre_m[1]) * NM;
-                let spline = &self.rows[i];
-                for (r, value) in spline.values.iter().enumerate() {
-                    let j = spline.first + r;
-                    if j > 0 {
-                        row_x[SPLINE_AT + j - 1] = *value;
-                        row_y[SPLINE_AT + b + j - 1] = *value;
-                    }
-                }
-                for (k, &start) in self.creep_starts.iter().enumerate() {
-                    let elapsed = f.time_s - start;
-                    if elapsed <= 0.0 {
-                        continue;
-                    }
-                    let q = p[at + 3 * k + 2];
-                    let t0 = self.t0_map.t0(q);
-                    let log = (elapsed / t0).ln_1p();
-                    let dlog = -elapsed / (t0 * (t0 + elapsed)) * self.t0_map.derivative(q);
-                    row_x[at + 3 * k] = log;
-                    row_y[at + 3 * k + 1] = log;
-                    row_x[at + 3 * k + 2] = p[at + 3 * k] * dlog;
-                    row_y[at + 3 * k + 2] = p[at + 3 * k + 1] * dlog;
-                }
-                let mut lag = [0.0; 5];
-                law_gradient(
-                    &law,
-                    f.line_time_s,
-                    Quantity::ExcessIntegral,
-                    &mut lag[..hysteresis_count],
-                );
-                for j in 0..hysteresis_count {
-                    let g = match f.pass {
-                        ScanPass::Trace => lag[j],
-                        ScanPass::Retrace => end[j] - lag[j],
-                    };
-                    row_x[h_at + j] = f.lag_direction_m_per_s[0] * NM * g;
-                    row_y[h_at + j] = f.lag_direction_m_per_s[1] * NM * g;
-                }
-            });
-        DMatrix::from_row_slice(self.rows(), n, &rows)
     }
 }
