@@ -121,6 +121,7 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         .iter()
         .map(|input| {
             analyse_model_file(&input.path, &request.config, frame_options)
+                .map(kept_for_the_series)
                 .with_context(|| format!("frame {} cannot be analysed alone", input.path.display()))
         })
         .collect::<Result<_>>()?;
@@ -190,6 +191,18 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
 /// the global registration and its cross-validation (a third of the cost of a frame).
 fn frame_options(options: &mut dhct_pipeline::PipelineOptions) {
     options.dhct.route = dhct_distortion::RoutePolicy::LocalOnly;
+}
+
+/// `frame` without what the series does not read (the rejected candidates, each feature's
+/// local distortion), so that a long session holds little more than its features.
+fn kept_for_the_series(mut frame: FrameModel) -> FrameModel {
+    for set in &mut frame.run.features {
+        set.rejected = Vec::new();
+        set.features.shrink_to_fit();
+    }
+    frame.run.dhct.passes = Vec::new();
+    frame.run.dhct.routes = None;
+    frame
 }
 
 /// The series fit of the analysed frames in time order, each placed from the frame before

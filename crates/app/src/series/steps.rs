@@ -18,6 +18,8 @@ pub struct SeenStep {
     shift_px: [f64; 2],
     /// The correlation's next best peak over the best.
     next_peak_ratio: f64,
+    /// The best peak over what noise alone reaches (standard deviations).
+    significance: f64,
 }
 
 /// Per frame in time order, the step its trace image shows against the frame before's
@@ -50,11 +52,13 @@ pub fn observed(
             && g0.pitch_x() == g1.pitch_x()
             && g0.pitch_y() == g1.pitch_y()
             && g0.scan_angle() == g1.scan_angle();
-        // Blurred over half a nearest-neighbour distance: the lattice gone, defects kept.
+        // Blurred over one nearest-neighbour distance: the lattice gone (its strongest
+        // reflection down by e^-26; half the distance left e^-6.6, as strong as the noise and
+        // coherent over the frame), defects kept as blobs.
         let nn = corrected[timed[k].input]
             .lattice
             .nearest_neighbour_distance();
-        let blur_px = 0.5 * nn / g1.pitch_x().max(g1.pitch_y());
+        let blur_px = nn / g1.pitch_x().max(g1.pitch_y());
         let found = comparable
             .then(|| correlation::frame_offset(&before, &current, blur_px))
             .flatten()
@@ -65,6 +69,7 @@ pub fn observed(
                 },
                 shift_px: offset.shift_px,
                 next_peak_ratio: offset.next_peak_ratio,
+                significance: offset.significance,
             });
         steps.push(found);
         before = current;
@@ -82,14 +87,15 @@ pub fn notes(steps: &[Option<SeenStep>]) -> Vec<String> {
             Some(format!(
                 "frame {k} placed from its image's correlation with frame {}: shifted ({:.2}, \
                  {:.2}) px, D changed by ({}, {}) {:.0} s into both (the next correlation peak {:.0} % of the \
-                 best)",
+                 best, the best {:.1}σ above noise)",
                 k - 1,
                 s.shift_px[0],
                 s.shift_px[1],
                 dhct_scan::quantity::length(s.step.step_m[0]),
                 dhct_scan::quantity::length(s.step.step_m[1]),
                 s.step.frame_time_s,
-                100.0 * s.next_peak_ratio
+                100.0 * s.next_peak_ratio,
+                s.significance
             ))
         })
         .collect()

@@ -5,7 +5,7 @@
 
 use dhct_lattice::Lattice;
 use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
-use dhct_numerics::robust::mad_sigma_about;
+use dhct_numerics::robust::{mad_sigma_about, median};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -184,9 +184,12 @@ pub fn fit_series(
     };
     let mut features = index_series(frames, lattice, &placed)?;
     let mut setup = Setup::new(frames, options);
+    let own = own_rms(frames, lattice);
     let knots = match options.knots {
         KnotChoice::Fixed(k) => (k, Vec::new()),
-        KnotChoice::CrossValidated => setup.cross_validate(&features, frames, &shifts)?,
+        KnotChoice::CrossValidated => {
+            setup.cross_validate(&features, frames, &shifts, typical(&own))?
+        }
     };
     let mut fit = setup.fit(
         &features,
@@ -255,7 +258,7 @@ pub fn fit_series(
         .collect();
     fit.recentre_on(&first);
     fit.frame_rms_m = frame_rms(&fit, &features, frames.len());
-    fit.own_rms_m = own_rms(frames, lattice);
+    fit.own_rms_m = own;
     check_explained(&fit)?;
     Ok(fit)
 }
@@ -699,12 +702,17 @@ impl Setup {
     }
 
     /// The knot count with the lowest held-out misfit: 5 folds of blocks of time (an
-    /// eighth of a frame each), each fitted without its features and scored on them.
+    /// eighth of a frame each), each fitted without its features and scored on them. The
+    /// knot counts double from 0 until two in a row score worse once the misfit is near
+    /// `noise_m` (a frame's misfit under its own model): far above it, the spline is still
+    /// too stiff for the drift (an oscillation over a long session needs knots near its
+    /// period before any count helps), and a flat score says nothing yet.
     fn cross_validate(
         &self,
         features: &[SeriesFeature],
         frames: &[SeriesFrame],
         shifts: &[[f64; 2]],
+        noise_m: f64,
     ) -> Result<(usize, Vec<KnotScore>), DistortionError> {
         let block = frames[0].geometry.frame_duration() / 8.0;
         let most = 4 * frames.len();
@@ -743,7 +751,7 @@ impl Setup {
                     held_out_rms_m: sx.hypot(sy),
                 });
             }
-            if worse_twice(&scores) {
+            if enough_knots(&scores, noise_m) {
                 break;
             }
         }
@@ -756,8 +764,29 @@ impl Setup {
     }
 }
 
-/// Whether the last two knot counts both scored worse than the one before each: more knots
-/// only fit noise from here on.
+/// The held-out misfit (over a frame's own model's) below which more knots only fit
+/// noise once they stop helping; above it the drift is not followed yet.
+const SETTLED_MISFIT: f64 = 2.0;
+
+/// The median of the finite values (NaN when there are none).
+fn typical(values: &[f64]) -> f64 {
+    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    median(&mut finite).unwrap_or(f64::NAN)
+}
+
+/// Whether more knots only fit noise from here on: the last two knot counts both scored
+/// worse than the one before each, and the best score is within [`SETTLED_MISFIT`] of
+/// `noise_m` (NaN: not known, and the scores alone decide).
+fn enough_knots(scores: &[KnotScore], noise_m: f64) -> bool {
+    let best = scores
+        .iter()
+        .map(|s| s.held_out_rms_m)
+        .fold(f64::INFINITY, f64::min);
+    let settled = noise_m.is_nan() || best <= SETTLED_MISFIT * noise_m;
+    settled && worse_twice(scores)
+}
+
+/// Whether the last two knot counts both scored worse than the one before each.
 fn worse_twice(scores: &[KnotScore]) -> bool {
     let n = scores.len();
     n >= 3
@@ -895,5 +924,35 @@ fn trajectory_point(
         time_s: t,
         displacement_m: drift.displacement(t),
         sigma_m,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scores(pm: &[f64]) -> Vec<KnotScore> {
+        pm.iter()
+            .enumerate()
+            .map(|(k, v)| KnotScore {
+                interior_knots: k,
+                held_out_rms_m: v * 1e-12,
+            })
+            .collect()
+    }
+
+    /// A flat score far above the noise (a spline still too stiff for an oscillating
+    /// drift) asks for more knots; the same rise at the noise level stops.
+    #[test]
+    fn knots_stop_being_added_only_once_the_misfit_is_near_the_noise() {
+        let noise = 1.1e-12;
+        assert!(!enough_knots(&scores(&[232.7, 231.9, 232.3, 232.8]), noise));
+        assert!(enough_knots(&scores(&[3.0, 1.2, 1.3, 1.4]), noise));
+        assert!(!enough_knots(&scores(&[3.0, 1.2, 1.3]), noise));
+        assert!(!enough_knots(&scores(&[3.0, 1.2, 1.1, 1.4]), noise));
+        assert!(enough_knots(
+            &scores(&[232.7, 231.9, 232.3, 232.8]),
+            f64::NAN
+        ));
     }
 }
