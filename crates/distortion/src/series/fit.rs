@@ -5,7 +5,7 @@
 
 use dhct_lattice::Lattice;
 use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
-use dhct_numerics::robust::{mad_sigma_about, median};
+use dhct_numerics::robust::{finite_median, mad_sigma_about};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -188,7 +188,8 @@ pub fn fit_series(
     let knots = match options.knots {
         KnotChoice::Fixed(k) => (k, Vec::new()),
         KnotChoice::CrossValidated => {
-            setup.cross_validate(&features, frames, &shifts, typical(&own))?
+            let noise = finite_median(own.iter().copied()).unwrap_or(f64::NAN);
+            setup.cross_validate(&features, frames, &shifts, noise)?
         }
     };
     let mut fit = setup.fit(
@@ -767,12 +768,6 @@ impl Setup {
 /// The held-out misfit (over a frame's own model's) below which more knots only fit
 /// noise once they stop helping; above it the drift is not followed yet.
 const SETTLED_MISFIT: f64 = 2.0;
-
-/// The median of the finite values (NaN when there are none).
-fn typical(values: &[f64]) -> f64 {
-    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    median(&mut finite).unwrap_or(f64::NAN)
-}
 
 /// Whether more knots only fit noise from here on: the last two knot counts both scored
 /// worse than the one before each, and the best score is within [`SETTLED_MISFIT`] of
