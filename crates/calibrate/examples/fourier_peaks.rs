@@ -17,10 +17,22 @@ fn main() {
     let file = dhct_sm4_io::read_path(std::path::Path::new(path)).expect("a readable file");
     let pair = file.topography().expect("a topography");
     let geometry = pair.geometry();
-    let image = pair.image(dhct_scan::ScanPass::Trace).expect("a trace");
+    let (_, image) = pair.images().next().expect("an image");
     let measured = measure_lattice(image.z.view(), geometry, None).expect("a lattice");
     println!("blind: {}", measured.lattice.describe());
-    for p in measured.peaks().iter().take(20) {
+    for noise in &measured.periodic_noise {
+        println!(
+            "  periodic noise: {:.1} Hz, period {:.3e} m, {} peaks, power {:.2e}",
+            noise.frequency_hz, noise.period_m, noise.peaks, noise.relative_power
+        );
+    }
+    for r in &measured.lattice.reflections {
+        println!(
+            "  blind index {:?} at {:?} snr {:.1}",
+            r.index, r.frequency_per_m, r.snr
+        );
+    }
+    for p in measured.peaks().iter().take(48) {
         println!(
             "  k = ({:7.2}, {:7.2}) bins  power {:9.3e}  snr {:8.1}",
             p.k[0], p.k[1], p.power, p.snr

@@ -156,7 +156,7 @@ pub fn find_basis(peaks: &[Peak]) -> Option<FittedBasis> {
                 ca.total_cmp(&cb)
             }
         })?;
-    let (basis, covariance) = refine(&basis, peaks, &chosen.indices)?;
+    let (basis, covariance) = refine(&basis, peaks, &refinable(&basis, peaks, &chosen.indices))?;
     let basis = reduce(basis);
     let rescored = score(&basis, peaks)?;
     Some(FittedBasis {
@@ -165,6 +165,43 @@ pub fn find_basis(peaks: &[Peak]) -> Option<FittedBasis> {
         indices: rescored.indices,
         indexed_power: rescored.indexed_power,
     })
+}
+
+/// A peak farther than this many of its position uncertainties from its reflection under
+/// the current map is left out of the next least-squares step (a noise peak that lands
+/// near some high-order reflection by chance)…
+const CONSISTENT_SIGMAS: f64 = 3.0;
+
+/// …its uncertainty for this test including this fraction of its radius: a non-uniform
+/// distortion (creep, a drift that changes) smears and shifts a peak in proportion to its
+/// frequency.
+const DISTORTION_SMEAR: f64 = 0.005;
+
+/// The indices the least-squares refinement uses under basis `n`: without the peaks whose
+/// position could not be refined (beside the scan-line band, off by up to a bin on a small
+/// frame) or that lie more than [`CONSISTENT_SIGMAS`] from their reflection, as long as the
+/// others still span two directions.
+pub(crate) fn refinable(
+    n: &Matrix2<f64>,
+    peaks: &[Peak],
+    indices: &[Option<[i64; 2]>],
+) -> Vec<Option<[i64; 2]>> {
+    let consistent = |p: &Peak, h: [i64; 2]| {
+        let predicted = n * Vector2::new(h[0] as f64, h[1] as f64);
+        let sigma = position_sigma(p).hypot(DISTORTION_SMEAR * predicted.norm());
+        (Vector2::new(p.k[0], p.k[1]) - predicted).norm() <= CONSISTENT_SIGMAS * sigma
+    };
+    let refined: Vec<Option<[i64; 2]>> = peaks
+        .iter()
+        .zip(indices)
+        .map(|(p, i)| i.filter(|&h| !p.unrefined && consistent(p, h)))
+        .collect();
+    let kept: Vec<[i64; 2]> = refined.iter().flatten().copied().collect();
+    let spans = kept
+        .iter()
+        .enumerate()
+        .any(|(i, a)| kept[i + 1..].iter().any(|b| a[0] * b[1] != a[1] * b[0]));
+    if spans { refined } else { indices.to_vec() }
 }
 
 /// Position uncertainty of a peak (bins): about half a bin at the detection threshold,

@@ -6,6 +6,7 @@ use nalgebra::{Matrix2, Matrix4, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::basis::propagate;
+use crate::periodic_noise::PeriodicNoise;
 use crate::spectrum::{Peak, PowerSpectrum};
 
 /// The shape of a 2-D lattice, judged from its reduced cell (tolerances: 3 % in length
@@ -147,8 +148,10 @@ pub struct LatticeMeasurement {
     /// The measured reciprocal basis (bins, reduced) and its covariance.
     pub(crate) reciprocal: Matrix2<f64>,
     pub(crate) covariance: Matrix4<f64>,
-    /// Every peak detected (bins), strongest first.
+    /// Every peak detected (bins), strongest first, but those of periodic noise.
     pub(crate) peaks: Vec<Peak>,
+    /// Periodic noise in time whose peaks were left out, strongest first.
+    pub periodic_noise: Vec<PeriodicNoise>,
 }
 
 impl LatticeMeasurement {

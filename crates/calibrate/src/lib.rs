@@ -48,6 +48,7 @@ mod image_lattice;
 mod matching;
 mod measure;
 mod named_fit;
+mod periodic_noise;
 mod spectrum;
 mod structure;
 
@@ -61,6 +62,7 @@ pub use measure::{
 pub use named_fit::{
     MIN_EXPLAINED_FRACTION, MIN_PRIMARY_COVERAGE, MapBounds, STRONG_POWER_FRACTION, UnexplainedPeak,
 };
+pub use periodic_noise::PeriodicNoise;
 pub use spectrum::{Peak, PowerSpectrum, SpectrumError};
 
 use dhct_lattice::Lattice;
@@ -77,6 +79,28 @@ pub struct PassCalibration {
     pub lattice: ImageLattice,
     /// Matched to the lattice given.
     pub matched: LatticeMatch,
+    /// Periodic noise in time the image shows, whose peaks were left out, strongest first.
+    #[serde(default)]
+    pub periodic_noise: Vec<PeriodicNoise>,
+}
+
+impl PassCalibration {
+    /// In words, e.g. "periodic noise in time left out of the lattice's measurement:
+    /// 100.3 Hz (32 peaks)"; empty when there is none.
+    pub fn periodic_noise_note(&self) -> String {
+        if self.periodic_noise.is_empty() {
+            return String::new();
+        }
+        let each: Vec<String> = self
+            .periodic_noise
+            .iter()
+            .map(|n| format!("{:.1} Hz ({} peaks)", n.frequency_hz, n.peaks))
+            .collect();
+        format!(
+            "periodic noise in time left out of the lattice's measurement: {}",
+            each.join(", ")
+        )
+    }
 }
 
 /// The calibration of a scan pair.
@@ -121,6 +145,7 @@ pub fn calibrate_pair(
         pass: first_pass,
         lattice: first.lattice,
         matched,
+        periodic_noise: first.periodic_noise,
     }];
     for (pass, measurement) in measured {
         let Ok(measurement) = measurement else {
@@ -131,6 +156,7 @@ pub fn calibrate_pair(
                 pass,
                 lattice: measurement.lattice,
                 matched,
+                periodic_noise: measurement.periodic_noise,
             });
         }
     }

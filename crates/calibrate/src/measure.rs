@@ -1,7 +1,7 @@
 //! The lattice an image shows: two real-space cell vectors in file units with their
 //! uncertainties, from the image's spectral peaks.
 
-use dhct_scan::ScanGeometry;
+use dhct_scan::{Axis, ScanGeometry};
 use nalgebra::{Matrix2, Vector2};
 use ndarray::{Array2, ArrayView2};
 
@@ -10,7 +10,8 @@ use crate::basis::{FittedBasis, find_basis, reduce};
 use crate::image_lattice::{
     ImageLattice, LatticeMeasurement, LatticeShape, Reflection, real_basis,
 };
-use crate::spectrum::PowerSpectrum;
+use crate::periodic_noise::{NoiseColumn, PeriodicNoise, periodic_noise};
+use crate::spectrum::{Peak, PowerSpectrum};
 
 /// Largest image side (pixels) measured at full resolution; larger images are binned.
 pub const MAX_MEASURED_SIDE: usize = 1024;
@@ -90,7 +91,7 @@ pub fn measure_lattice(
         return Err(CalibrationError::BadPitch { pitch_x, pitch_y });
     }
     let spectrum = PowerSpectrum::of(z, mask, geometry.fast_axis())?;
-    let peaks = spectrum.peaks();
+    let mut peaks = spectrum.peaks();
     if peaks.len() < 2 {
         return Err(CalibrationError::NoLattice {
             reason: format!(
@@ -99,17 +100,21 @@ pub fn measure_lattice(
             ),
         });
     }
-    let FittedBasis {
-        basis,
-        covariance,
-        indices,
-        indexed_power,
-    } = find_basis(&peaks).ok_or_else(|| CalibrationError::NoLattice {
+    let fitted = find_basis(&peaks).ok_or_else(|| CalibrationError::NoLattice {
         reason: format!(
             "{} peaks stand out, but no two independent ones index the others",
             peaks.len()
         ),
     })?;
+    let (
+        FittedBasis {
+            basis,
+            covariance,
+            indices,
+            indexed_power,
+        },
+        noise,
+    ) = without_periodic_noise(&mut peaks, fitted, geometry.fast_axis());
     let bin_per_m = [
         1.0 / (spectrum.columns as f64 * pitch_x),
         1.0 / (spectrum.rows as f64 * pitch_y),
@@ -131,6 +136,10 @@ pub fn measure_lattice(
         })
         .collect();
     reflections.sort_by(|a, b| b.snr.total_cmp(&a.snr));
+    let periodic_noise = noise
+        .iter()
+        .map(|column| periodic_noise_in_time(column, &spectrum, geometry))
+        .collect();
     let mut measurement = LatticeMeasurement {
         lattice: ImageLattice {
             vectors_m: [[cell[(0, 0)], cell[(1, 0)]], [cell[(0, 1)], cell[(1, 1)]]],
@@ -148,6 +157,7 @@ pub fn measure_lattice(
         reciprocal: basis,
         covariance,
         peaks,
+        periodic_noise,
     };
     // Uncertainties of the reduced cell's lengths and angle: invariant quantities, so they
     // are computed from the conventional cell of each perturbed basis.
@@ -162,6 +172,53 @@ pub fn measure_lattice(
     lattice.angle_sigma_deg = angle_sigma_deg;
     lattice.shape = LatticeShape::of(lattice.lengths_m, lattice.angle_deg);
     Ok(measurement)
+}
+
+/// `peaks` without the periodic noise in time that `fitted` (the lattice found with it)
+/// leaves unindexed, and the lattice found again without it (`fitted` itself when there is
+/// none, or when nothing is found without it).
+fn without_periodic_noise(
+    peaks: &mut Vec<Peak>,
+    fitted: FittedBasis,
+    fast_axis: Axis,
+) -> (FittedBasis, Vec<NoiseColumn>) {
+    let (noise, in_noise) = periodic_noise(peaks, &fitted.indices, fast_axis == Axis::Horizontal);
+    if noise.is_empty() {
+        return (fitted, noise);
+    }
+    let kept: Vec<Peak> = peaks
+        .iter()
+        .zip(&in_noise)
+        .filter(|(_, noise)| !**noise)
+        .map(|(p, _)| *p)
+        .collect();
+    match (kept.len() >= 2).then(|| find_basis(&kept)).flatten() {
+        Some(again) => {
+            *peaks = kept;
+            (again, noise)
+        }
+        None => (fitted, Vec::new()),
+    }
+}
+
+/// A noise column of `spectrum` (the image's, of `geometry`) in time and along the fast
+/// axis.
+fn periodic_noise_in_time(
+    column: &NoiseColumn,
+    spectrum: &PowerSpectrum,
+    geometry: &ScanGeometry,
+) -> PeriodicNoise {
+    let (padded, pitch) = match geometry.fast_axis() {
+        Axis::Horizontal => (spectrum.columns, geometry.pitch_x()),
+        Axis::Vertical => (spectrum.rows, geometry.pitch_y()),
+    };
+    let cycles_per_pixel = column.fast_bins / padded as f64;
+    PeriodicNoise {
+        frequency_hz: cycles_per_pixel / geometry.pixel_period(),
+        period_m: pitch / cycles_per_pixel,
+        peaks: column.peaks,
+        relative_power: column.relative_power,
+    }
 }
 
 /// Angle between the columns of `a`, degrees.
@@ -238,6 +295,67 @@ mod tests {
         for length in measured.lengths_m {
             assert!((length / a_m - 1.0).abs() < 0.002, "{measured:?}");
         }
+    }
+
+    /// A hexagonal lattice of `a_px` pixels with mains hum along the scan lines at
+    /// `hum_cycles_per_px`, its phase wandering from line to line (a random walk).
+    fn lattice_with_hum(n: usize, a_px: f64, hum_cycles_per_px: f64, hum: f64) -> Array2<f64> {
+        let k = 4.0 * std::f64::consts::PI / (3f64.sqrt() * a_px);
+        let waves: Vec<[f64; 2]> = [75.0f64, 15.0, -45.0]
+            .iter()
+            .map(|d| [k * d.to_radians().cos(), k * d.to_radians().sin()])
+            .collect();
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut phase = 0.0;
+        let phases: Vec<f64> = (0..n)
+            .map(|_| {
+                phase += 1.2 * (uniform() - 0.5);
+                phase
+            })
+            .collect();
+        Array2::from_shape_fn((n, n), |(r, c)| {
+            let (x, y) = (c as f64, r as f64);
+            let atoms: f64 = waves.iter().map(|w| (w[0] * x + w[1] * y).cos()).sum();
+            let wave = (2.0 * std::f64::consts::PI * hum_cycles_per_px * x + phases[r]).cos();
+            1e-11 * ((0.8 * atoms).exp() + hum * wave)
+        })
+    }
+
+    #[test]
+    fn mains_hum_along_the_lines_is_left_out_of_the_lattice() {
+        let (n, a_px, pitch, pixel_period) = (512, 32.0, 1e-11, 3.9e-3);
+        let z = lattice_with_hum(n, a_px, 0.358, 0.15);
+        let geometry = ScanGeometry::new(
+            n,
+            n,
+            pitch,
+            pitch,
+            pixel_period,
+            dhct_scan::ScanDirection::Right,
+            dhct_scan::ScanDirection::Down,
+        )
+        .unwrap();
+        let measured = measure_lattice(z.view(), &geometry, None).unwrap();
+        let lattice = &measured.lattice;
+        let a_m = a_px * pitch;
+        // With the hum's peaks in the fit: 0.33 % short and 0.085° off.
+        for length in lattice.lengths_m {
+            assert!((length / a_m - 1.0).abs() < 0.001, "{lattice:?}");
+        }
+        assert!((lattice.angle_deg - 60.0).abs() < 0.03, "{lattice:?}");
+        let hum = measured.periodic_noise.first().expect("the hum is found");
+        let hz = 0.358 / pixel_period;
+        assert!(
+            (hum.frequency_hz / hz - 1.0).abs() < 0.01,
+            "{hum:?} against {hz} Hz"
+        );
+        assert!(hum.peaks >= 4, "{hum:?}");
     }
 
     #[test]

@@ -23,7 +23,7 @@ use dhct_scan::Axis;
 use nalgebra::{Matrix2, Matrix4, Vector2};
 use serde::{Deserialize, Serialize};
 
-use crate::basis::{position_sigma, refine};
+use crate::basis::{refinable, refine};
 use crate::image_lattice::real_basis;
 use crate::spectrum::Peak;
 use crate::structure::{amplitude, structure_factor};
@@ -421,43 +421,6 @@ fn primary_coverage(
     } else {
         observed as f64 / visible as f64
     }
-}
-
-/// A peak farther than this many of its position uncertainties from its reflection under
-/// the current map is left out of the next least-squares step (a noise peak that lands
-/// near some high-order reflection by chance)…
-const CONSISTENT_SIGMAS: f64 = 3.0;
-
-/// …its uncertainty for this test including this fraction of its radius: a non-uniform
-/// distortion (creep, a drift that changes) smears and shifts a peak in proportion to its
-/// frequency.
-const DISTORTION_SMEAR: f64 = 0.005;
-
-/// The indices the least-squares refinement uses under basis `n`: without the peaks whose
-/// position could not be refined (beside the scan-line band, off by up to a bin on a small
-/// frame) or that lie more than [`CONSISTENT_SIGMAS`] from their reflection, as long as the
-/// others still span two directions.
-fn refinable(
-    n: &Matrix2<f64>,
-    peaks: &[Peak],
-    indices: &[Option<[i64; 2]>],
-) -> Vec<Option<[i64; 2]>> {
-    let consistent = |p: &Peak, h: [i64; 2]| {
-        let predicted = n * Vector2::new(h[0] as f64, h[1] as f64);
-        let sigma = position_sigma(p).hypot(DISTORTION_SMEAR * predicted.norm());
-        (Vector2::new(p.k[0], p.k[1]) - predicted).norm() <= CONSISTENT_SIGMAS * sigma
-    };
-    let refined: Vec<Option<[i64; 2]>> = peaks
-        .iter()
-        .zip(indices)
-        .map(|(p, i)| i.filter(|&h| !p.unrefined && consistent(p, h)))
-        .collect();
-    let kept: Vec<[i64; 2]> = refined.iter().flatten().copied().collect();
-    let spans = kept
-        .iter()
-        .enumerate()
-        .any(|(i, a)| kept[i + 1..].iter().any(|b| a[0] * b[1] != a[1] * b[0]));
-    if spans { refined } else { indices.to_vec() }
 }
 
 /// Fits `lattice` to `peaks` (bins, strongest first) within `bounds`: the best-scoring map,

@@ -485,12 +485,15 @@ fn calibration_lines(summary: &RunSummary) -> String {
     match (&summary.calibration, &summary.calibration_note) {
         (Some(found), _) => {
             for pass in &found.passes {
+                let noise = pass.periodic_noise_note();
                 let _ = writeln!(
                     s,
-                    "{}: the image shows {}; {}",
+                    "{}: the image shows {}; {}{}{}",
                     pass.pass,
                     pass.lattice.describe(),
-                    pass.matched.explanation()
+                    pass.matched.explanation(),
+                    if noise.is_empty() { "" } else { "; " },
+                    noise
                 );
             }
             let c = &found.calibration;
