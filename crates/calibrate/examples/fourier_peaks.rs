@@ -8,11 +8,18 @@ use dhct_lattice::{Hexagonal, PlaneGroup};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let (Some(path), Some(nn)) = (args.get(1), args.get(2).and_then(|s| s.parse::<f64>().ok()))
-    else {
-        eprintln!("usage: fourier_peaks FILE NN_M [TOLERANCE]");
+    let (Some(path), Some(which)) = (args.get(1), args.get(2)) else {
+        eprintln!("usage: fourier_peaks FILE NN_M|CATALOGUE_NAME [TOLERANCE]");
         std::process::exit(2);
     };
+    let lattice: Box<dyn dhct_lattice::Lattice + Send + Sync> = match which.parse::<f64>() {
+        Ok(nn) => Box::new(Hexagonal::new("hexagonal", nn, PlaneGroup::P6mm).unwrap()),
+        Err(_) => dhct_lattice::catalogue::lookup(which)
+            .expect("a catalogue lattice")
+            .build(None)
+            .unwrap(),
+    };
+    let lattice = lattice.as_ref();
     let tolerance = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(0.15);
     let file = dhct_sm4_io::read_path(std::path::Path::new(path)).expect("a readable file");
     let pair = file.topography().expect("a topography");
@@ -38,12 +45,11 @@ fn main() {
             p.k[0], p.k[1], p.power, p.snr
         );
     }
-    let lattice = Hexagonal::new("hexagonal", nn, PlaneGroup::P6mm).unwrap();
     let options = CheckOptions {
         pitch_tolerance: tolerance,
         ..CheckOptions::default()
     };
-    match check_inputs(&measured, &lattice, geometry.fast_axis(), &options) {
+    match check_inputs(&measured, lattice, geometry.fast_axis(), &options) {
         Ok(m) => println!(
             "fit: scale {:?} shear {:.2}° anisotropy {:.3} explained {:.2}; unexplained {:?}",
             m.calibration.scale,
@@ -60,7 +66,7 @@ fn main() {
             ..CheckOptions::default()
         };
         let bounds = options.bounds(geometry.fast_axis());
-        if let Some(m) = dhct_calibrate::match_lattice(&measured, &lattice, &bounds) {
+        if let Some(m) = dhct_calibrate::match_lattice(&measured, lattice, &bounds) {
             println!(
                 "tolerance {tolerance:.2}: scale {:?} rotation {:.1} explained {:.2} coverage {:.2} explains {}",
                 m.calibration.scale,
@@ -69,6 +75,13 @@ fn main() {
                 m.primary_coverage,
                 m.explains_image
             );
+            for shell in &m.shells {
+                println!(
+                    "  shell {:.3e}/m: {:?} relative power {:?}",
+                    shell.frequency_per_m, shell.indices, shell.relative_power
+                );
+            }
+            println!("  cell in file {:?}", m.cell_in_file_m);
         }
     }
 }

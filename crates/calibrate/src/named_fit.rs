@@ -39,6 +39,13 @@ pub const STRONG_POWER_FRACTION: f64 = 0.02;
 /// chance.
 pub const MIN_EXPLAINED_FRACTION: f64 = 0.3;
 
+/// A map that puts this many strong peaks on its reflections, spanning two directions and
+/// one of them on a shell it predicts strongest ([`PRIMARY_WEIGHT`]), explains them by no
+/// chance either: a motif the lattice does not model can make higher orders the image's
+/// strongest and leave the first order in the scan-line band or under the background (the
+/// adatoms around Si(111)-7×7's corner holes, 20 nm across: 25 peaks within 0.3 bin).
+const MANY_STRONG_HITS: usize = 8;
+
 /// Peaks at reflections of the lattice's two strongest predicted shells (weight `1/rank`
 /// at least this) are the ones that must show the lattice: one shell's six reflections
 /// may lie partly in the scan-line band, and a motif may make the second shell as strong.
@@ -167,7 +174,8 @@ pub(crate) struct NamedFit {
     /// periods or shorter.
     pub explained_fraction: f64,
     /// Whether two independent strong peaks are at reflections of the two shells the lattice
-    /// predicts strongest.
+    /// predicts strongest (or one is, among [`MANY_STRONG_HITS`] strong peaks it indexes in
+    /// two directions).
     pub independent: bool,
     /// Fraction of the strongest predicted shell's visible reflections that are observed
     /// peaks (1 when none is visible).
@@ -295,6 +303,14 @@ fn lowest_reflection(basis: &Matrix2<f64>, shells: &[PredictedShell]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// Whether two of `indices` are independent.
+fn spans_two_directions(indices: &[[i64; 2]]) -> bool {
+    indices
+        .iter()
+        .enumerate()
+        .any(|(i, a)| indices[i + 1..].iter().any(|b| a[0] * b[1] != a[1] * b[0]))
+}
+
 /// Indexes `peaks` with `basis` (a peak is explained within 1 bin or 4 % of its radius,
 /// at most a quarter of the shortest basis vector, at a reflection that is not extinct).
 /// The explained fraction is of the strong peaks the lattice could explain: those at a
@@ -307,6 +323,7 @@ fn index(basis: &Matrix2<f64>, peaks: &[Peak], shells: &[PredictedShell]) -> Opt
     let long_period_below = LONG_PERIOD * lowest_reflection(basis, shells);
     let (mut score, mut explained, mut strong_total) = (0.0, 0.0, 0.0);
     let mut strong_indices: Vec<[i64; 2]> = Vec::new();
+    let mut strong_hits: Vec<[i64; 2]> = Vec::new();
     let indices: Vec<Option<[i64; 2]>> = peaks
         .iter()
         .map(|p| {
@@ -325,6 +342,7 @@ fn index(basis: &Matrix2<f64>, peaks: &[Peak], shells: &[PredictedShell]) -> Opt
                 score += amplitude * weight;
                 if strong {
                     explained += amplitude;
+                    strong_hits.push(index);
                     if weight >= PRIMARY_WEIGHT {
                         strong_indices.push(index);
                     }
@@ -333,11 +351,10 @@ fn index(basis: &Matrix2<f64>, peaks: &[Peak], shells: &[PredictedShell]) -> Opt
             })
         })
         .collect();
-    let independent = strong_indices.iter().enumerate().any(|(i, a)| {
-        strong_indices[i + 1..]
-            .iter()
-            .any(|b| a[0] * b[1] != a[1] * b[0])
-    });
+    let independent = spans_two_directions(&strong_indices)
+        || (!strong_indices.is_empty()
+            && strong_hits.len() >= MANY_STRONG_HITS
+            && spans_two_directions(&strong_hits));
     let top_explained = indices
         .iter()
         .take(TOP_PEAKS)
@@ -634,6 +651,91 @@ mod tests {
                 || ((h[0].abs() - 0.5).abs() < 1e-6 && (h[1].abs() - 0.5).abs() < 1e-6),
             "{h:?}"
         );
+    }
+
+    #[test]
+    fn a_large_cell_shown_by_its_higher_orders_is_fitted() {
+        // A 7×7-like cell tracked by one narrow feature, 7 cells across a stretched frame:
+        // of the first order only one reflection is a peak (one lies in the scan-line band,
+        // one under the background), the √3 order is weak, and the motif the lattice does
+        // not model makes the orders from 2 up the strongest (the Si(111)-7×7 frame of
+        // 20 nm).
+        let lattice = Hexagonal::si111_7x7();
+        let a = Matrix2::new(1.08, -0.2, 0.0, 1.55);
+        let (pitch, n) = (7.8e-11, 256.0);
+        let [a1, a2] = lattice.translation_cell();
+        let reciprocal = real_basis(&(a * Matrix2::from_columns(&[a1, a2]))).unwrap() * (n * pitch);
+        let g1 = (reciprocal * Vector2::new(1.0, 0.0)).norm();
+        let shells = predicted_shells(&lattice);
+        let mut peaks = Vec::new();
+        let mut faint: Vec<[f64; 2]> = Vec::new();
+        for h in -4i64..=4 {
+            for k in -4i64..=4 {
+                let g = reciprocal * Vector2::new(h as f64, k as f64);
+                let order = g.norm() / g1;
+                let first = shells[0].indices.contains(&[h, k]);
+                let half_plane = g.x > 0.0 || (g.x == 0.0 && g.y > 0.0);
+                if !half_plane
+                    || (h, k) == (0, 0)
+                    || shells[1].indices.contains(&[h, k])
+                    || g.x < 2.5
+                {
+                    continue;
+                }
+                let power = if first { 30.0 } else { 100.0 / order };
+                if first && peaks.iter().any(|p: &Peak| p.power == 30.0) {
+                    faint.push([g.x, g.y]);
+                    continue;
+                }
+                peaks.push(Peak {
+                    k: [g.x, g.y],
+                    power,
+                    snr: 50.0,
+                    unrefined: false,
+                });
+            }
+        }
+        peaks.sort_by(|x, y| y.power.total_cmp(&x.power));
+        assert!(peaks.len() >= 12, "{}", peaks.len());
+        // The faint first-order reflection shows in the spectrum (6 × its background)
+        // without standing out as a peak.
+        let shown: Vec<[f64; 2]> = peaks.iter().map(|p| p.k).collect();
+        let near = |list: &[[f64; 2]], k: [f64; 2]| {
+            list.iter().any(|p| {
+                (p[0] - k[0]).hypot(p[1] - k[1]) <= 1.0 || (p[0] + k[0]).hypot(p[1] + k[1]) <= 1.0
+            })
+        };
+        let contrast = move |k: [f64; 2]| {
+            if near(&shown, k) {
+                100.0
+            } else if near(&faint, k) {
+                6.0
+            } else {
+                1.0
+            }
+        };
+        let window = SpectrumWindow {
+            half: [n / 2.0; 2],
+            fast_axis: Axis::Horizontal,
+            contrast: &contrast,
+        };
+        let fit = fit_named(&lattice, &peaks, [1.0 / (n * pitch); 2], &window, &bounds()).unwrap();
+        assert!(
+            fit.explains_image(),
+            "independent {}, explained {}, coverage {}",
+            fit.independent,
+            fit.explained_fraction,
+            fit.primary_coverage
+        );
+        let found = file_map(
+            &fit.basis,
+            [1.0 / (n * pitch); 2],
+            &Matrix2::from_columns(&[a1, a2]),
+        )
+        .unwrap();
+        let shape = MapShape::of(&found);
+        assert!((shape.scale[0] - 1.08).abs() < 1e-6, "{found}");
+        assert!((shape.scale[1] - 1.55).abs() < 1e-6, "{found}");
     }
 
     #[test]
