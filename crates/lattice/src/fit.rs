@@ -47,7 +47,7 @@ pub enum LatticeFitError {
         /// Median distance to the nearest point, metres.
         median_nn_m: f64,
     },
-    /// The indexing lost the lattice.
+    /// The indexing lost the lattice: too few features near a site.
     #[error(
         "the lattice fit diverged: within {} of the seed only {fraction_ok:.0} % of the \
          features lie within half a lattice constant of a site. Check the lattice type and constant, \
@@ -59,6 +59,27 @@ pub enum LatticeFitError {
         radius_m: f64,
         /// Per cent of the features in the disc within the deviation limit.
         fraction_ok: f64,
+    },
+    /// The indexing lost the lattice: the features near a site are, together, farther
+    /// from one affine lattice than a lattice's are.
+    #[error(
+        "the lattice fit diverged: within {} of the seed {fraction_ok:.0} % of the features \
+         lie within half a lattice constant of a site, but {rms_percent:.0} % of a \
+         nearest-neighbour distance from one affine lattice (rms; at most {limit_percent:.0} %): \
+         the lattice there is distorted beyond an affine map, or the features are not all one \
+         lattice's. Check the lattice type and constant, or fit one domain (mask region) at a \
+         time",
+        length(*.radius_m)
+    )]
+    TooScattered {
+        /// Radius of the indexing disc, metres.
+        radius_m: f64,
+        /// Per cent of the features in the disc within the deviation limit.
+        fraction_ok: f64,
+        /// Their rms deviation from the fitted affine lattice, per cent of the NN distance.
+        rms_percent: f64,
+        /// The largest accepted, per cent.
+        limit_percent: f64,
     },
     /// A point has a NaN or infinite coordinate.
     #[error("a point is not finite: set {set}, index {index}")]
@@ -360,7 +381,12 @@ impl Indexing<'_> {
             .sum::<f64>()
             / pairs.len() as f64;
         if mean_square.sqrt() > MAX_RMS_DEVIATION_FRACTION * self.nn {
-            return Err(diverged(fraction));
+            return Err(LatticeFitError::TooScattered {
+                radius_m: radius,
+                fraction_ok: 100.0 * fraction,
+                rms_percent: 100.0 * mean_square.sqrt() / self.nn,
+                limit_percent: 100.0 * MAX_RMS_DEVIATION_FRACTION,
+            });
         }
         // Prefer more points at equal cost.
         Ok(((origin, b), mean_square - pairs.len() as f64 * 1e-30))

@@ -188,7 +188,9 @@ fn random_points_and_too_few_points_are_clear_errors() {
     assert!(
         matches!(
             error,
-            LatticeFitError::Diverged { .. } | LatticeFitError::NoBonds { .. }
+            LatticeFitError::Diverged { .. }
+                | LatticeFitError::TooScattered { .. }
+                | LatticeFitError::NoBonds { .. }
         ),
         "{error}"
     );
@@ -202,4 +204,30 @@ fn random_points_and_too_few_points_are_clear_errors() {
         fit_lattice(&graphite, &[&bad], &LatticeFitOptions::default()),
         Err(LatticeFitError::NotFinite { .. })
     ));
+}
+
+#[test]
+fn a_lattice_scattered_past_a_quarter_of_its_spacing_is_refused_naming_the_rms() {
+    // Uniform jitter of rms 0.3 nn along each axis: most features still lie within half a
+    // lattice constant of a site, but together they are no affine lattice.
+    let graphite = Hexagonal::graphite();
+    let nn = graphite.nearest_neighbour_distance();
+    let (scattered, _) = points(&graphite, 6e-9, 0.3, [1.0, 1.0], [0.0, 0.0], 0.2 * nn);
+    let error = fit_lattice(&graphite, &[&scattered], &LatticeFitOptions::default()).unwrap_err();
+    match error {
+        LatticeFitError::TooScattered {
+            fraction_ok,
+            rms_percent,
+            limit_percent,
+            ..
+        } => {
+            assert!(fraction_ok >= 80.0, "{error}");
+            assert!(rms_percent > limit_percent, "{error}");
+            assert!(error.to_string().contains("rms"), "{error}");
+        }
+        other => panic!("{other}"),
+    }
+    // A tenth of that is a lattice.
+    let (tight, _) = points(&graphite, 6e-9, 0.3, [1.0, 1.0], [0.0, 0.0], 0.02 * nn);
+    assert!(fit_lattice(&graphite, &[&tight], &LatticeFitOptions::default()).is_ok());
 }
