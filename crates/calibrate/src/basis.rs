@@ -285,12 +285,7 @@ mod tests {
     use super::*;
 
     fn peak(kx: f64, ky: f64, power: f64) -> Peak {
-        Peak {
-            k: [kx, ky],
-            power,
-            snr: 100.0,
-            unrefined: false,
-        }
+        Peak::at(kx, ky, power)
     }
 
     #[test]

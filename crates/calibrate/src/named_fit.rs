@@ -598,6 +598,18 @@ mod tests {
         }
     }
 
+    /// The shape of the file map `fit` found for `lattice` on a spectrum `width_m` wide.
+    fn fitted_shape(fit: &NamedFit, lattice: &dyn Lattice, width_m: f64) -> MapShape {
+        let [a1, a2] = lattice.translation_cell();
+        let map = file_map(
+            &fit.basis,
+            [1.0 / width_m; 2],
+            &Matrix2::from_columns(&[a1, a2]),
+        )
+        .unwrap();
+        MapShape::of(&map)
+    }
+
     fn bounds() -> MapBounds {
         MapBounds {
             max_anisotropy: 1.7,
@@ -631,16 +643,9 @@ mod tests {
             &bounds(),
         )
         .unwrap();
-        let [a1, a2] = lattice.translation_cell();
-        let found = file_map(
-            &fit.basis,
-            [1.0 / (n * pitch); 2],
-            &Matrix2::from_columns(&[a1, a2]),
-        )
-        .unwrap();
-        let shape = MapShape::of(&found);
-        assert!((shape.scale[0] - 1.05).abs() < 1e-6, "{found}");
-        assert!((shape.scale[1] - 1.3).abs() < 1e-6, "{found}");
+        let shape = fitted_shape(&fit, &lattice, n * pitch);
+        assert!((shape.scale[0] - 1.05).abs() < 1e-6, "{shape:?}");
+        assert!((shape.scale[1] - 1.3).abs() < 1e-6, "{shape:?}");
         assert!(fit.explains_image());
         let left = fit.unexplained(&peaks, [1.0 / (n * pitch); 2]);
         assert_eq!(left.len(), 1, "{left:?}");
@@ -727,15 +732,9 @@ mod tests {
             fit.explained_fraction,
             fit.primary_coverage
         );
-        let found = file_map(
-            &fit.basis,
-            [1.0 / (n * pitch); 2],
-            &Matrix2::from_columns(&[a1, a2]),
-        )
-        .unwrap();
-        let shape = MapShape::of(&found);
-        assert!((shape.scale[0] - 1.08).abs() < 1e-6, "{found}");
-        assert!((shape.scale[1] - 1.55).abs() < 1e-6, "{found}");
+        let shape = fitted_shape(&fit, &lattice, n * pitch);
+        assert!((shape.scale[0] - 1.08).abs() < 1e-6, "{shape:?}");
+        assert!((shape.scale[1] - 1.55).abs() < 1e-6, "{shape:?}");
     }
 
     #[test]

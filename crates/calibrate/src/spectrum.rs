@@ -69,6 +69,19 @@ pub struct Peak {
     pub unrefined: bool,
 }
 
+#[cfg(test)]
+impl Peak {
+    /// A refined peak at `[kx, ky]` (bins) of `power` and SNR 100, for tests.
+    pub(crate) fn at(kx: f64, ky: f64, power: f64) -> Peak {
+        Peak {
+            k: [kx, ky],
+            power,
+            snr: 100.0,
+            unrefined: false,
+        }
+    }
+}
+
 /// The power spectrum `|F|²` of a levelled, windowed image.
 #[derive(Debug, Clone)]
 pub struct PowerSpectrum {
