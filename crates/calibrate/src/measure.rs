@@ -182,7 +182,7 @@ fn without_periodic_noise(
     fitted: FittedBasis,
     fast_axis: Axis,
 ) -> (FittedBasis, Vec<NoiseColumn>) {
-    let (noise, in_noise) = periodic_noise(peaks, &fitted.indices, fast_axis == Axis::Horizontal);
+    let (noise, in_noise) = periodic_noise(peaks, &fitted.indices, fast_axis);
     if noise.is_empty() {
         return (fitted, noise);
     }

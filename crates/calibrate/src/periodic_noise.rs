@@ -12,6 +12,7 @@
 //! refine the lattice: at high orders a few of them land near reflections by chance (a
 //! column of 32 holds 5–10 such) and pulled that retrace's lattice 2.4 % short.
 
+use dhct_scan::Axis;
 use serde::{Deserialize, Serialize};
 
 use crate::spectrum::Peak;
@@ -51,16 +52,20 @@ pub(crate) struct NoiseColumn {
 }
 
 /// A peak's frequency along the fast axis (≥ 0), bins.
-fn fast_frequency(peak: &Peak, fast_is_x: bool) -> f64 {
-    if fast_is_x { peak.k[0] } else { peak.k[1] }.abs()
+fn fast_frequency(peak: &Peak, fast_axis: Axis) -> f64 {
+    match fast_axis {
+        Axis::Horizontal => peak.k[0],
+        Axis::Vertical => peak.k[1],
+    }
+    .abs()
 }
 
 /// The columns of `peaks` (each the peaks' positions in `peaks`): at least
 /// [`MIN_COLUMN_PEAKS`] peaks whose frequencies along the fast axis lie within
-/// [`COLUMN_WIDTH_BINS`] of the column's lowest (`fast_is_x` when the fast axis is x).
-fn columns(peaks: &[Peak], fast_is_x: bool) -> Vec<Vec<usize>> {
+/// [`COLUMN_WIDTH_BINS`] of the column's lowest.
+fn columns(peaks: &[Peak], fast_axis: Axis) -> Vec<Vec<usize>> {
     let mut order: Vec<usize> = (0..peaks.len()).collect();
-    let fast = |i: usize| fast_frequency(&peaks[i], fast_is_x);
+    let fast = |i: usize| fast_frequency(&peaks[i], fast_axis);
     order.sort_by(|&a, &b| fast(a).total_cmp(&fast(b)));
     let mut found = Vec::new();
     let mut start = 0;
@@ -84,23 +89,46 @@ fn fundamental(index: [i64; 2]) -> bool {
     index[0].abs() <= 1 && index[1].abs() <= 1
 }
 
+/// The peaks of a noise `column` that are noise, and the strongest unindexed peak's power
+/// there: a reflection inside the noise stands out of it (by [`STANDS_OUT`]) at a frequency
+/// no higher than `reach`, where the lattice shows reflections elsewhere; a noise peak that
+/// the lattice indexes by chance does neither, as a rule.
+fn noise_members(
+    column: Vec<usize>,
+    peaks: &[Peak],
+    indices: &[Option<[i64; 2]>],
+    reach: f64,
+) -> (Vec<usize>, f64) {
+    let noise_power = column
+        .iter()
+        .filter(|&&i| indices[i].is_none())
+        .map(|&i| peaks[i].power)
+        .fold(0.0, f64::max);
+    let reflection = |i: usize| {
+        indices[i].is_some()
+            && peaks[i].power >= STANDS_OUT * noise_power
+            && peaks[i].k[0].hypot(peaks[i].k[1]) <= reach
+    };
+    let members = column.into_iter().filter(|&i| !reflection(i)).collect();
+    (members, noise_power)
+}
+
 /// The periodic noise among `peaks` (strongest first) under a lattice that indexes them
 /// as `indices`: the columns of which it indexes fewer than half and none as a fundamental
 /// reflection (the peaks a strong reflection's smear puts beside it make a column too),
-/// and for each peak whether it is noise (in such a column, and not a reflection: indexed,
-/// standing out of the column by [`STANDS_OUT`] and no farther out than a reflection the
-/// lattice indexes outside every column).
+/// and for each peak whether it is noise (in such a column, and not a reflection:
+/// [`noise_members`], with `reach` the highest frequency of a reflection the lattice
+/// indexes outside every column).
 pub(crate) fn periodic_noise(
     peaks: &[Peak],
     indices: &[Option<[i64; 2]>],
-    fast_is_x: bool,
+    fast_axis: Axis,
 ) -> (Vec<NoiseColumn>, Vec<bool>) {
     let strongest = peaks
         .first()
         .map_or(f64::MIN_POSITIVE, |p| p.power)
         .max(f64::MIN_POSITIVE);
-    let columns = columns(peaks, fast_is_x);
-    // The highest frequency of a reflection the lattice indexes outside every column.
+    let columns = columns(peaks, fast_axis);
     let mut in_column = vec![false; peaks.len()];
     for &i in columns.iter().flatten() {
         in_column[i] = true;
@@ -112,46 +140,27 @@ pub(crate) fn periodic_noise(
         .filter(|((_, index), column)| index.is_some() && !**column)
         .map(|((p, _), _)| p.k[0].hypot(p.k[1]))
         .fold(0.0, f64::max);
+    let is_noise = |column: &Vec<usize>| {
+        let indexed = column.iter().filter(|&&i| indices[i].is_some()).count();
+        2 * indexed < column.len() && !column.iter().any(|&i| indices[i].is_some_and(fundamental))
+    };
     let mut in_noise = vec![false; peaks.len()];
-    let mut noise: Vec<NoiseColumn> = columns
-        .into_iter()
-        .filter(|column| {
-            let indexed = column.iter().filter(|&&i| indices[i].is_some()).count();
-            2 * indexed < column.len()
-                && !column.iter().any(|&i| indices[i].is_some_and(fundamental))
-        })
-        .map(|column| {
-            // A reflection inside the noise stands out of it, at a frequency where the
-            // lattice shows reflections elsewhere; a noise peak that the lattice indexes
-            // by chance does neither, as a rule.
-            let noise_power = column
+    let mut noise: Vec<NoiseColumn> = Vec::new();
+    for column in columns.into_iter().filter(is_noise) {
+        let (members, noise_power) = noise_members(column, peaks, indices, reach);
+        for &i in &members {
+            in_noise[i] = true;
+        }
+        noise.push(NoiseColumn {
+            fast_bins: members
                 .iter()
-                .filter(|&&i| indices[i].is_none())
-                .map(|&i| peaks[i].power)
-                .fold(0.0, f64::max);
-            let members: Vec<usize> = column
-                .into_iter()
-                .filter(|&i| {
-                    let reflection = indices[i].is_some()
-                        && peaks[i].power >= STANDS_OUT * noise_power
-                        && peaks[i].k[0].hypot(peaks[i].k[1]) <= reach;
-                    !reflection
-                })
-                .collect();
-            for &i in &members {
-                in_noise[i] = true;
-            }
-            NoiseColumn {
-                fast_bins: members
-                    .iter()
-                    .map(|&i| fast_frequency(&peaks[i], fast_is_x))
-                    .sum::<f64>()
-                    / members.len() as f64,
-                peaks: members.len(),
-                relative_power: noise_power / strongest,
-            }
-        })
-        .collect();
+                .map(|&i| fast_frequency(&peaks[i], fast_axis))
+                .sum::<f64>()
+                / members.len() as f64,
+            peaks: members.len(),
+            relative_power: noise_power / strongest,
+        });
+    }
     noise.sort_by(|a, b| b.relative_power.total_cmp(&a.relative_power));
     (noise, in_noise)
 }
@@ -182,7 +191,7 @@ mod tests {
             peaks.push(peak(183.4 + 0.01 * (j as f64), ky, 0.5));
             indices.push((j < 2).then_some([11, j as i64]));
         }
-        let (noise, in_noise) = periodic_noise(&peaks, &indices, true);
+        let (noise, in_noise) = periodic_noise(&peaks, &indices, Axis::Horizontal);
         assert_eq!(noise.len(), 1, "{noise:?}");
         assert_eq!(noise[0].peaks, 8);
         assert!((noise[0].fast_bins - 183.435).abs() < 1e-9, "{noise:?}");
@@ -190,7 +199,11 @@ mod tests {
         assert_eq!(in_noise.iter().filter(|&&n| n).count(), 8);
         assert!(in_noise[..6].iter().all(|&n| !n));
         // Read with y as the fast axis there is no column at all.
-        assert!(periodic_noise(&peaks, &indices, false).0.is_empty());
+        assert!(
+            periodic_noise(&peaks, &indices, Axis::Vertical)
+                .0
+                .is_empty()
+        );
     }
 
     #[test]
@@ -204,7 +217,7 @@ mod tests {
             peak(8.80, 33.0, 0.1),
         ];
         let indices = [Some([1, 1]), Some([1, 0]), None, None, None];
-        let (noise, in_noise) = periodic_noise(&peaks, &indices, true);
+        let (noise, in_noise) = periodic_noise(&peaks, &indices, Axis::Horizontal);
         assert!(noise.is_empty(), "{noise:?}");
         assert!(in_noise.iter().all(|&n| !n));
     }
@@ -225,7 +238,7 @@ mod tests {
         }
         peaks.push(peak(3.96, -76.2, 3.4));
         indices.push(Some([-2, 3]));
-        let (noise, in_noise) = periodic_noise(&peaks, &indices, true);
+        let (noise, in_noise) = periodic_noise(&peaks, &indices, Axis::Horizontal);
         assert_eq!(noise.len(), 1, "{noise:?}");
         assert_eq!(noise[0].peaks, 5);
         assert!(!in_noise[8]);
@@ -238,7 +251,7 @@ mod tests {
                 .copied()
                 .collect::<Vec<_>>(),
             &[&indices[..2], &indices[3..]].concat(),
-            true,
+            Axis::Horizontal,
         );
         assert_eq!(in_noise.iter().filter(|&&n| n).count(), 6);
     }
@@ -251,7 +264,7 @@ mod tests {
             peaks.push(peak(kx, sign * 150.2, 0.5));
         }
         let indices = [vec![Some([1, 0]), Some([0, 1])], vec![None; 4]].concat();
-        let (noise, in_noise) = periodic_noise(&peaks, &indices, false);
+        let (noise, in_noise) = periodic_noise(&peaks, &indices, Axis::Vertical);
         assert_eq!(noise.len(), 1, "{noise:?}");
         assert_eq!(in_noise, [false, false, true, true, true, true]);
     }
