@@ -21,7 +21,9 @@ use crate::model::{
 use crate::secant::{secant, secant_offsets};
 use crate::thinning::thin;
 use crate::{DistortionError, LocalDistortion};
-use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
+use dhct_numerics::lm::{
+    Bounds, LmOptions, ResidualFit, Residuals, fit_residuals, fit_residuals_within,
+};
 use dhct_numerics::robust::{HUBER_K, huber_weights, mad_sigma_about};
 
 /// Options of [`fit_model`]; [`FitOptions::validate`] checks their ranges.
@@ -813,7 +815,8 @@ fn iterations(max_iterations: usize) -> LmOptions {
 /// deviations, then `rows − 2m` prior rows. The positions are weighted by each axis's own
 /// robust scale (Huber weights after the first round when `robust_rounds > 0`), the priors
 /// keep unit weight. Returns the last fit, its normal matrix evaluated once more with the
-/// final weights, and those weights. `what` names the fit in its error.
+/// final weights, and those weights. `what` names the fit in its error; `bounds`, when
+/// given, keep the parameters inside a box.
 pub(crate) fn position_irls<R: Residuals + ?Sized>(
     problem: &R,
     (rows, m): (usize, usize),
@@ -821,12 +824,13 @@ pub(crate) fn position_irls<R: Residuals + ?Sized>(
     mut p: Vec<f64>,
     robust_rounds: usize,
     what: &'static str,
+    bounds: Option<&Bounds>,
 ) -> Result<(ResidualFit, Vec<f64>), DistortionError> {
     let mut weights = plain_weights;
     let mut last = None;
     let lm = iterations(100);
     for round in 0..=robust_rounds.max(1) {
-        let fit = fit_residuals(problem, rows, &p, &weights, &lm)
+        let fit = fit_residuals_within(problem, rows, &p, &weights, bounds.cloned(), &lm)
             .ok_or(DistortionError::FitFailed(what))?;
         p.clone_from(&fit.params);
         weights = axis_weights(&fit.residuals, m, round > 0 && robust_rounds > 0);

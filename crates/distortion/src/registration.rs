@@ -314,6 +314,7 @@ pub fn register(
         p0,
         options.robust_rounds,
         "global registration",
+        None,
     )?;
     problem.result(&fit, &weights)
 }

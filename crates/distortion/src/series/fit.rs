@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::alignment::{frame_shifts, index_series, own_rms};
 use super::frame::{SeriesFeature, SeriesFrame};
-use super::problem::{NM, SPLINE_AT, SeriesProblem};
+use super::problem::{GAIN_AT, NM, SPLINE_AT, SeriesProblem};
 use super::session_drift::{MoveCreep, SessionDrift};
 use super::spline::SplineBasis;
 use crate::DistortionError;
@@ -273,11 +273,25 @@ pub const MAX_UNEXPLAINED_RATIO: f64 = 2.0;
 /// is off by per cent, not by half.
 pub const GAIN_RANGE: (f64, f64) = (0.67, 1.5);
 
+/// Bounds of `n` series parameters: the scanner's y gain inside [`GAIN_RANGE`], the others
+/// free. A mirrored slow axis (gain −1) with a drift near twice the slow-scan speed making
+/// up for it within each frame is a false minimum that unbounded fits from a rough start
+/// have ended in; no scanner is mirrored.
+fn gain_bounds(n: usize) -> Bounds {
+    let mut lower = vec![f64::NEG_INFINITY; n];
+    let mut upper = vec![f64::INFINITY; n];
+    lower[GAIN_AT] = GAIN_RANGE.0 - 1.0;
+    upper[GAIN_AT] = GAIN_RANGE.1 - 1.0;
+    Bounds { lower, upper }
+}
+
 /// An error naming the frame the series model explains worst, when it is past
 /// [`MAX_UNEXPLAINED_RATIO`], or the gain, when it is outside [`GAIN_RANGE`].
 fn check_explained(fit: &SeriesFit) -> Result<(), DistortionError> {
     let (low, high) = GAIN_RANGE;
-    if !(low..=high).contains(&fit.gain_y) {
+    // The fit keeps the gain inside the range (gain_bounds): one that ends on a bound was
+    // stopped there, not fixed by the data.
+    if !(fit.gain_y > low && fit.gain_y < high) {
         return Err(DistortionError::ImplausibleGain {
             gain: fit.gain_y,
             low,
@@ -419,8 +433,9 @@ impl Setup {
         }
     }
 
-    /// The start: each frame's own creep for the creeps, the spline fitted to what is left
-    /// of the frames' own drifts placed at their shifts.
+    /// The start: each frame's own creep for the creeps (where plausible), the spline
+    /// fitted to what the creeps leave of each frame's whole displacement (its shift plus
+    /// its own drift and creep since its start).
     fn start_drift(
         &self,
         frames: &[SeriesFrame],
@@ -483,25 +498,19 @@ impl Setup {
                 (shifts[b][1] - shifts[a][1]) / dt,
             ]
         };
-        // The drift within frame `k`, `t` seconds after its start, less its creep.
+        // The displacement within frame `k`, `t` seconds after its start: the frame's own
+        // drift and creep together (a frame alone fixes their sum, not the parts: its creep
+        // and drift may trade micrometres, as above).
         let within = |k: usize, t: f64| -> [f64; 2] {
             if placed_by_images {
                 let v = between(k);
                 return [v[0] * t, v[1] * t];
             }
-            let frame = &frames[k];
-            let own = frame.own_drift(t);
-            let d = &frame.model.drift;
-            let log = (t / d.t0_s).ln_1p();
-            let creep = frame
-                .geometry
-                .vector_to_instrument([d.creep_m[0] * log, d.creep_m[1] * log]);
-            [own[0] - creep[0], own[1] - creep[1]]
+            frames[k].own_drift(t)
         };
         let mut samples = Vec::new();
         for (k, (frame, shift)) in frames.iter().zip(shifts).enumerate() {
             let duration = frame.geometry.frame_duration();
-            let at_start = with_creeps.displacement(frame.start_s);
             for j in 0..=20 {
                 let t = duration * j as f64 / 20.0;
                 let drift = within(k, t);
@@ -509,8 +518,8 @@ impl Setup {
                 samples.push((
                     frame.start_s + t,
                     [
-                        shift[0] + drift[0] - creep[0] + at_start[0],
-                        shift[1] + drift[1] - creep[1] + at_start[1],
+                        shift[0] + drift[0] - creep[0],
+                        shift[1] + drift[1] - creep[1],
                     ],
                 ));
             }
@@ -553,7 +562,9 @@ impl Setup {
     /// non-linear parameter (from a creep of amplitude 0 the fit cannot move it, and a free
     /// `t0` trades with the spline towards a bound), so the plain fit is made with every
     /// creep's `t0` held at each of [`CREEP_T0_GRID`] values (log-spaced from two lines to
-    /// two frames) and the lowest cost's fitted drift is the start.
+    /// two frames) and the lowest cost's fitted drift is the start. Each trial keeps the
+    /// start's creep amplitudes and refits the spline under them ([`Setup::with_creeps`]).
+    /// The gain stays inside [`GAIN_RANGE`].
     fn best_creep_start(&self, features: &[SeriesFeature], start: &SessionDrift) -> SessionDrift {
         if start.creeps.is_empty() {
             return start.clone();
@@ -565,16 +576,18 @@ impl Setup {
         (0..CREEP_T0_GRID)
             .filter_map(|j| {
                 let t0 = low * (high / low).powf(j as f64 / (CREEP_T0_GRID - 1) as f64);
-                let mut candidate = start.clone();
-                for creep in &mut candidate.creeps {
-                    creep.coefficient_m = [0.0; 2];
+                let mut creeps = start.creeps.clone();
+                for creep in &mut creeps {
                     creep.t0_s = t0;
                 }
+                let candidate = self.with_creeps(start, creeps);
                 let (theta, origin) = place(&features, &candidate, &law, self.line_time_s);
                 let p0 = problem.start((theta, origin, 1.0), &candidate, &law);
                 let at = problem.creep_at();
-                let mut lower = vec![f64::NEG_INFINITY; p0.len()];
-                let mut upper = vec![f64::INFINITY; p0.len()];
+                let Bounds {
+                    mut lower,
+                    mut upper,
+                } = gain_bounds(p0.len());
                 for k in 0..candidate.creeps.len() {
                     lower[at + 3 * k + 2] = p0[at + 3 * k + 2];
                     upper[at + 3 * k + 2] = p0[at + 3 * k + 2];
@@ -597,6 +610,31 @@ impl Setup {
             })
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map_or_else(|| start.clone(), |(_, drift)| drift)
+    }
+
+    /// `drift` with `creeps` in place of its own and the spline fitted again to what they
+    /// leave of its displacement within every frame: the same whole displacement, so a
+    /// creep profiled at another time constant starts from the session's displacement, not
+    /// from what the creep it replaces left over (which, carried over a long session, is
+    /// nanometres off).
+    fn with_creeps(&self, drift: &SessionDrift, creeps: Vec<MoveCreep>) -> SessionDrift {
+        let creeps_alone = SessionDrift {
+            coefficients_m: vec![[0.0; 2]; drift.basis.len()],
+            basis: drift.basis.clone(),
+            creeps,
+        };
+        let mut samples = Vec::new();
+        for &start_s in &self.frame_starts_s {
+            for j in 0..=20 {
+                let t = start_s + self.frame_duration_s * j as f64 / 20.0;
+                let (whole, creep) = (drift.displacement(t), creeps_alone.displacement(t));
+                samples.push((t, [whole[0] - creep[0], whole[1] - creep[1]]));
+            }
+        }
+        SessionDrift {
+            coefficients_m: fit_spline(&drift.basis, &samples),
+            ..creeps_alone
+        }
     }
 
     /// [`Setup::fit`] with `robust_rounds` Huber rounds.
@@ -625,6 +663,7 @@ impl Setup {
             }
         };
         let p0 = problem.start(placed, start, &law);
+        let bounds = gain_bounds(p0.len());
         let (fit, weights) = position_irls(
             &problem,
             (problem.rows(), problem.features.len()),
@@ -632,6 +671,7 @@ impl Setup {
             p0,
             robust_rounds,
             "series",
+            Some(&bounds),
         )?;
         if !fit.params.iter().all(|v| v.is_finite()) {
             return Err(DistortionError::FitFailed("series"));
@@ -644,7 +684,7 @@ impl Setup {
         let n = p.len();
         let sigma = scaled_sigmas(fit, weights, n);
         let drift = problem.drift(p);
-        let mut parameters = vec![parameter("gain_y", 1.0 + p[3], sigma[3], "1")];
+        let mut parameters = vec![parameter("gain_y", 1.0 + p[GAIN_AT], sigma[GAIN_AT], "1")];
         let at = problem.creep_at();
         for (k, creep) in drift.creeps.iter().enumerate() {
             let q = p[at + 3 * k + 2];
@@ -687,8 +727,8 @@ impl Setup {
             drift,
             lattice_angle_rad: p[0],
             origin_m: [p[1] / NM, p[2] / NM],
-            gain_y: 1.0 + p[3],
-            gain_y_sigma: sigma[3],
+            gain_y: 1.0 + p[GAIN_AT],
+            gain_y_sigma: sigma[GAIN_AT],
             parameters,
             trajectory,
             frame_starts,
@@ -925,6 +965,8 @@ fn trajectory_point(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{DistortionModel, DriftCreep, FitOptions};
+    use dhct_scan::ScanGeometry;
 
     fn scores(pm: &[f64]) -> Vec<KnotScore> {
         pm.iter()
@@ -934,6 +976,76 @@ mod tests {
                 held_out_rms_m: v * 1e-12,
             })
             .collect()
+    }
+
+    /// The start drift follows each frame's whole displacement (its drift and creep as its
+    /// own model gives them), placed at its shift: a frame alone fixes their sum, not the
+    /// parts. (It once took each frame's drift without its creep, so a session whose frames'
+    /// own creeps traded with their drifts started tens of nanometres off, and 20- and
+    /// 30-frame sessions ended on a mirrored slow axis.)
+    #[test]
+    fn the_start_drift_follows_each_frames_own_drift_and_creep_together() {
+        use dhct_scan::ScanDirection;
+        let geometry = ScanGeometry::new(
+            64,
+            64,
+            1e-10,
+            1e-10,
+            2e-3,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap();
+        let duration = geometry.frame_duration();
+        // Each frame's own model: a creep of 50 nm traded against a drift that undoes most
+        // of it over the frame (the whole displacement stays a few nanometres).
+        let models: Vec<DistortionModel> = (0..4)
+            .map(|k| {
+                let creep = 5e-8 * (1.0 + 0.2 * k as f64);
+                let t0_s = 0.5 * duration;
+                let undo = -creep * (duration / t0_s).ln_1p() / duration;
+                let drift = DriftCreep {
+                    velocity_m_per_s: [undo + 1e-11, -undo],
+                    acceleration_m_per_s2: [0.0; 2],
+                    creep_m: [creep, -creep],
+                    t0_s,
+                };
+                DistortionModel::new(drift, HysteresisLaw::none())
+            })
+            .collect();
+        // Three frames of pause between them: room for the session's drift to turn.
+        let frames: Vec<SeriesFrame> = models
+            .iter()
+            .enumerate()
+            .map(|(k, model)| SeriesFrame {
+                geometry: &geometry,
+                inputs: Vec::new(),
+                model,
+                start_s: k as f64 * 4.0 * duration,
+                observed_step: None,
+            })
+            .collect();
+        let shifts: Vec<[f64; 2]> = (0..4)
+            .map(|k| [1e-9 * k as f64, -5e-10 * k as f64])
+            .collect();
+        let options = SeriesOptions {
+            fit: FitOptions::default(),
+            knots: KnotChoice::Fixed(128),
+        };
+        let setup = Setup::new(&frames, &options);
+        let start = setup.start_drift(&frames, &shifts, 128);
+        let mut worst: f64 = 0.0;
+        for (frame, shift) in frames.iter().zip(&shifts) {
+            for j in 0..=10 {
+                let t = duration * j as f64 / 10.0;
+                let expected = frame.own_drift(t);
+                let got = start.displacement(frame.start_s + t);
+                for axis in 0..2 {
+                    worst = worst.max((got[axis] - shift[axis] - expected[axis]).abs());
+                }
+            }
+        }
+        assert!(worst < 2e-11, "start drift off by {:.3} nm", worst * 1e9);
     }
 
     /// A flat score far above the noise (a spline still too stiff for an oscillating

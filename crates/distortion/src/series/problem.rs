@@ -28,6 +28,9 @@ pub(super) const NM: f64 = 1e9;
 /// Scale of the creep amplitudes' prior, nm (see the registration's).
 const CREEP_PRIOR_NM: f64 = 10.0;
 
+/// Index of the scanner's y gain error `ε_y`.
+pub(super) const GAIN_AT: usize = 3;
+
 /// Index of the first spline coefficient (after θ, the origin and `ε_y`).
 pub(super) const SPLINE_AT: usize = 4;
 
@@ -171,7 +174,7 @@ impl<'a> SeriesProblem<'a> {
         let lag = self.lag(law, f);
         let mut d = [
             f.controller_m[0] * NM + f.lag_direction_m_per_s[0] * NM * lag,
-            (f.controller_m[1] + p[3] * (f.controller_m[1] - f.centre_m[1])) * NM
+            (f.controller_m[1] + p[GAIN_AT] * (f.controller_m[1] - f.centre_m[1])) * NM
                 + f.lag_direction_m_per_s[1] * NM * lag,
         ];
         for (r, value) in row.values.iter().enumerate() {
