@@ -18,6 +18,7 @@ use anyhow::{Context, Result, bail};
 use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions, fit_series};
 use dhct_distortion::{FitOptions, PassInput};
 use dhct_pipeline::{CorrectedImageCheck, Warning};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::analysis::{FrameModel, analyse_model_file};
@@ -115,10 +116,12 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     // Each frame keeps its features and model only: the images are read again when the
-    // registered ones are written, so memory holds one frame's images at a time.
+    // registered ones are written, so memory holds the images of the frames being analysed
+    // (one per worker thread) at a time. Frames are analysed side by side: one 512² frame
+    // alone does not keep the cores busy.
     let corrected: Vec<FrameModel> = found
         .scans
-        .iter()
+        .par_iter()
         .map(|input| {
             analyse_model_file(&input.path, &request.config, frame_options)
                 .map(kept_for_the_series)

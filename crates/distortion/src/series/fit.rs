@@ -7,6 +7,7 @@ use dhct_lattice::Lattice;
 use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
 use dhct_numerics::robust::{finite_median, mad_sigma_about};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::alignment::{frame_shifts, index_series, own_rms};
@@ -765,23 +766,33 @@ impl Setup {
         let mut scores = Vec::new();
         for &knots in &candidates {
             let start = self.start_drift(frames, shifts, knots);
-            let (mut held_x, mut held_y) = (Vec::new(), Vec::new());
-            for k in 0..5 {
-                let train: Vec<SeriesFeature> =
-                    features.iter().filter(|f| fold(f) != k).copied().collect();
-                let test: Vec<SeriesFeature> =
-                    features.iter().filter(|f| fold(f) == k).copied().collect();
-                let Ok(fit) = self.fit_rounds(&train, &start, None, 0) else {
-                    continue;
-                };
-                let (s, c) = fit.lattice_angle_rad.sin_cos();
-                for f in &test {
-                    let q = fit.position_of(f);
-                    let [ux, uy] = f.site_m;
-                    held_x.push(q[0] - fit.origin_m[0] - (c * ux - s * uy));
-                    held_y.push(q[1] - fit.origin_m[1] - (s * ux + c * uy));
-                }
-            }
+            // The folds are fitted side by side; their held-out deviations are joined in
+            // fold order.
+            let held: Vec<Vec<[f64; 2]>> = (0..5)
+                .into_par_iter()
+                .map(|k| {
+                    let train: Vec<SeriesFeature> =
+                        features.iter().filter(|f| fold(f) != k).copied().collect();
+                    let Ok(fit) = self.fit_rounds(&train, &start, None, 0) else {
+                        return Vec::new();
+                    };
+                    let (s, c) = fit.lattice_angle_rad.sin_cos();
+                    features
+                        .iter()
+                        .filter(|f| fold(f) == k)
+                        .map(|f| {
+                            let q = fit.position_of(f);
+                            let [ux, uy] = f.site_m;
+                            [
+                                q[0] - fit.origin_m[0] - (c * ux - s * uy),
+                                q[1] - fit.origin_m[1] - (s * ux + c * uy),
+                            ]
+                        })
+                        .collect()
+                })
+                .collect();
+            let held_x: Vec<f64> = held.iter().flatten().map(|d| d[0]).collect();
+            let held_y: Vec<f64> = held.iter().flatten().map(|d| d[1]).collect();
             // Robust: a block the training left out entirely (the first seconds of a
             // creep) may be extrapolated far off; the score is the typical held-out feature.
             if let (Some(sx), Some(sy)) =
