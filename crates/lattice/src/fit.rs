@@ -64,7 +64,7 @@ pub enum LatticeFitError {
     /// from one affine lattice than a lattice's are.
     #[error(
         "the lattice fit diverged: within {} of the seed {fraction_ok:.0} % of the features \
-         lie within half a lattice constant of a site, but {rms_percent:.0} % of a \
+         lie within half a lattice constant of a site, but {rms_percent:.1} % of a \
          nearest-neighbour distance from one affine lattice (rms; at most {limit_percent:.0} %): \
          the lattice there is distorted beyond an affine map, or the features are not all one \
          lattice's. Check the lattice type and constant, or fit one domain (mask region) at a \

@@ -274,6 +274,9 @@ pub const MAX_UNEXPLAINED_RATIO: f64 = 2.0;
 /// is off by per cent, not by half.
 pub const GAIN_RANGE: (f64, f64) = (0.67, 1.5);
 
+/// Intervals per frame at whose ends a start's spline is fitted.
+const START_SAMPLES: usize = 20;
+
 /// Bounds of `n` series parameters: the scanner's y gain inside [`GAIN_RANGE`], the others
 /// free. A mirrored slow axis (gain −1) with a drift near twice the slow-scan speed making
 /// up for it within each frame is a false minimum that unbounded fits from a rough start
@@ -509,22 +512,20 @@ impl Setup {
             }
             frames[k].own_drift(t)
         };
-        let mut samples = Vec::new();
-        for (k, (frame, shift)) in frames.iter().zip(shifts).enumerate() {
-            let duration = frame.geometry.frame_duration();
-            for j in 0..=20 {
-                let t = duration * j as f64 / 20.0;
-                let drift = within(k, t);
-                let creep = with_creeps.displacement(frame.start_s + t);
-                samples.push((
-                    frame.start_s + t,
+        let samples: Vec<(f64, [f64; 2])> = self
+            .start_samples()
+            .map(|(k, t)| {
+                let (at, shift, drift) = (frames[k].start_s + t, shifts[k], within(k, t));
+                let creep = with_creeps.displacement(at);
+                (
+                    at,
                     [
                         shift[0] + drift[0] - creep[0],
                         shift[1] + drift[1] - creep[1],
                     ],
-                ));
-            }
-        }
+                )
+            })
+            .collect();
         let coefficients_m = fit_spline(&basis, &samples);
         SessionDrift {
             coefficients_m,
@@ -613,6 +614,14 @@ impl Setup {
             .map_or_else(|| start.clone(), |(_, drift)| drift)
     }
 
+    /// Where a start's spline is fitted: [`START_SAMPLES`] + 1 times evenly over every
+    /// frame (the frames share one duration), each as (frame, seconds since its start).
+    fn start_samples(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let step = self.frame_duration_s / START_SAMPLES as f64;
+        (0..self.frame_starts_s.len())
+            .flat_map(move |k| (0..=START_SAMPLES).map(move |j| (k, step * j as f64)))
+    }
+
     /// `drift` with `creeps` in place of its own and the spline fitted again to what they
     /// leave of its displacement within every frame: the same whole displacement, so a
     /// creep profiled at another time constant starts from the session's displacement, not
@@ -624,14 +633,14 @@ impl Setup {
             basis: drift.basis.clone(),
             creeps,
         };
-        let mut samples = Vec::new();
-        for &start_s in &self.frame_starts_s {
-            for j in 0..=20 {
-                let t = start_s + self.frame_duration_s * j as f64 / 20.0;
-                let (whole, creep) = (drift.displacement(t), creeps_alone.displacement(t));
-                samples.push((t, [whole[0] - creep[0], whole[1] - creep[1]]));
-            }
-        }
+        let samples: Vec<(f64, [f64; 2])> = self
+            .start_samples()
+            .map(|(k, t)| {
+                let at = self.frame_starts_s[k] + t;
+                let (whole, creep) = (drift.displacement(at), creeps_alone.displacement(at));
+                (at, [whole[0] - creep[0], whole[1] - creep[1]])
+            })
+            .collect();
         SessionDrift {
             coefficients_m: fit_spline(&drift.basis, &samples),
             ..creeps_alone
