@@ -121,9 +121,15 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
         /// Interior knots of the drift spline over the session (default: chosen by
-        /// cross-validation).
+        /// cross-validation; with --register image, one per frame after the first).
         #[arg(long, value_parser = clap::value_parser!(u16).range(0..=1000))]
         knots: Option<u16>,
+        /// How frames are placed: `lattice` (default: every frame's features against the
+        /// lattice, with scale and hysteresis) or `image` (frames without a resolved
+        /// lattice: bands of each frame's lines found in the frame before; the files'
+        /// pixel size and any hysteresis are kept as they are).
+        #[arg(long, value_enum, default_value_t = Registration::Lattice)]
+        register: Registration,
         #[command(flatten)]
         options: CorrectArgs,
     },
@@ -227,6 +233,15 @@ enum Command {
         #[arg(long)]
         print_config: bool,
     },
+}
+
+/// How `dhct series` places its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Registration {
+    /// Every frame's features against the lattice (scale and hysteresis measured).
+    Lattice,
+    /// What the frames' images share (no lattice needed; scale and hysteresis as stated).
+    Image,
 }
 
 /// What `dhct lattice` does.
@@ -490,6 +505,29 @@ fn main() -> ExitCode {
             inputs,
             output,
             knots,
+            register: Registration::Image,
+            options,
+        } => options.config().and_then(|config| {
+            let summary = series::by_image::run(&series::SeriesRequest {
+                inputs,
+                output,
+                config,
+                knots: knots.map(usize::from),
+            })?;
+            let text = if options.json {
+                serde_json::to_string_pretty(&summary)? + "\n"
+            } else {
+                series::by_image::text_summary(&summary, output)
+            };
+            diagnose::write_stdout(&text)?;
+            eprint!("{}", series::by_image::warning_lines(&summary));
+            Ok(())
+        }),
+        Command::Series {
+            inputs,
+            output,
+            knots,
+            register: Registration::Lattice,
             options,
         } => options.config().and_then(|config| {
             let summary = series::run(&series::SeriesRequest {

@@ -33,10 +33,10 @@ pub struct FrameOffset {
     /// `s` (columns, rows), pixels: what the frame shows at pixel `p`, the frame before
     /// showed at `p + s` (to a fraction of the blur).
     pub shift_px: [f64; 2],
-    /// The next best peak over the best (< [`DISTINCT_PEAK_RATIO`]).
+    /// The next best peak over the best (< [`DISTINCT_PEAK_RATIO`] from [`frame_offset`]).
     pub next_peak_ratio: f64,
     /// The best peak over the spread noise alone gives ([`noise_correlation`]; at least
-    /// [`MIN_PEAK_SIGMAS`]).
+    /// [`MIN_PEAK_SIGMAS`] from [`frame_offset`]).
     pub significance: f64,
 }
 
@@ -51,6 +51,26 @@ fn noise_correlation(blur_px: f64, shared: f64) -> f64 {
 /// `current`'s shift against `previous` (same size), both blurred with a Gaussian of
 /// `blur_px` (about one lattice period, pixels), if one correlation peak stands out.
 pub fn frame_offset(
+    previous: &Array2<f64>,
+    current: &Array2<f64>,
+    blur_px: f64,
+) -> Option<FrameOffset> {
+    best_correlation(previous, current, blur_px)
+        .filter(|o| o.next_peak_ratio <= DISTINCT_PEAK_RATIO && o.significance >= MIN_PEAK_SIGMAS)
+}
+
+impl FrameOffset {
+    /// How far the best peak stands above the next best, in standard deviations of what
+    /// noise alone gives: `(1 − next/best) × significance`.
+    pub fn margin_sigmas(&self) -> f64 {
+        (1.0 - self.next_peak_ratio) * self.significance
+    }
+}
+
+/// The best peak of the normalised cross-correlation of `previous` and `current` (same
+/// size, both blurred with a Gaussian of `blur_px`), with how it stands against the next
+/// best and against noise, whatever those are; `None` when no shift correlates positively.
+pub fn best_correlation(
     previous: &Array2<f64>,
     current: &Array2<f64>,
     blur_px: f64,
@@ -94,9 +114,6 @@ pub fn frame_offset(
         .fold(f64::NEG_INFINITY, f64::max);
     let ratio = (next / best).max(0.0);
     let significance = best / noise_correlation(blur_px, shared[[r, c]]);
-    if ratio > DISTINCT_PEAK_RATIO || significance < MIN_PEAK_SIGMAS {
-        return None;
-    }
     let (fr, fc) = (
         vertex(&normalised, r, c, true),
         vertex(&normalised, r, c, false),

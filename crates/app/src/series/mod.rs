@@ -4,6 +4,7 @@
 //! does; its features and its own model start the series fit
 //! ([`dhct_distortion::series`]).
 
+pub mod by_image;
 mod correlation;
 mod order;
 mod outputs;

@@ -7,7 +7,9 @@ use std::io::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dhct_distortion::series::{SeriesFeature, register_image};
+use dhct_distortion::series::{
+    SeriesFeature, SessionDrift, SessionPlacement, TrajectoryPoint, register_image,
+};
 use dhct_pipeline::{CorrectedImageCheck, check_corrected_images};
 use dhct_scan::{ImageChannel, ScanPass};
 use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
@@ -55,8 +57,16 @@ pub fn write_all(
     config: &CorrectConfig,
 ) -> Result<Written> {
     let mut files = vec![write_features(dir, summary, corrected, timed)?];
-    files.push(write_trajectory(dir, summary)?);
-    let registered = write_registered(dir, summary, corrected, timed, config)?;
+    files.push(write_trajectory(dir, &summary.fit.trajectory)?);
+    let first = &corrected[timed[0].input];
+    let session = Session {
+        placement: &summary.fit,
+        drift: &summary.fit.drift,
+        grid: first.geometry.clone(),
+        // A registered image is checked only where the raw image's lattice was measured.
+        lattice: first.run.lattice_measured.then_some(first.lattice.as_ref()),
+    };
+    let registered = write_registered(dir, &session, timed, config)?;
     files.extend(registered.files);
     files.push(SERIES_JSON.to_string());
     Ok(Written {
@@ -133,13 +143,13 @@ fn write_features(
 }
 
 /// `trajectory.csv`: the drift over the session with 1σ.
-fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
+pub fn write_trajectory(dir: &Path, trajectory: &[TrajectoryPoint]) -> Result<String> {
     const NAME: &str = "trajectory.csv";
     write_atomically(&dir.join(NAME), |w| {
         let mut out = csv::Writer::from_writer(w);
         out.write_record(["session_time_s", "dx_m", "dy_m", "sigma_x_m", "sigma_y_m"])
             .map_err(csv_error)?;
-        for p in &summary.fit.trajectory {
+        for p in trajectory {
             out.write_record([
                 format!("{:.4}", p.time_s),
                 format!("{:e}", p.displacement_m[0]),
@@ -155,25 +165,34 @@ fn write_trajectory(dir: &Path, summary: &SeriesSummary) -> Result<String> {
     Ok(NAME.to_string())
 }
 
+/// How a session places every frame's pixels, and what to check its images against.
+pub struct Session<'a> {
+    /// The fit that places pixels in the session frame.
+    pub placement: &'a dyn SessionPlacement,
+    /// Its drift over the session.
+    pub drift: &'a SessionDrift,
+    /// The common grid: the first frame's.
+    pub grid: dhct_scan::ScanGeometry,
+    /// The lattice the registered images are checked against by FFT (`None`: not checked).
+    pub lattice: Option<&'a dyn dhct_lattice::Lattice>,
+}
+
 /// Every frame's images registered onto the first frame's grid, their stack and its mean,
-/// each image's lattice measured by FFT ([`fft_check`]) and its shift against the first
-/// frame's trace measured from the pixels ([`placement::image_shift`]). Each frame's file
-/// is read again here, one at a time.
-fn write_registered(
+/// each image's lattice measured by FFT ([`fft_check`]) where `session` names one, and its
+/// shift against the first frame's trace measured from the pixels
+/// ([`placement::image_shift`]). Each frame's file is read again here, one at a time.
+pub fn write_registered(
     dir: &Path,
-    summary: &SeriesSummary,
-    corrected: &[FrameModel],
+    session: &Session,
     timed: &[Timed],
     config: &CorrectConfig,
 ) -> Result<Registered> {
     let folder = dir.join("registered");
     std::fs::create_dir_all(&folder)
         .with_context(|| format!("cannot create {}", folder.display()))?;
-    let first = &corrected[timed[0].input];
-    let grid = first.geometry.clone();
-    // A registered image is checked only where the raw image's lattice could be measured.
+    let grid = &session.grid;
     let mut checks = RegisteredChecks {
-        made: first.run.lattice_measured,
+        made: session.lattice.is_some(),
         ..RegisteredChecks::default()
     };
     let mut written = Vec::new();
@@ -181,17 +200,15 @@ fn write_registered(
     for (k, t) in timed.iter().enumerate() {
         let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
         let frame = FrameRegistration {
-            summary,
+            session,
             geometry: pair.geometry(),
             start_s: t.start_s,
-            grid: &grid,
-            lattice: first.lattice.as_ref(),
         };
         let (mut measured, mut unmeasured) = (Vec::new(), Vec::new());
         for (pass, image) in pair.images() {
-            let z = frame.register(pass, &image.z, &grid)?;
-            if checks.made {
-                match fft_check(&frame, pass, &image.z, &z) {
+            let z = frame.register(pass, &image.z, grid)?;
+            if let Some(lattice) = session.lattice {
+                match fft_check(&frame, lattice, pass, &image.z, &z) {
                     Some(c) => measured.push(c),
                     None => unmeasured.push(pass),
                 }
@@ -201,7 +218,7 @@ fn write_registered(
                 ImageChannel::new(format!("{} {name}", image.name), image.unit.clone(), z);
             let file = format!("registered/{name}.gsf");
             write_atomically(&dir.join(&file), |w| {
-                gsf::write_pass(&channel, &grid, pass, w)
+                gsf::write_pass(&channel, grid, pass, w)
             })?;
             written.push(file);
             pages.push((k, pass, channel));
@@ -211,11 +228,9 @@ fn write_registered(
     }
     checks.shifts = shifts_against_first(&pages, timed.len());
     let pages: Vec<ImageChannel> = pages.into_iter().map(|(_, _, page)| page).collect();
-    let mean = write_stack_and_mean(dir, &pages, &grid, &mut written)?;
-    if checks.made {
-        checks.mean =
-            check_corrected_images(&[(ScanPass::Trace, &mean.z)], &grid, first.lattice.as_ref())
-                .pop();
+    let mean = write_stack_and_mean(dir, &pages, grid, &mut written)?;
+    if let Some(lattice) = session.lattice {
+        checks.mean = check_corrected_images(&[(ScanPass::Trace, &mean.z)], grid, lattice).pop();
     }
     Ok(Registered {
         files: written,
@@ -226,11 +241,9 @@ fn write_registered(
 
 /// What registering one frame needs.
 struct FrameRegistration<'a> {
-    summary: &'a SeriesSummary,
+    session: &'a Session<'a>,
     geometry: &'a dhct_scan::ScanGeometry,
     start_s: f64,
-    grid: &'a dhct_scan::ScanGeometry,
-    lattice: &'a dyn dhct_lattice::Lattice,
 }
 
 impl FrameRegistration<'_> {
@@ -242,7 +255,7 @@ impl FrameRegistration<'_> {
         grid: &dhct_scan::ScanGeometry,
     ) -> Result<Array2<f64>> {
         Ok(register_image(
-            &self.summary.fit,
+            self.session.placement,
             self.geometry,
             self.start_s,
             pass,
@@ -257,15 +270,16 @@ impl FrameRegistration<'_> {
 /// own grid moved with the sample.
 fn fft_check(
     frame: &FrameRegistration,
+    lattice: &dyn dhct_lattice::Lattice,
     pass: ScanPass,
     raw: &Array2<f64>,
     registered: &Array2<f64>,
 ) -> Option<CorrectedImageCheck> {
     let on = |z: &Array2<f64>, grid: &dhct_scan::ScanGeometry| {
-        check_corrected_images(&[(pass, z)], grid, frame.lattice).pop()
+        check_corrected_images(&[(pass, z)], grid, lattice).pop()
     };
-    on(registered, frame.grid).or_else(|| {
-        let grid = own_grid(frame.summary, frame.geometry, frame.start_s)?;
+    on(registered, &frame.session.grid).or_else(|| {
+        let grid = own_grid(frame.session.drift, frame.geometry, frame.start_s)?;
         let z = frame.register(pass, raw, &grid).ok()?;
         on(&z, &grid)
     })
@@ -331,10 +345,13 @@ fn write_stack_and_mean(
 }
 
 /// What [`write_registered`] wrote and measured.
-struct Registered {
-    files: Vec<String>,
-    checks: RegisteredChecks,
-    mean: ImageChannel,
+pub struct Registered {
+    /// The files written, relative to the output directory.
+    pub files: Vec<String>,
+    /// The registered images' checks.
+    pub checks: RegisteredChecks,
+    /// The mean registered image.
+    pub mean: ImageChannel,
 }
 
 /// The median of `page − reference` where both hold values (0 where they share none).
@@ -355,11 +372,11 @@ fn level_against(reference: &Array2<f64>, page: &Array2<f64>) -> f64 {
 /// The frame's own grid moved with the sample to where the frame scanned it (by the
 /// session's drift at its start): its registered image there covers nearly all of it.
 fn own_grid(
-    summary: &SeriesSummary,
+    drift: &SessionDrift,
     geometry: &dhct_scan::ScanGeometry,
     start_s: f64,
 ) -> Option<dhct_scan::ScanGeometry> {
-    let d = summary.fit.drift.displacement(start_s);
+    let d = drift.displacement(start_s);
     let (x, y) = geometry.offset();
     geometry.clone().with_offset(x + d[0], y + d[1]).ok()
 }

@@ -12,7 +12,7 @@ use ndarray::Array2;
 
 /// The fit stops once the shift is larger than this (pixels): it is then reported as it
 /// stands, far beyond any registration error worth a sub-pixel figure.
-const MAX_SHIFT_PX: f64 = 2.0;
+pub const MAX_SHIFT_PX: f64 = 2.0;
 
 /// Pixels this far from the grid's edge (or from a pixel without a value) are left out, so
 /// that every sample shifted by up to [`MAX_SHIFT_PX`], its gradient's neighbours and their
@@ -36,13 +36,22 @@ const MIN_OVERLAP: usize = 400;
 /// Every sample stays inside the images: the shift is at most [`MAX_SHIFT_PX`] (plus one
 /// step) and [`MARGIN`] leaves room for it.
 pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<[f64; 2]> {
-    let pixels = overlap(reference, moving);
+    image_shift_over(reference, moving, &overlap(reference, moving))
+}
+
+/// [`image_shift`] over `pixels` only (`(row, column)`, each from [`overlap`]): a part of
+/// the images, such as a band of lines.
+pub fn image_shift_over(
+    reference: &Array2<f64>,
+    moving: &Array2<f64>,
+    pixels: &[(usize, usize)],
+) -> Option<[f64; 2]> {
     if pixels.len() < MIN_OVERLAP {
         return None;
     }
     let mut d = [0.0f64; 2];
     for _ in 0..MAX_STEPS {
-        let step = gauss_newton_step(reference, moving, &pixels, d)?;
+        let step = gauss_newton_step(reference, moving, pixels, d)?;
         d = [d[0] + step[0], d[1] + step[1]];
         if d[0].abs() > MAX_SHIFT_PX || d[1].abs() > MAX_SHIFT_PX {
             break;
@@ -55,7 +64,7 @@ pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<[f64
 }
 
 /// The pixels where both images, and every neighbour within [`MARGIN`], hold values.
-fn overlap(a: &Array2<f64>, b: &Array2<f64>) -> Vec<(usize, usize)> {
+pub fn overlap(a: &Array2<f64>, b: &Array2<f64>) -> Vec<(usize, usize)> {
     let (rows, columns) = a.dim();
     if b.dim() != (rows, columns) || rows <= 2 * MARGIN || columns <= 2 * MARGIN {
         return Vec::new();

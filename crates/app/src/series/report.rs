@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use anyhow::Result;
+use dhct_distortion::series::TrajectoryPoint;
 use dhct_pipeline::CorrectedImageCheck;
 use dhct_scan::quantity::{length, value_with_sigma};
 use dhct_scan::{ImageChannel, ScanGeometry};
@@ -109,13 +110,26 @@ fn trust_section(html: &mut Html, summary: &SeriesSummary) {
 
 /// `D_x(T)` and `D_y(T)` with their 1σ band and grey lines at the frame starts.
 fn trajectory_plots(summary: &SeriesSummary) -> Vec<Figure> {
-    let fit = &summary.fit;
     let starts: Vec<f64> = summary.frames.iter().map(|f| f.start_s).collect();
+    trajectory_figures(
+        &summary.fit.trajectory,
+        &starts,
+        "fitted to every feature of every frame",
+    )
+}
+
+/// `D_x(T)` and `D_y(T)` of `trajectory` with their 1σ band and grey lines at `starts`
+/// (session seconds); `fitted_to` says what the drift was fitted to.
+pub(super) fn trajectory_figures(
+    trajectory: &[TrajectoryPoint],
+    starts: &[f64],
+    fitted_to: &str,
+) -> Vec<Figure> {
     (0..2)
         .map(|axis| {
             let name = ["x", "y"][axis];
             let curve = |k: f64| -> Vec<(f64, f64)> {
-                fit.trajectory
+                trajectory
                     .iter()
                     .map(|p| {
                         (
@@ -137,9 +151,8 @@ fn trajectory_plots(summary: &SeriesSummary) -> Vec<Figure> {
                 GREY,
             ))
             .with(Series::new("D (fitted)", curve(0.0), Style::Line, INK));
-            plot.vertical_lines = starts.clone();
-            let largest_sigma = fit
-                .trajectory
+            plot.vertical_lines = starts.to_vec();
+            let largest_sigma = trajectory
                 .iter()
                 .map(|p| p.sigma_m[axis])
                 .fold(0.0, f64::max);
@@ -149,8 +162,8 @@ fn trajectory_plots(summary: &SeriesSummary) -> Vec<Figure> {
                 format!(
                     "The tip's displacement relative to the sample along instrument {name} \
                      against session time (black), with its 1σ band (grey dashes; at most {}), \
-                     fitted to every feature of every frame; grey verticals: frame starts. \
-                     trajectory.csv holds the numbers.",
+                     {fitted_to}; grey verticals: frame starts. trajectory.csv holds the \
+                     numbers.",
                     length(largest_sigma)
                 ),
                 &plot,
@@ -165,7 +178,7 @@ fn band(upper: Vec<(f64, f64)>, lower: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 }
 
 /// The mean registered image with scale and colour bars.
-fn mean_picture(mean: &MeanImage, colormap: Colormap) -> Figure {
+pub(super) fn mean_picture(mean: &MeanImage, colormap: Colormap) -> Figure {
     let z = &mean.channel.z;
     let range = display_range(z.view());
     let scale = upscale_for(z.nrows(), z.ncols(), 512);

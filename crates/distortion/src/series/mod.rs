@@ -25,6 +25,7 @@
 pub mod alignment;
 mod fit;
 mod frame;
+mod image_drift;
 mod problem;
 mod registered_image;
 mod session_drift;
@@ -35,6 +36,9 @@ pub use fit::{
     TrajectoryPoint, fit_series,
 };
 pub use frame::{ObservedStep, SeriesFeature, SeriesFrame};
-pub use registered_image::register_image;
+pub use image_drift::{
+    DifferenceDriftFit, DriftDifference, ImageRegistration, MoveTiming, fit_drift_differences,
+};
+pub use registered_image::{SessionPlacement, register_image};
 pub use session_drift::{MoveCreep, SessionDrift};
 pub use spline::SplineBasis;

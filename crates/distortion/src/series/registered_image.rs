@@ -7,8 +7,39 @@ use ndarray::Array2;
 
 use super::fit::SeriesFit;
 use super::frame::SeriesFeature;
+use super::image_drift::ImageRegistration;
 use crate::DistortionError;
 use crate::correction::{image_shape, resample_onto};
+
+/// What places a frame's pixels in the session frame: the tip's sample position when it
+/// was at a given controller position and time (instrument frame, metres).
+pub trait SessionPlacement: Sync {
+    /// Where the tip was relative to the sample at `f`.
+    fn position_of(&self, f: &SeriesFeature) -> [f64; 2];
+}
+
+impl SessionPlacement for SeriesFit {
+    fn position_of(&self, f: &SeriesFeature) -> [f64; 2] {
+        SeriesFit::position_of(self, f)
+    }
+}
+
+/// The drift, with trace and retrace set apart by the offset the images show between them
+/// (half each way): no hysteresis law, the files' pixel size (what image comparisons
+/// cannot measure).
+impl SessionPlacement for ImageRegistration {
+    fn position_of(&self, f: &SeriesFeature) -> [f64; 2] {
+        let d = self.fit.drift.displacement(f.time_s);
+        let half = match f.pass {
+            ScanPass::Trace => -0.5,
+            ScanPass::Retrace => 0.5,
+        };
+        [
+            f.controller_m[0] + d[0] + half * self.retrace_offset_m[0],
+            f.controller_m[1] + d[1] + half * self.retrace_offset_m[1],
+        ]
+    }
+}
 
 /// `z` (an image of `pass` of a frame of `geometry` that started `start_s` into the
 /// session) resampled onto the grid of `grid` (the common frame: output pixel `(c, r)` is
@@ -16,7 +47,7 @@ use crate::correction::{image_shape, resample_onto};
 /// nothing: the session frame fixed to the sample at the first frame's start). NaN where the
 /// frame did not reach.
 pub fn register_image(
-    fit: &SeriesFit,
+    fit: &dyn SessionPlacement,
     geometry: &ScanGeometry,
     start_s: f64,
     pass: ScanPass,
