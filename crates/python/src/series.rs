@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use dhct_app::series::{SeriesRequest, run};
+use dhct_app::series::{SeriesRequest, by_image, run};
 use dhct_simulate::{SequenceSimulation, SimulationConfig, presets as preset_table};
 use pyo3::prelude::*;
 
@@ -14,7 +14,7 @@ use crate::errors::{AnalysisError, SimulationError, to_py};
 /// Runs `dhct series` on `inputs` (files, folders, glob patterns) into `output`; returns
 /// `series.json`'s content.
 #[pyfunction]
-#[pyo3(signature = (inputs, output, options_json, config_path=None, knots=None))]
+#[pyo3(signature = (inputs, output, options_json, config_path=None, knots=None, by_image=false))]
 pub fn correct_series(
     py: Python<'_>,
     inputs: Vec<String>,
@@ -22,20 +22,25 @@ pub fn correct_series(
     options_json: &str,
     config_path: Option<PathBuf>,
     knots: Option<usize>,
+    by_image: bool,
 ) -> PyResult<String> {
     let config = build_config(options_json, config_path)?;
-    let summary = py
+    let request = SeriesRequest {
+        inputs: &inputs,
+        output: &output,
+        config,
+        knots,
+    };
+    let text = py
         .detach(|| {
-            run(&SeriesRequest {
-                inputs: &inputs,
-                output: &output,
-                config,
-                knots,
-            })
+            if by_image {
+                by_image::run(&request).and_then(|s| Ok(serde_json::to_string(&s)?))
+            } else {
+                run(&request).and_then(|s| Ok(serde_json::to_string(&s)?))
+            }
         })
         .map_err(|e| to_py::<AnalysisError>(&e))?;
-    serde_json::to_string(&summary)
-        .map_err(|e| AnalysisError::new_err(format!("cannot serialise the summary: {e}")))
+    Ok(text)
 }
 
 /// Simulates the sequence of a preset or config file (with a `[sequence]` table) into

@@ -68,3 +68,53 @@ def test_one_frame_is_not_a_series(tmp_path):
         dhct.correct_series(frames / "frame_00.sm4", tmp_path / "out")
     with pytest.raises(dhct.OptionError):
         dhct.correct_series(frames, tmp_path / "out", retrace="x")
+
+
+def test_frames_without_a_resolved_lattice_are_registered_by_their_images(tmp_path):
+    config = tmp_path / "molecules.toml"
+    config.write_text(
+        """
+name = "molecules"
+seed = 7
+[scan]
+columns = 128
+rows = 128
+width_m = 12e-9
+height_m = 12e-9
+fast_speed_m_per_s = 150e-9
+trace_fast = "right"
+slow = "down"
+[surface]
+lattice = { kind = "hexagonal", a_m = 1.4e-9 }
+feature = { height_m = 40e-12, sigma_m = [2.5e-10, 2.5e-10] }
+defects = { vacancy_fraction = 0.6 }
+[noise]
+white_sigma_m = 2e-12
+[sequence]
+frames = 3
+pause_s = 2.0
+drift = { velocity_m_per_s = [4e-12, -3e-12] }
+"""
+    )
+    frames = tmp_path / "frames"
+    dhct.simulate_sequence(str(config), frames)
+    summary = dhct.correct_series(str(frames / "*.sm4"), tmp_path / "out", register="image")
+    assert summary["registration"] == "image"
+    assert any("scale" in u for u in summary["undetermined"])
+    truth = json.loads((frames / "sequence_truth.json").read_text())
+    pitch = 12e-9 / 128
+    starts = [s["displacement_m"] for s in summary["drift"]["frame_starts"]]
+    true = [f["displacement_at_start_m"] for f in truth["frames"]]
+    # Up to the session frame's place (a constant comparisons cannot fix).
+    for k in (1, 2):
+        for i in range(2):
+            found = starts[k][i] - starts[0][i]
+            expected = true[k][i] - true[0][i]
+            assert abs(found - expected) < 0.15 * pitch, (k, i, found, expected)
+    assert abs(true[2][0] - true[0][0]) > 2 * pitch, "the test needs a drift"
+    # A perfect lattice shares its pattern at every period: refused, not guessed.
+    graphite = _small_sequence(tmp_path / "graphite", frames=2)
+    with pytest.raises(dhct.AnalysisError, match="no common structure"):
+        dhct.correct_series(graphite, tmp_path / "out2", register="image")
+    with pytest.raises(dhct.OptionError):
+        dhct.correct_series(graphite, tmp_path / "out3", register="features")

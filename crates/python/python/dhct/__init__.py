@@ -527,6 +527,7 @@ def correct_series(
     lattice: Optional[str] = None,
     nn: Union[float, str, None] = None,
     knots: Optional[int] = None,
+    register: str = "lattice",
     **options: Any,
 ) -> Dict[str, Any]:
     """Fits one model to frames of one area taken one after another and registers them
@@ -540,10 +541,16 @@ def correct_series(
     start time each file records. ``lattice``, ``nn`` and the options are those of
     :func:`correct` (every frame is first analysed alone with them). ``knots``: interior
     knots of the drift spline over the session (default: chosen by cross-validation).
+    ``register="image"``: frames without a resolved lattice, placed by what their images
+    share under the same smooth drift (``series.json`` then has ``"registration": "image"``
+    and lists what stays ``undetermined``: scale, hysteresis).
 
     Raises OptionError, AnalysisError (e.g. fewer than two frames, frames of different
-    sizes, frames overlapping in time, a frame that cannot be analysed alone).
+    sizes, frames overlapping in time, a frame that cannot be analysed alone, frames whose
+    images share nothing).
     """
+    if register not in ("lattice", "image"):
+        raise OptionError(f"register must be 'lattice' or 'image', not {register!r}")
     _check_names(options, tuple(name for name in _OPTIONS if name not in ("retrace", "progress")))
     config = _config_options(lattice, nn, options)
     if isinstance(frames, (str, os.PathLike)):
@@ -556,6 +563,7 @@ def correct_series(
         json.dumps(config),
         os.fspath(config_path) if config_path is not None else None,
         knots,
+        register == "image",
     )
     return json.loads(raw)
 
