@@ -75,6 +75,9 @@ pub enum WarningCode {
     FrameNotExplained,
     /// Two frames of a series, registered, do not line up pixel for pixel.
     FramesDisagree,
+    /// Two consecutive frames registered by their images matched on few of their bands of
+    /// lines: the drift within the later one rests on the spline's smoothness.
+    FewComparisons,
 }
 
 /// An input the user can give to change a result. Each front end spells it its own way
@@ -186,6 +189,7 @@ impl WarningCode {
             WarningCode::ModelImageOff => "model_image_off",
             WarningCode::FrameNotExplained => "frame_not_explained",
             WarningCode::FramesDisagree => "frames_disagree",
+            WarningCode::FewComparisons => "few_comparisons",
         }
     }
 }

@@ -11,7 +11,7 @@ use dhct_pipeline::{
 use dhct_scan::quantity::length;
 
 use super::outputs::RegisteredChecks;
-use super::{FrameSummary, Timed};
+use super::{FrameSummary, PassShift, Timed};
 
 /// A registered image shifted more than this (pixels of the first frame's grid) against
 /// the frame it is compared with does not line up with it. The registration's own error is
@@ -62,20 +62,35 @@ pub fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<Warning> {
 /// Registered images whose pixels are shifted more than [`SHIFT_WARNING_PX`] against the
 /// frame they were compared with.
 pub fn shift_warnings(frames: &[FrameSummary], pitch_m: [f64; 2]) -> Vec<Warning> {
+    let frames = frames
+        .iter()
+        .map(|f| (f.file.as_str(), f.registered_shifts.as_slice()));
+    shifts_beyond(frames, pitch_m, SHIFT_WARNING_PX)
+}
+
+/// Registered images (each frame's file and shifts, in time order) whose pixels are
+/// shifted more than `limit_px` against the frame they were compared with.
+pub fn shifts_beyond<'a>(
+    frames: impl Iterator<Item = (&'a str, &'a [PassShift])>,
+    pitch_m: [f64; 2],
+    limit_px: f64,
+) -> Vec<Warning> {
     let mut warnings = Vec::new();
-    for (k, frame) in frames.iter().enumerate() {
-        for s in &frame.registered_shifts {
+    for (k, (file, shifts)) in frames.enumerate() {
+        for s in shifts {
             let (Some(d), Some(against)) = (s.shift_px, s.against_frame) else {
                 continue;
             };
-            if d[0].hypot(d[1]) <= SHIFT_WARNING_PX {
+            if d[0].hypot(d[1]) <= limit_px {
                 continue;
             }
             warnings.push(Warning::new(
                 WarningCode::FramesDisagree,
                 format!(
-                    "registered frame {k} ({}), {}: its pixels lie ({:.3}, {:.3}) px ({}) off                      frame {against}'s trace, more than {SHIFT_WARNING_PX} px: the two are                      not registered alike (a creep, tip change or move the session's model                      does not hold, or a placement a lattice period off)",
-                    frame.file,
+                    "registered frame {k} ({file}), {}: its pixels lie ({:.3}, {:.3}) px ({}) \
+                     off frame {against}'s trace, more than {limit_px} px: the two are not \
+                     registered alike (a creep, tip change or move the session's model does \
+                     not hold, or a placement a lattice period off)",
                     s.pass,
                     d[0],
                     d[1],

@@ -8,6 +8,7 @@ use dhct_scan::quantity::length;
 use dhct_sm4_io::png_file::Colormap;
 
 use super::ImageSeriesSummary;
+use crate::flags::warning_line;
 use crate::report::html::{figure_grid, figure_html};
 use crate::report::page::{Html, document};
 use crate::report::{write_bytes, write_figure_files};
@@ -52,7 +53,8 @@ pub fn write_report(
              registered image lines up with the first frame's to half a pixel.",
         );
     } else {
-        body.list(&summary.warnings);
+        let lines: Vec<String> = summary.warnings.iter().map(warning_line).collect();
+        body.list(&lines);
     }
     body.element("p", "Not determined without a lattice:")
         .list(&summary.undetermined);
