@@ -209,6 +209,15 @@ pub fn analyse_model_file(
     adjust: fn(&mut PipelineOptions),
 ) -> Result<FrameModel> {
     let pair = read_pair(input, None, &config.geometry, config.channel.as_deref())?;
+    analyse_model_pair(pair, config, adjust)
+}
+
+/// [`analyse_model_file`] of a pair already read.
+pub fn analyse_model_pair(
+    pair: ScanPair,
+    config: &CorrectConfig,
+    adjust: fn(&mut PipelineOptions),
+) -> Result<FrameModel> {
     let render = |e: CorrectError| anyhow::anyhow!(e.render(Spelling::CommandLine));
     let (mask, mut resolved) = resolve_for(&pair, config, None).map_err(render)?;
     adjust(&mut resolved.options);

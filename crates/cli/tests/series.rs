@@ -562,3 +562,28 @@ fn passes_apart_by_hysteresis_are_registered_halfway_and_other_areas_refused() {
     assert!(err.contains("no common structure"), "{err}");
     assert!(!dir.path().join("refused").exists(), "nothing written");
 }
+
+#[test]
+fn a_file_of_several_frames_is_a_series_of_them() {
+    // A real SPECS film (tests/data/real, BSD-3): five 100 nm frames, 38.5 s each, in one
+    // file. Its frames are the series (the file is neither skipped nor one frame), and they
+    // are refused: tip changes and line jumps between them leave no correlation peak that
+    // stands out, and a guess would be a wrong registration.
+    let film = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/real/specs_aarhus_film_100nm.flm");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let run = series(
+        film.to_str().expect("utf-8"),
+        &out,
+        &["--register", "image"],
+    );
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !err.contains("skipping") && !err.contains("at least two"),
+        "{err}"
+    );
+    assert!(err.contains("no common structure"), "{err}");
+    assert!(!out.exists(), "nothing written");
+}

@@ -2,6 +2,13 @@ use dhct_scan::FileFormat;
 
 /// Recognises a file format from its first bytes. Returns `None` for anything else.
 pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
+    detect_format_of_length(bytes, bytes.len() as u64)
+}
+
+/// [`detect_format`] from the first bytes (`head`, a few kB) of a file of `file_len`
+/// bytes: a SPECS `.mul`/`.flm` has no magic, only a block structure that must fit the
+/// whole file.
+pub fn detect_format_of_length(bytes: &[u8], file_len: u64) -> Option<FileFormat> {
     if crate::sm4::looks_like_sm4(bytes) {
         return Some(FileFormat::RhkSm4);
     }
@@ -45,7 +52,7 @@ pub fn detect_format(bytes: &[u8]) -> Option<FileFormat> {
         Some(FileFormat::OmicronMatrix)
     } else if crate::wsxm::looks_like_wsxm(bytes) {
         Some(FileFormat::Wsxm)
-    } else if crate::mul::looks_like_mul(bytes) {
+    } else if crate::mul::looks_like_mul_of_length(bytes, file_len) {
         // Last: a MUL file has no magic of its own, only a plausible structure.
         Some(FileFormat::AarhusMul)
     } else {

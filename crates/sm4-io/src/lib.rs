@@ -61,7 +61,7 @@ pub mod wsxm;
 use std::path::Path;
 
 pub use atomic::write_atomically;
-pub use detect::detect_format;
+pub use detect::{detect_format, detect_format_of_length};
 pub use dhct_scan::{FileFormat, ScanFile};
 pub use error::{OverrideRangeError, ReadError, WriteError};
 pub use limits::{MAX_TEXT_FILE_BYTES, ReadLimits, check_regular_file, read_regular_text};

@@ -40,7 +40,10 @@
 //! a retrace of equal length with no turnaround: line time per direction = duration / (2 ·
 //! yres). The file does not record the slow-scan direction; the lines are read as
 //! acquired in storage order (bottom to top), and the timing is marked assumed for that
-//! reason (a `dhct` warning says so). Only the forward image of each line is stored.
+//! reason (a `dhct` warning says so). Only the forward image of each line is stored. The
+//! label's date is taken as the image's start ([`ScanGeometry::start_time`]; the format does
+//! not say whether it marks the start or the end: a series of one file's images keeps
+//! their order and spacing either way, to within the differences of their durations).
 //!
 //! Each image of the file is a separate frame ([`ScanGeometry::frame`] 0, 1, …), named
 //! `image <id>` plus its sample and title text when the file has any.
@@ -70,10 +73,19 @@ const MAX_SIDE: usize = 1 << 14;
 /// True when `bytes` have the structure of a `.mul` (index, then a plausible first label)
 /// or a `.flm` (a plausible first label of image 1 at block 0, with a real date).
 pub fn looks_like_mul(bytes: &[u8]) -> bool {
-    if !bytes.len().is_multiple_of(BLOCK) || bytes.len() < 2 * BLOCK {
+    looks_like_mul_of_length(bytes, bytes.len() as u64)
+}
+
+/// [`looks_like_mul`] from the first bytes of a file of `file_len` bytes (at least the
+/// first four blocks: the index and the first label).
+pub fn looks_like_mul_of_length(bytes: &[u8], file_len: u64) -> bool {
+    let Ok(file_len) = usize::try_from(file_len) else {
+        return false;
+    };
+    if !file_len.is_multiple_of(BLOCK) || file_len < 2 * BLOCK {
         return false;
     }
-    let blocks = bytes.len() / BLOCK;
+    let blocks = file_len / BLOCK;
     if bytes.starts_with(&MUL_START) {
         return Label::at(bytes, INDEX_BLOCKS).is_some_and(|l| l.fits(INDEX_BLOCKS, blocks));
     }
@@ -247,6 +259,21 @@ impl Label {
             && block + self.size as usize <= blocks
     }
 
+    /// The label's date as seconds since 1970 (the file's clock), taken as the frame's
+    /// start; `None` without a plausible date.
+    fn start_time(&self) -> Option<f64> {
+        let [year, month, day, hour, minute, second] = self.date;
+        let field = |v: i16| u32::try_from(v).ok();
+        self.has_date()
+            .then(|| {
+                dhct_scan::clock::seconds_from_civil(
+                    (i64::from(year), field(month)?, field(day)?),
+                    (field(hour)?, field(minute)?, f64::from(second)),
+                )
+            })
+            .flatten()
+    }
+
     fn has_date(&self) -> bool {
         let [year, month, day, hour, minute, second] = self.date;
         (1980..=2100).contains(&year)
@@ -383,7 +410,8 @@ fn geometry(
     .map_err(geometry_error)?
     .with_scale_source(scale_source)
     .with_timing_source(ValueSource::Assumed)
-    .with_frame(frame);
+    .with_frame(frame)
+    .with_start_time(label.start_time());
     let tilt = f64::from(label.tilt).to_radians();
     if tilt != 0.0 && plausible(tilt, &PLAUSIBLE_SCAN_ANGLE_RAD) {
         geometry = geometry.with_scan_angle(tilt).map_err(geometry_error)?;

@@ -7,7 +7,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use dhct_sm4_io::{FileFormat, detect_format, limits::open_regular_file};
+use dhct_sm4_io::{FileFormat, detect_format_of_length, limits::open_regular_file};
 
 use crate::output_dir::MARKER;
 
@@ -63,7 +63,7 @@ fn pattern_base(pattern: &str) -> PathBuf {
 /// Why `path` is not a scan, or `None` when it is one (recognised by its first bytes; a
 /// FIFO or device is never opened for reading).
 fn not_a_scan(path: &Path) -> Option<String> {
-    let (file, _) = match open_regular_file(path) {
+    let (file, length) = match open_regular_file(path) {
         Ok(opened) => opened,
         Err(e) => return Some(e.to_string()),
     };
@@ -72,7 +72,7 @@ fn not_a_scan(path: &Path) -> Option<String> {
         return Some(format!("cannot read: {e}"));
     }
     let npy_beside = path.with_extension("npy");
-    match detect_format(&head) {
+    match detect_format_of_length(&head, length) {
         None if path.extension().is_some_and(|e| e == "json") && npy_beside.is_file() => {
             Some(format!(
                 "the JSON sidecar of {} (read with it)",

@@ -10,6 +10,7 @@ mod order;
 mod outputs;
 mod placement;
 mod report;
+mod sources;
 mod steps;
 mod trust;
 
@@ -22,11 +23,12 @@ use dhct_pipeline::{CorrectedImageCheck, Warning};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::analysis::{FrameModel, analyse_model_file};
+use crate::analysis::{FrameModel, analyse_model_pair};
 use crate::flags::warning_line;
 use crate::setup::CorrectConfig;
 
 pub use order::Timed;
+pub use sources::FrameSource;
 pub use trust::UNEXPLAINED_FRAME_RATIO;
 
 /// What `dhct series` was asked to do.
@@ -106,31 +108,24 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     for s in &found.skipped {
         eprintln!("note: skipping {}: {}", s.path.display(), s.note);
     }
-    if found.scans.len() < 2 {
-        bail!(
-            "a series needs at least two frames, {} found in {}: one frame is corrected by \
-             `dhct correct`",
-            found.scans.len(),
-            request.inputs.join(", ")
-        );
-    }
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     // Each frame keeps its features and model only: the images are read again when the
     // registered ones are written, so memory holds the images of the frames being analysed
     // (one per worker thread) at a time. Frames are analysed side by side: one 512² frame
     // alone does not keep the cores busy.
-    let corrected: Vec<FrameModel> = found
-        .scans
+    let sources = frame_sources(&found, request)?;
+    let corrected: Vec<FrameModel> = sources
         .par_iter()
-        .map(|input| {
-            analyse_model_file(&input.path, &request.config, frame_options)
+        .map(|source| {
+            source
+                .read(&request.config)
+                .and_then(|pair| analyse_model_pair(pair, &request.config, frame_options))
                 .map(kept_for_the_series)
-                .with_context(|| format!("frame {} cannot be analysed alone", input.path.display()))
+                .with_context(|| format!("frame {source} cannot be analysed alone"))
         })
         .collect::<Result<_>>()?;
-    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
-    let geometries: Vec<(PathBuf, &dhct_scan::ScanGeometry)> = paths
+    let geometries: Vec<(FrameSource, &dhct_scan::ScanGeometry)> = sources
         .iter()
         .zip(&corrected)
         .map(|(p, c)| (p.clone(), &c.geometry))
@@ -189,6 +184,25 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
+}
+
+/// The frames of the inputs found (each file, or each frame of a file of several); at
+/// least two.
+fn frame_sources(
+    found: &crate::batch::inputs::Found,
+    request: &SeriesRequest,
+) -> Result<Vec<FrameSource>> {
+    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
+    let sources = sources::expand(&paths, &request.config)?;
+    if sources.len() < 2 {
+        bail!(
+            "a series needs at least two frames, {} found in {}: one frame is corrected by \
+             `dhct correct`",
+            sources.len(),
+            request.inputs.join(", ")
+        );
+    }
+    Ok(sources)
 }
 
 /// Each frame's own model only starts the series fit: the paper's local route alone, without
@@ -261,7 +275,7 @@ fn frame_summary(t: &Timed, c: &FrameModel) -> FrameSummary {
         .take_while(|p| !matches!(p.name.as_str(), "k" | "n" | "amplitude" | "c0"))
         .count();
     FrameSummary {
-        file: t.path.display().to_string(),
+        file: t.source.to_string(),
         start_s: t.start_s,
         scan_angle_deg: g.scan_angle().to_degrees(),
         offset_m: [g.offset().0, g.offset().1],

@@ -1,10 +1,10 @@
 //! The frames of a series on one clock: ordered by the start time each file records,
 //! spaced by it, and what to say when a file records none or frames overlap in time.
 
-use std::path::PathBuf;
-
 use anyhow::{Result, bail};
 use dhct_scan::ScanGeometry;
+
+use super::FrameSource;
 
 /// Start times a file rounds to the second may make back-to-back frames overlap by up to
 /// this much (seconds); the later frame is then taken to start when the earlier ended.
@@ -15,15 +15,15 @@ const ROUNDING_OVERLAP_S: f64 = 1.5;
 pub struct Timed {
     /// Index of the frame among the inputs (path order).
     pub input: usize,
-    /// Its file.
-    pub path: PathBuf,
+    /// Its file (or frame of a file).
+    pub source: FrameSource,
     /// Seconds since the first frame's start.
     pub start_s: f64,
 }
 
 /// The frames in time order with their session start times, and notes for the user (an
 /// order other than the names', a clock assumed, a start moved past a rounding overlap).
-pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<String>)> {
+pub fn order(frames: &[(FrameSource, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<String>)> {
     let mut notes = Vec::new();
     let stated: Vec<Option<f64>> = frames.iter().map(|(_, g)| g.start_time()).collect();
     if stated.iter().any(Option::is_none) {
@@ -31,12 +31,12 @@ pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<Str
             .iter()
             .zip(&stated)
             .filter(|(_, s)| s.is_none())
-            .map(|((p, _), _)| p.display().to_string())
+            .map(|((p, _), _)| p.to_string())
             .collect();
         notes.push(format!(
-            "assumption: {} of {} files record no start time ({}); the frames are taken in \
-             name order, each starting when the one before ended (pauses between frames \
-             would make the drift between them wrong)",
+            "assumption: {} of {} frames record no start time ({}); the frames are taken in \
+             name order (a file's own frames in its order), each starting when the one \
+             before ended (pauses between frames would make the drift between them wrong)",
             missing.len(),
             frames.len(),
             missing.join(", ")
@@ -48,7 +48,7 @@ pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<Str
             .map(|(input, (path, g))| {
                 let t = Timed {
                     input,
-                    path: path.clone(),
+                    source: path.clone(),
                     start_s: start,
                 };
                 start += g.frame_duration();
@@ -80,9 +80,9 @@ pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<Str
                     "{} starts {:.1} s into the session but {} (started {:.1} s in) takes {:.1} s: \
                      the frames overlap in time, so they are not one sequence of scans (check \
                      the files' dates and line times)",
-                    frames[i].0.display(),
+                    frames[i].0,
                     start_s,
-                    before.path.display(),
+                    before.source,
                     before.start_s,
                     frames[before.input].1.frame_duration()
                 );
@@ -93,7 +93,7 @@ pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<Str
         }
         timed.push(Timed {
             input: i,
-            path: frames[i].0.clone(),
+            source: frames[i].0.clone(),
             start_s,
         });
     }
@@ -104,6 +104,13 @@ pub fn order(frames: &[(PathBuf, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec<Str
 mod tests {
     use super::*;
     use dhct_scan::ScanDirection;
+
+    fn source(k: usize) -> FrameSource {
+        FrameSource {
+            path: format!("f{k}").into(),
+            frame: None,
+        }
+    }
 
     fn geometry(start: Option<f64>) -> ScanGeometry {
         // 10 lines of 1 s each way: a 20 s frame.
@@ -127,11 +134,8 @@ mod tests {
             geometry(Some(100.0)),
             geometry(Some(119.0)),
         ];
-        let frames: Vec<(PathBuf, &ScanGeometry)> = g
-            .iter()
-            .enumerate()
-            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
-            .collect();
+        let frames: Vec<(FrameSource, &ScanGeometry)> =
+            g.iter().enumerate().map(|(k, g)| (source(k), g)).collect();
         let err = order(&frames).unwrap_err().to_string();
         assert!(err.contains("overlap"), "{err}");
         let g = [
@@ -139,25 +143,19 @@ mod tests {
             geometry(Some(100.0)),
             geometry(Some(119.5)),
         ];
-        let frames: Vec<(PathBuf, &ScanGeometry)> = g
-            .iter()
-            .enumerate()
-            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
-            .collect();
+        let frames: Vec<(FrameSource, &ScanGeometry)> =
+            g.iter().enumerate().map(|(k, g)| (source(k), g)).collect();
         let (timed, notes) = order(&frames).unwrap();
         let starts: Vec<(usize, f64)> = timed.iter().map(|t| (t.input, t.start_s)).collect();
         assert_eq!(starts, [(1, 0.0), (2, 20.0), (0, 50.0)]);
         assert!(notes[0].contains("recorded start times"), "{notes:?}");
         let g = [geometry(Some(100.0)), geometry(None)];
-        let frames: Vec<(PathBuf, &ScanGeometry)> = g
-            .iter()
-            .enumerate()
-            .map(|(k, g)| (PathBuf::from(format!("f{k}")), g))
-            .collect();
+        let frames: Vec<(FrameSource, &ScanGeometry)> =
+            g.iter().enumerate().map(|(k, g)| (source(k), g)).collect();
         let (timed, notes) = order(&frames).unwrap();
         assert_eq!(timed[1].start_s, 20.0);
         assert!(
-            notes[0].starts_with("assumption: 1 of 2 files"),
+            notes[0].starts_with("assumption: 1 of 2 frames"),
             "{notes:?}"
         );
     }

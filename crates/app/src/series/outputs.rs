@@ -18,7 +18,7 @@ use ndarray::Array2;
 use super::placement;
 use super::{PassShift, SeriesSummary, Timed};
 use crate::analysis::FrameModel;
-use crate::setup::{CorrectConfig, read_pair};
+use crate::setup::CorrectConfig;
 
 /// What [`write_all`] wrote and what the registered images showed.
 pub struct Written {
@@ -198,7 +198,7 @@ pub fn write_registered(
     let mut written = Vec::new();
     let mut pages: Vec<(usize, ScanPass, ImageChannel)> = Vec::new();
     for (k, t) in timed.iter().enumerate() {
-        let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+        let pair = t.source.read(config)?;
         let frame = FrameRegistration {
             session,
             geometry: pair.geometry(),

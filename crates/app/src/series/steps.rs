@@ -33,8 +33,7 @@ pub fn observed(
     config: &CorrectConfig,
 ) -> Result<Vec<Option<SeenStep>>> {
     let trace = |t: &Timed| -> Result<ndarray::Array2<f64>> {
-        let pair =
-            crate::setup::read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+        let pair = t.source.read(config)?;
         Ok(pair
             .images()
             .next()

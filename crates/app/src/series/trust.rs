@@ -48,7 +48,7 @@ pub fn unexplained_frames(fit: &SeriesFit, timed: &[Timed]) -> Vec<Warning> {
                     "frame {k} ({}) deviates {} rms from the lattice, the frames' median is {}: \
                      the session's model does not explain it (placed a lattice period off, a \
                      tip change, or a move the headers do not record)",
-                    t.path.display(),
+                    t.source,
                     length(*rms),
                     length(median)
                 ),
@@ -116,7 +116,7 @@ pub fn registered_image_warnings(
     }
     let mut warnings = Vec::new();
     for (k, (measured, t)) in checks.frames.iter().zip(timed).enumerate() {
-        let what = format!("registered frame {k} ({})", t.path.display());
+        let what = format!("registered frame {k} ({})", t.source);
         for c in measured.iter().filter(|c| !c.passes()) {
             warnings.push(image_off(&format!("{what}, {}", c.pass), c, lattice));
         }
@@ -172,7 +172,10 @@ mod tests {
         (0..n)
             .map(|k| Timed {
                 input: k,
-                path: PathBuf::from(format!("f{k}.sm4")),
+                source: crate::series::FrameSource {
+                    path: PathBuf::from(format!("f{k}.sm4")),
+                    frame: None,
+                },
                 start_s: 60.0 * k as f64,
             })
             .collect()

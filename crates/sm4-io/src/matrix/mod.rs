@@ -21,7 +21,8 @@
 //! **upwards**: the first is the bottom row. With `XYScanner.Y_Retrace` the next `Lines`
 //! scan downwards from the top row. A scan stopped early stores fewer values; lines never
 //! completed are NaN. dhct returns one [`ScanPair`] per slow direction: the channel name for
-//! the upward frame (slow [`ScanDirection::Up`]) and `<name> down` for the downward one.
+//! the upward frame (slow [`ScanDirection::Up`], frame 0) and `<name> down` for the
+//! downward one (frame 1: recorded after it, so another frame of a series).
 //!
 //! # Calibration and timing
 //!
@@ -154,7 +155,8 @@ pub fn read_pair(
         } else {
             ScanDirection::Down
         };
-        let geometry = layout.geometry(&params, slow)?;
+        // The downward frame is recorded after the upward one: the file's second frame.
+        let geometry = layout.geometry(&params, slow)?.with_frame(usize::from(!up));
         let trace = layout.image(&values, up, false, &name, &unit)?;
         let retrace = if layout.x_retrace {
             Some(layout.image(&values, up, true, &name, &unit)?)

@@ -24,6 +24,10 @@ const WHOLE_FRAME_BLUR_PX: f64 = 2.0;
 /// independent shifts of a frame noise alone reaches 5σ with a chance of about 10⁻⁴.
 const MIN_MARGIN_SIGMAS: f64 = 5.0;
 
+/// The smooth background taken out of each frame before it is compared ([`prepared`]):
+/// a Gaussian of this σ, pixels.
+const BACKGROUND_PX: f64 = 8.0;
+
 /// Lines per band at least; a frame has between [`MIN_BANDS`] and [`MAX_BANDS`].
 const LINES_PER_BAND: usize = 32;
 const MIN_BANDS: usize = 2;
@@ -77,8 +81,21 @@ pub enum ComparisonError {
     },
 }
 
+/// What is compared of a frame: each scan line minus its median (line offsets gone), less
+/// its own blur over [`BACKGROUND_PX`] (terrace levels, a bow, the slow z drift: smooth
+/// structure whose correlation is broad and moves with the frame's edges, not with the
+/// sample); what is left are the edges of steps, islands, molecules and defects. NaN kept.
+pub fn prepared(z: &Array2<f64>, fast_axis: Axis) -> Array2<f64> {
+    let lines = levelled(z, fast_axis);
+    let filled = lines.mapv(|v| if v.is_finite() { v } else { 0.0 });
+    let background = dhct_features::gaussian_blur(&filled, BACKGROUND_PX);
+    let mut out = lines;
+    out.zip_mut_with(&background, |v, b| *v -= b);
+    out
+}
+
 /// Each scan line minus its median (line offsets gone; NaN kept).
-pub fn levelled(z: &Array2<f64>, fast_axis: Axis) -> Array2<f64> {
+fn levelled(z: &Array2<f64>, fast_axis: Axis) -> Array2<f64> {
     let mut out = z.clone();
     let mut level = |mut line: ndarray::ArrayViewMut1<f64>| {
         let mut finite: Vec<f64> = line.iter().copied().filter(|v| v.is_finite()).collect();
@@ -97,8 +114,8 @@ pub fn levelled(z: &Array2<f64>, fast_axis: Axis) -> Array2<f64> {
     out
 }
 
-/// The drift differences `frame` (index `k`) shows against `before` (both levelled, one
-/// size, pitch and scan angle).
+/// The drift differences `frame` (index `k`) shows against `before` (both [`prepared`],
+/// one size, pitch and scan angle).
 pub fn compare(
     k: usize,
     before: &FrameImage,
@@ -137,7 +154,7 @@ pub fn compare(
 }
 
 /// `s` (pixels, `(columns, rows)`) where `retrace` shows at `p` what `trace` (of the same
-/// frame, both levelled) showed at `p + s`: the passes' hysteresis differs (their drift
+/// frame, both [`prepared`]) showed at `p + s`: the passes' hysteresis differs (their drift
 /// differs by one line time only). `None` when no correlation peak stands out.
 pub fn pass_shift(trace: &Array2<f64>, retrace: &Array2<f64>, fast_axis: Axis) -> Option<[f64; 2]> {
     let whole = correlation::best_correlation(trace, retrace, WHOLE_FRAME_BLUR_PX)

@@ -24,8 +24,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::outputs::{self, Session};
-use super::{PassShift, SeriesRequest, Timed, order};
-use crate::setup::read_pair;
+use super::{FrameSource, PassShift, SeriesRequest, Timed, order};
 use comparisons::{FrameImage, PairComparison};
 
 /// What comparing images cannot determine, as `series.json` and the report say it.
@@ -101,31 +100,24 @@ pub fn run(request: &SeriesRequest) -> Result<ImageSeriesSummary> {
     for s in &found.skipped {
         eprintln!("note: skipping {}: {}", s.path.display(), s.note);
     }
-    if found.scans.len() < 2 {
-        bail!(
-            "a series needs at least two frames, {} found in {}",
-            found.scans.len(),
-            request.inputs.join(", ")
-        );
-    }
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     let config = &request.config;
-    let geometries: Vec<ScanGeometry> = found
-        .scans
-        .par_iter()
-        .map(|input| {
-            read_pair(
-                &input.path,
-                None,
-                &config.geometry,
-                config.channel.as_deref(),
-            )
-            .map(|pair| pair.geometry().clone())
-        })
-        .collect::<Result<_>>()?;
     let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
-    let listed: Vec<(PathBuf, &ScanGeometry)> = paths.iter().cloned().zip(&geometries).collect();
+    let sources = super::sources::expand(&paths, config)?;
+    if sources.len() < 2 {
+        bail!(
+            "a series needs at least two frames, {} found in {}",
+            sources.len(),
+            request.inputs.join(", ")
+        );
+    }
+    let geometries: Vec<ScanGeometry> = sources
+        .par_iter()
+        .map(|source| source.read(config).map(|pair| pair.geometry().clone()))
+        .collect::<Result<_>>()?;
+    let listed: Vec<(FrameSource, &ScanGeometry)> =
+        sources.iter().cloned().zip(&geometries).collect();
     let (timed, notes) = order::order(&listed)?;
     check_comparable(&timed, &geometries)?;
     let (pairs, differences) = compare_all(&timed, &geometries, request)?;
@@ -203,13 +195,13 @@ fn check_comparable(timed: &[Timed], geometries: &[ScanGeometry]) -> Result<()> 
                 "registration by image compares frames of one size, pixel size, scan angle \
                  and fast axis: {} is {} x {} px of {:.4} x {:.4} nm at {:.1}°, the first frame \
                  {} is {} x {} px of {:.4} x {:.4} nm at {:.1}°",
-                t.path.display(),
+                t.source,
                 g.columns(),
                 g.rows(),
                 g.pitch_x() * 1e9,
                 g.pitch_y() * 1e9,
                 g.scan_angle().to_degrees(),
-                timed[0].path.display(),
+                timed[0].source,
                 first.columns(),
                 first.rows(),
                 first.pitch_x() * 1e9,
@@ -229,14 +221,14 @@ fn compare_all(
 ) -> Result<(Vec<PairComparison>, Vec<DriftDifference>)> {
     let config = &request.config;
     let trace = |t: &Timed| -> Result<ndarray::Array2<f64>> {
-        let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+        let pair = t.source.read(config)?;
         let g = pair.geometry().clone();
         let z = pair
             .images()
             .next()
             .map(|(_, image)| image.z.clone())
             .unwrap_or_default();
-        Ok(comparisons::levelled(&z, g.fast_axis()))
+        Ok(comparisons::prepared(&z, g.fast_axis()))
     };
     let compared: Vec<(PairComparison, Vec<DriftDifference>)> = (1..timed.len())
         .into_par_iter()
@@ -271,11 +263,11 @@ fn retrace_shift(timed: &[Timed], request: &SeriesRequest) -> Result<Option<[f64
     let shifts: Vec<Option<[f64; 2]>> = timed
         .par_iter()
         .map(|t| -> Result<_> {
-            let pair = read_pair(&t.path, None, &config.geometry, config.channel.as_deref())?;
+            let pair = t.source.read(config)?;
             let axis = pair.geometry().fast_axis();
             let levelled = |pass| {
                 pair.image(pass)
-                    .map(|image| comparisons::levelled(&image.z, axis))
+                    .map(|image| comparisons::prepared(&image.z, axis))
             };
             Ok(
                 match (levelled(ScanPass::Trace), levelled(ScanPass::Retrace)) {
@@ -351,7 +343,7 @@ fn moves(timed: &[Timed], geometries: &[ScanGeometry]) -> Vec<MoveTiming> {
 
 fn frame_summary(t: &Timed, g: &ScanGeometry, shifts: Vec<PassShift>) -> ImageFrame {
     ImageFrame {
-        file: t.path.display().to_string(),
+        file: t.source.to_string(),
         start_s: t.start_s,
         scan_angle_deg: g.scan_angle().to_degrees(),
         offset_m: [g.offset().0, g.offset().1],
