@@ -111,8 +111,9 @@ drift = { velocity_m_per_s = [4e-12, -3e-12] }
         errors = [starts[k][i] - true[k][i] for k in range(3)]
         centre = sum(errors) / 3
         assert all(abs(e - centre) < 0.15 * pitch for e in errors), (i, errors)
-    assert abs(true[2][0] - true[0][0]) > 2 * pitch, "the test needs a drift"
+    assert abs(true[2][0] - true[0][0]) > 1.5 * pitch, "the test needs a drift"
     # A perfect lattice shares its pattern at every period: refused, not guessed.
+    (tmp_path / "graphite").mkdir()
     graphite = _small_sequence(tmp_path / "graphite", frames=2)
     with pytest.raises(dhct.AnalysisError, match="no common structure"):
         dhct.correct_series(graphite, tmp_path / "out2", register="image")

@@ -14,9 +14,9 @@ mod sources;
 mod steps;
 mod trust;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions, fit_series};
 use dhct_distortion::{FitOptions, PassInput};
 use dhct_pipeline::{CorrectedImageCheck, Warning};
@@ -104,17 +104,13 @@ pub struct SeriesSummary {
 
 /// Runs `dhct series`; returns the summary (also written as `series.json`).
 pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
-    let found = crate::batch::inputs::find(request.inputs, request.output)?;
-    for s in &found.skipped {
-        eprintln!("note: skipping {}: {}", s.path.display(), s.note);
-    }
+    let sources = sources::find_frames(request)?;
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     // Each frame keeps its features and model only: the images are read again when the
     // registered ones are written, so memory holds the images of the frames being analysed
     // (one per worker thread) at a time. Frames are analysed side by side: one 512² frame
     // alone does not keep the cores busy.
-    let sources = frame_sources(&found, request)?;
     let corrected: Vec<FrameModel> = sources
         .par_iter()
         .map(|source| {
@@ -184,25 +180,6 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
-}
-
-/// The frames of the inputs found (each file, or each frame of a file of several); at
-/// least two.
-fn frame_sources(
-    found: &crate::batch::inputs::Found,
-    request: &SeriesRequest,
-) -> Result<Vec<FrameSource>> {
-    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
-    let sources = sources::expand(&paths, &request.config)?;
-    if sources.len() < 2 {
-        bail!(
-            "a series needs at least two frames, {} found in {}: one frame is corrected by \
-             `dhct correct`",
-            sources.len(),
-            request.inputs.join(", ")
-        );
-    }
-    Ok(sources)
 }
 
 /// Each frame's own model only starts the series fit: the paper's local route alone, without

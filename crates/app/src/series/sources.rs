@@ -5,9 +5,10 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use dhct_scan::{ScanFile, ScanPair};
 
+use super::SeriesRequest;
 use crate::setup::CorrectConfig;
 
 /// One frame of a series: a file, or one frame of a file of several.
@@ -66,9 +67,30 @@ fn frame_pairs(file: ScanFile, frame: usize) -> ScanFile {
     }
 }
 
+/// The frames `request`'s inputs hold (folders, globs and files as `dhct batch` finds
+/// them; each file, or each frame of a file of several), at least two; the inputs skipped
+/// are noted on stderr.
+pub fn find_frames(request: &SeriesRequest) -> Result<Vec<FrameSource>> {
+    let found = crate::batch::inputs::find(request.inputs, request.output)?;
+    for s in &found.skipped {
+        eprintln!("note: skipping {}: {}", s.path.display(), s.note);
+    }
+    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
+    let sources = expand(&paths, &request.config)?;
+    if sources.len() < 2 {
+        bail!(
+            "a series needs at least two frames, {} found in {}: one frame is corrected by \
+             `dhct correct`",
+            sources.len(),
+            request.inputs.join(", ")
+        );
+    }
+    Ok(sources)
+}
+
 /// Every frame of `paths` in order: a file of one frame as itself, a file of several as
 /// each of its frames that holds the config's channel (or a topography), in file order.
-pub fn expand(paths: &[PathBuf], config: &CorrectConfig) -> Result<Vec<FrameSource>> {
+fn expand(paths: &[PathBuf], config: &CorrectConfig) -> Result<Vec<FrameSource>> {
     let mut sources = Vec::new();
     for path in paths {
         let file = read_file(path, config)?;

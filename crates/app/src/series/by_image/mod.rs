@@ -11,8 +11,6 @@
 mod comparisons;
 mod report;
 
-use std::path::PathBuf;
-
 use anyhow::{Context, Result, bail};
 use dhct_distortion::series::{
     DifferenceDriftFit, DriftDifference, ImageRegistration, MoveTiming, SplineBasis,
@@ -96,22 +94,10 @@ const MISALIGNED_PX: f64 = 0.5;
 /// Runs `dhct series --register image`; returns the summary (also written as
 /// `series.json`).
 pub fn run(request: &SeriesRequest) -> Result<ImageSeriesSummary> {
-    let found = crate::batch::inputs::find(request.inputs, request.output)?;
-    for s in &found.skipped {
-        eprintln!("note: skipping {}: {}", s.path.display(), s.note);
-    }
+    let sources = super::sources::find_frames(request)?;
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
     let config = &request.config;
-    let paths: Vec<PathBuf> = found.scans.iter().map(|s| s.path.clone()).collect();
-    let sources = super::sources::expand(&paths, config)?;
-    if sources.len() < 2 {
-        bail!(
-            "a series needs at least two frames, {} found in {}",
-            sources.len(),
-            request.inputs.join(", ")
-        );
-    }
     let geometries: Vec<ScanGeometry> = sources
         .par_iter()
         .map(|source| source.read(config).map(|pair| pair.geometry().clone()))
