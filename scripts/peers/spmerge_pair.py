@@ -250,14 +250,11 @@ def variant(python, size, hysteresis, work):
               "output)")
     traces = [np.load(os.path.join(frames, f"frame_0{k}_trace.npy")) for k in (0, 1)]
     merged = run_spmerge(python, traces, work)
-    best = None
     for angle, (image, seconds) in merged.items():
         row = judge(f"SPmerge (0, {angle:+.0f})°", image, pitch)
         row["seconds"] = seconds
         rows.append(row)
         print(f"  SPmerge (0, {angle:+.0f})°: {seconds:.2f} s")
-        if best is None or row["rms_about_lattice_pm"] < best["rms_about_lattice_pm"]:
-            best = row
     return {"variant": label, "size": size, "rows": rows}
 
 
