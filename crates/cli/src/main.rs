@@ -505,45 +505,37 @@ fn main() -> ExitCode {
             inputs,
             output,
             knots,
-            register: Registration::Image,
+            register,
             options,
         } => options.config().and_then(|config| {
-            let summary = series::by_image::run(&series::SeriesRequest {
+            let request = series::SeriesRequest {
                 inputs,
                 output,
                 config,
                 knots: knots.map(usize::from),
-            })?;
-            let text = if options.json {
-                serde_json::to_string_pretty(&summary)? + "\n"
-            } else {
-                series::by_image::text_summary(&summary, output)
             };
-            diagnose::write_stdout(&text)?;
-            eprint!("{}", series::by_image::warning_lines(&summary));
-            Ok(())
-        }),
-        Command::Series {
-            inputs,
-            output,
-            knots,
-            register: Registration::Lattice,
-            options,
-        } => options.config().and_then(|config| {
-            let summary = series::run(&series::SeriesRequest {
-                inputs,
-                output,
-                config,
-                knots: knots.map(usize::from),
-            })?;
-            let text = if options.json {
-                serde_json::to_string_pretty(&summary)? + "\n"
-            } else {
-                series::text_summary(&summary, output)
+            // (series.json's content, the text summary, the warnings)
+            let (json, text, warnings) = match register {
+                Registration::Lattice => {
+                    let summary = series::run(&request)?;
+                    (
+                        serde_json::to_string_pretty(&summary)?,
+                        series::text_summary(&summary, output),
+                        series::warning_lines(&summary),
+                    )
+                }
+                Registration::Image => {
+                    let summary = series::by_image::run(&request)?;
+                    (
+                        serde_json::to_string_pretty(&summary)?,
+                        series::by_image::text_summary(&summary, output),
+                        series::by_image::warning_lines(&summary),
+                    )
+                }
             };
-            diagnose::write_stdout(&text)?;
+            diagnose::write_stdout(&if options.json { json + "\n" } else { text })?;
             // Warnings go to stderr whatever --quiet and --json say.
-            eprint!("{}", series::warning_lines(&summary));
+            eprint!("{warnings}");
             Ok(())
         }),
         Command::Summarize { inputs, output } => {

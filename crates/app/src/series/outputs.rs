@@ -79,8 +79,8 @@ pub fn write_all(
 /// File name of the summary.
 pub const SERIES_JSON: &str = "series.json";
 
-/// Writes `series.json`.
-pub fn write_summary(dir: &Path, summary: &SeriesSummary) -> Result<()> {
+/// Writes `series.json` (either route's summary).
+pub fn write_summary(dir: &Path, summary: &impl serde::Serialize) -> Result<()> {
     write_atomically(&dir.join(SERIES_JSON), |w| {
         serde_json::to_writer_pretty(&mut *w, summary)
             .map_err(|e| WriteError::Stream(std::io::Error::other(e)))?;

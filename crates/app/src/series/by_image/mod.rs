@@ -160,7 +160,7 @@ pub fn run(request: &SeriesRequest) -> Result<ImageSeriesSummary> {
     )?);
     files.push(outputs::SERIES_JSON.to_string());
     summary.outputs = files;
-    write_summary(staged.path(), &summary)?;
+    outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
 }
@@ -362,17 +362,6 @@ fn warnings(pairs: &[PairComparison], frames: &[ImageFrame], pitch_m: [f64; 2]) 
         .map(|f| (f.file.as_str(), f.registered_shifts.as_slice()));
     few.chain(super::trust::shifts_beyond(shifts, pitch_m, MISALIGNED_PX))
         .collect()
-}
-
-fn write_summary(dir: &std::path::Path, summary: &ImageSeriesSummary) -> Result<()> {
-    use std::io::Write as _;
-    dhct_sm4_io::write_atomically(&dir.join(outputs::SERIES_JSON), |w| {
-        serde_json::to_writer_pretty(&mut *w, summary)
-            .map_err(|e| dhct_sm4_io::WriteError::Stream(std::io::Error::other(e)))?;
-        w.write_all(b"\n")?;
-        Ok(())
-    })?;
-    Ok(())
 }
 
 /// What `dhct series --register image` prints.
