@@ -33,6 +33,7 @@
 
 pub mod banded;
 pub mod crlb;
+pub mod envelope;
 pub mod linalg;
 pub mod lm;
 pub mod moments;

@@ -164,17 +164,25 @@ fn downhill_step<P: LmProblem + ?Sized>(
 }
 
 /// Solves `(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀWr` (Cholesky, LU when that fails).
+/// Parameters from which a damped step is solved inside the normal matrix's envelope
+/// ([`crate::envelope`]) instead of by a dense Cholesky factorisation.
+const ENVELOPE_FROM: usize = 64;
+
 fn damped_step(normal: &NormalEquations, lambda: f64) -> Option<DVector<f64>> {
     let mut damped = normal.jtwj.clone();
     for k in 0..damped.nrows() {
         damped[(k, k)] += lambda * normal.jtwj[(k, k)].max(1e-12);
     }
     let rhs = -&normal.jtwr;
-    match damped.clone().cholesky() {
-        Some(cholesky) => Some(cholesky.solve(&rhs)),
-        None => damped.lu().solve(&rhs),
-    }
-    .filter(|step| step.iter().all(|v| v.is_finite()))
+    // Large problems are mostly zeros (a spline's coefficients touch only their neighbours):
+    // their factor is computed inside its envelope.
+    let solved = match damped.nrows() >= ENVELOPE_FROM {
+        true => crate::envelope::solve_positive_definite(&damped, &rhs),
+        false => damped.clone().cholesky().map(|c| c.solve(&rhs)),
+    };
+    solved
+        .or_else(|| damped.lu().solve(&rhs))
+        .filter(|step| step.iter().all(|v| v.is_finite()))
 }
 
 /// Residuals `r(p)` of a weighted least-squares problem, for [`ResidualProblem`]. Any

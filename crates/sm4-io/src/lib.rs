@@ -60,7 +60,7 @@ pub mod wsxm;
 
 use std::path::Path;
 
-pub use atomic::write_atomically;
+pub use atomic::{AtomicFile, write_atomically};
 pub use detect::{detect_format, detect_format_of_length};
 pub use dhct_scan::{FileFormat, ScanFile};
 pub use error::{OverrideRangeError, ReadError, WriteError};

@@ -35,7 +35,7 @@
 //! copy of the samples: a 16 MB deflate bomb is refused before it is decoded.
 
 use std::collections::BTreeMap;
-use std::io::{Cursor, Write};
+use std::io::{Cursor, Seek, Write};
 
 use ::tiff::ColorType;
 use ::tiff::TiffError;
@@ -180,34 +180,66 @@ fn write_f32_pages<W: Write>(
 ) -> Result<(), WriteError> {
     let mut cursor = Cursor::new(Vec::new());
     {
-        let mut encoder = TiffEncoder::new(&mut cursor).map_err(encoder_error)?;
+        let mut stack = F32Pages::start(&mut cursor, resolution)?;
         for channel in pages {
-            let (width, height) = dimensions(channel)?;
-            let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
-            let description = match resolution {
-                Some(_) => imagej_description(channel),
-                None => description(channel, None),
-            };
-            let mut image = encoder
-                .new_image::<colortype::Gray32Float>(width, height)
-                .map_err(encoder_error)?;
-            let tags = image.encoder();
-            tags.write_tag(Tag::ImageDescription, description.as_str())
-                .map_err(encoder_error)?;
-            if let Some([x, y]) = &resolution {
-                let copy = |r: &Rational| Rational { n: r.n, d: r.d };
-                tags.write_tag(Tag::XResolution, copy(x))
-                    .map_err(encoder_error)?;
-                tags.write_tag(Tag::YResolution, copy(y))
-                    .map_err(encoder_error)?;
-                tags.write_tag(Tag::ResolutionUnit, ResolutionUnit::Centimeter.to_u16())
-                    .map_err(encoder_error)?;
-            }
-            image.write_data(&data).map_err(encoder_error)?;
+            stack.push(channel)?;
         }
     }
     w.write_all(cursor.get_ref())?;
     Ok(())
+}
+
+/// A multi-page float32 TIFF written a page at a time, each page as
+/// [`write_f32_pages_with_pixel_size`] writes it: a long stack never has to be held whole,
+/// neither as images nor as bytes. The writer must seek (a file, or a buffered file).
+pub struct F32Pages<W: Write + Seek> {
+    encoder: TiffEncoder<W>,
+    resolution: Option<[Rational; 2]>,
+}
+
+impl<W: Write + Seek> F32Pages<W> {
+    /// Starts a stack whose pages have the pixel size `pitch_m` (x, y; metres per pixel).
+    pub fn with_pixel_size(w: W, pitch_m: [f64; 2]) -> Result<F32Pages<W>, WriteError> {
+        let resolution = [
+            pixels_per_centimetre(pitch_m[0])?,
+            pixels_per_centimetre(pitch_m[1])?,
+        ];
+        F32Pages::start(w, Some(resolution))
+    }
+
+    fn start(w: W, resolution: Option<[Rational; 2]>) -> Result<F32Pages<W>, WriteError> {
+        Ok(F32Pages {
+            encoder: TiffEncoder::new(w).map_err(encoder_error)?,
+            resolution,
+        })
+    }
+
+    /// Appends `channel` as the next page, with its own name and unit.
+    pub fn push(&mut self, channel: &ImageChannel) -> Result<(), WriteError> {
+        let (width, height) = dimensions(channel)?;
+        let data: Vec<f32> = channel.z.iter().map(|&v| v as f32).collect();
+        let description = match self.resolution {
+            Some(_) => imagej_description(channel),
+            None => description(channel, None),
+        };
+        let mut image = self
+            .encoder
+            .new_image::<colortype::Gray32Float>(width, height)
+            .map_err(encoder_error)?;
+        let tags = image.encoder();
+        tags.write_tag(Tag::ImageDescription, description.as_str())
+            .map_err(encoder_error)?;
+        if let Some([x, y]) = &self.resolution {
+            let copy = |r: &Rational| Rational { n: r.n, d: r.d };
+            tags.write_tag(Tag::XResolution, copy(x))
+                .map_err(encoder_error)?;
+            tags.write_tag(Tag::YResolution, copy(y))
+                .map_err(encoder_error)?;
+            tags.write_tag(Tag::ResolutionUnit, ResolutionUnit::Centimeter.to_u16())
+                .map_err(encoder_error)?;
+        }
+        image.write_data(&data).map_err(encoder_error)
+    }
 }
 
 /// Writes `channel` as a single-page, uncompressed 16-bit grey TIFF: the finite range maps

@@ -15,6 +15,7 @@ mod steps;
 mod trust;
 
 use std::path::Path;
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 use dhct_distortion::series::{KnotChoice, SeriesFit, SeriesFrame, SeriesOptions, fit_series};
@@ -100,10 +101,33 @@ pub struct SeriesSummary {
     pub notes: Vec<String>,
     /// Files written into the output directory.
     pub outputs: Vec<String>,
+    /// Wall time of each stage, seconds.
+    pub timings: SeriesTimings,
+}
+
+/// Wall time of each stage of `dhct series`, seconds.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct SeriesTimings {
+    /// Every frame analysed alone (read, lattice, features, its own model), side by side.
+    pub frames_s: f64,
+    /// The frames' stages summed over the frames (seconds of one core each).
+    pub frame_stages: dhct_pipeline::StageTimings,
+    /// Consecutive frames compared by their images (the steps between them).
+    pub steps_s: f64,
+    /// The series fit.
+    pub fit_s: f64,
+    /// The features, the trajectory and the registered images written and checked.
+    pub registered_s: f64,
+    /// The report.
+    pub report_s: f64,
+    /// The whole run.
+    pub total_s: f64,
 }
 
 /// Runs `dhct series`; returns the summary (also written as `series.json`).
 pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
+    let started = Instant::now();
+    let mut timings = SeriesTimings::default();
     let sources = sources::find_frames(request)?;
     let staged =
         crate::output_dir::StagedOutput::prepare(request.output, request.config.overwrite)?;
@@ -121,6 +145,9 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
                 .with_context(|| format!("frame {source} cannot be analysed alone"))
         })
         .collect::<Result<_>>()?;
+    timings.frames_s = started.elapsed().as_secs_f64();
+    timings.frame_stages = summed_stages(&corrected);
+    let steps_started = Instant::now();
     let geometries: Vec<(FrameSource, &dhct_scan::ScanGeometry)> = sources
         .iter()
         .zip(&corrected)
@@ -130,7 +157,10 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
     let steps = steps::observed(&corrected, &timed, &request.config)?;
     notes.extend(steps::notes(&steps));
     let steps: Vec<_> = steps.iter().map(|s| s.map(|s| s.step)).collect();
+    timings.steps_s = steps_started.elapsed().as_secs_f64();
+    let fit_started = Instant::now();
     let fit = fit_frames(&corrected, &timed, &steps, request)?;
+    timings.fit_s = fit_started.elapsed().as_secs_f64();
     let warnings = trust::unexplained_frames(&fit, &timed);
     let mut summary = SeriesSummary {
         frames: timed
@@ -142,7 +172,9 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         warnings,
         notes,
         outputs: Vec::new(),
+        timings,
     };
+    let written_started = Instant::now();
     let written = outputs::write_all(staged.path(), &summary, &corrected, &timed, &request.config)?;
     let lattice = corrected[timed[0].input].lattice.as_ref();
     summary.warnings.extend(trust::registered_image_warnings(
@@ -157,6 +189,8 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         frame.registered_shifts = shifts;
     }
     summary.mean_check = written.checks.mean;
+    summary.timings.registered_s = written_started.elapsed().as_secs_f64();
+    let report_started = Instant::now();
     let grid = &corrected[timed[0].input].geometry;
     let pitch = [grid.pitch_x(), grid.pitch_y()];
     let shifted = trust::shift_warnings(&summary.frames, pitch);
@@ -177,15 +211,32 @@ pub fn run(request: &SeriesRequest) -> Result<SeriesSummary> {
         colormap,
     )?);
     summary.outputs = files;
+    summary.timings.report_s = report_started.elapsed().as_secs_f64();
+    summary.timings.total_s = started.elapsed().as_secs_f64();
     outputs::write_summary(staged.path(), &summary)?;
     staged.commit()?;
     Ok(summary)
 }
 
+/// The frames' stage timings summed.
+fn summed_stages(frames: &[FrameModel]) -> dhct_pipeline::StageTimings {
+    let mut sum = dhct_pipeline::StageTimings::default();
+    for t in frames.iter().map(|f| &f.run.timings) {
+        sum.calibration_s += t.calibration_s;
+        sum.features_s += t.features_s;
+        sum.model_s += t.model_s;
+        sum.total_s += t.total_s;
+    }
+    sum
+}
+
 /// Each frame's own model only starts the series fit: the paper's local route alone, without
-/// the global registration and its cross-validation (a third of the cost of a frame).
+/// the global registration and its cross-validation (a third of the cost of a frame), and
+/// each local distortion compared with the model's derivative, as the series fit does, not
+/// its secant over the neighbours (half the cost of the model fit).
 fn frame_options(options: &mut dhct_pipeline::PipelineOptions) {
     options.dhct.route = dhct_distortion::RoutePolicy::LocalOnly;
+    options.dhct.fit.secant = false;
 }
 
 /// `frame` without what the series does not read (the rejected candidates, each feature's

@@ -12,8 +12,9 @@ use dhct_distortion::series::{
 };
 use dhct_pipeline::{CorrectedImageCheck, check_corrected_images};
 use dhct_scan::{ImageChannel, ScanPass};
-use dhct_sm4_io::{WriteError, gsf, tiff_file, write_atomically};
+use dhct_sm4_io::{AtomicFile, WriteError, gsf, tiff_file, write_atomically};
 use ndarray::Array2;
+use rayon::prelude::*;
 
 use super::placement;
 use super::{PassShift, SeriesSummary, Timed};
@@ -180,7 +181,11 @@ pub struct Session<'a> {
 /// Every frame's images registered onto the first frame's grid, their stack and its mean,
 /// each image's lattice measured by FFT ([`fft_check`]) where `session` names one, and its
 /// shift against the first frame's trace measured from the pixels
-/// ([`placement::image_shift`]). Each frame's file is read again here, one at a time.
+/// ([`placement::image_shift`]). Each frame's file is read again here; frames are
+/// registered side by side, one per worker thread, and each is written (its GSF files, its
+/// stack pages, its share of the mean) before the next few are read: memory holds the first
+/// and the latest frame's registered traces and the frames in hand, however long the
+/// session.
 pub fn write_registered(
     dir: &Path,
     session: &Session,
@@ -196,39 +201,58 @@ pub fn write_registered(
         ..RegisteredChecks::default()
     };
     let mut written = Vec::new();
-    let mut pages: Vec<(usize, ScanPass, ImageChannel)> = Vec::new();
-    for (k, t) in timed.iter().enumerate() {
-        let pair = t.source.read(config)?;
-        let frame = FrameRegistration {
-            session,
-            geometry: pair.geometry(),
-            start_s: t.start_s,
-        };
-        let (mut measured, mut unmeasured) = (Vec::new(), Vec::new());
-        for (pass, image) in pair.images() {
-            let z = frame.register(pass, &image.z, grid)?;
-            if let Some(lattice) = session.lattice {
-                match fft_check(&frame, lattice, pass, &image.z, &z) {
-                    Some(c) => measured.push(c),
-                    None => unmeasured.push(pass),
-                }
+    let mut stack_file = AtomicFile::create(&dir.join(STACK))?;
+    let mut stack = tiff_file::F32Pages::with_pixel_size(
+        stack_file.writer(),
+        [grid.pitch_x(), grid.pitch_y()],
+    )?;
+    let mut mean = MeanImage::default();
+    let mut unit = None;
+    // The first frame alone, then as many at a time as there are worker threads.
+    let first = register_frame(dir, session, config, 0, &timed[0], None)?;
+    let first_trace = first.trace().cloned();
+    let mut latest_trace = first_trace.clone();
+    let mut in_hand = vec![first];
+    let mut next = 1;
+    loop {
+        for frame in in_hand.drain(..) {
+            let shifts = frame.shifts(latest_trace.as_ref());
+            if let Some(trace) = frame.trace() {
+                latest_trace = Some(trace.clone());
             }
-            let name = format!("frame_{k:02}_{}", pass.name());
-            let channel =
-                ImageChannel::new(format!("{} {name}", image.name), image.unit.clone(), z);
-            let file = format!("registered/{name}.gsf");
-            write_atomically(&dir.join(&file), |w| {
-                gsf::write_pass(&channel, grid, pass, w)
-            })?;
-            written.push(file);
-            pages.push((k, pass, channel));
+            for (pass, page) in &frame.pages {
+                stack.push(page)?;
+                mean.add(&page.z);
+                unit.get_or_insert_with(|| page.unit.clone());
+                written.push(format!("registered/{}.gsf", page_name(frame.index, *pass)));
+            }
+            checks.frames.push(frame.measured);
+            checks.unmeasured.push(frame.unmeasured);
+            checks.shifts.push(shifts);
         }
-        checks.frames.push(measured);
-        checks.unmeasured.push(unmeasured);
+        if next == timed.len() {
+            break;
+        }
+        let chunk = (next..timed.len()).take(rayon::current_num_threads().max(1));
+        in_hand = chunk
+            .clone()
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|k| register_frame(dir, session, config, k, &timed[k], first_trace.as_ref()))
+            .collect::<Result<_>>()?;
+        next += chunk.len();
     }
-    checks.shifts = shifts_against_first(&pages, timed.len());
-    let pages: Vec<ImageChannel> = pages.into_iter().map(|(_, _, page)| page).collect();
-    let mean = write_stack_and_mean(dir, &pages, grid, &mut written)?;
+    stack_file.commit()?;
+    let mean = ImageChannel::new(
+        "mean of the registered frames",
+        unit.unwrap_or_default(),
+        mean.finish(),
+    );
+    write_atomically(&dir.join("registered/mean.gsf"), |w| {
+        gsf::write_pass(&mean, grid, ScanPass::Trace, w)
+    })?;
+    written.push("registered/mean.gsf".into());
+    written.push(STACK.into());
     if let Some(lattice) = session.lattice {
         checks.mean = check_corrected_images(&[(ScanPass::Trace, &mean.z)], grid, lattice).pop();
     }
@@ -237,6 +261,104 @@ pub fn write_registered(
         checks,
         mean,
     })
+}
+
+/// The registered stack, one page per image in time order (trace before retrace).
+const STACK: &str = "registered/stack.tif";
+
+/// `frame_NN_trace` or `frame_NN_retrace`.
+fn page_name(frame: usize, pass: ScanPass) -> String {
+    format!("frame_{frame:02}_{}", pass.name())
+}
+
+/// One frame registered: its pages (written as GSF already) and what was measured of them.
+struct RegisteredFrame {
+    index: usize,
+    pages: Vec<(ScanPass, ImageChannel)>,
+    measured: Vec<CorrectedImageCheck>,
+    unmeasured: Vec<ScanPass>,
+    /// Per page, its shift against the first frame's trace (`None`: not measured there;
+    /// the first frame's trace itself has none).
+    against_first: Vec<Option<[f64; 2]>>,
+}
+
+impl RegisteredFrame {
+    fn trace(&self) -> Option<&Array2<f64>> {
+        self.pages
+            .iter()
+            .find(|(pass, _)| *pass == ScanPass::Trace)
+            .map(|(_, page)| &page.z)
+    }
+
+    /// Each page's shift against the first frame's trace, or, where the first overlaps it
+    /// too little, against `before` (the frame before's registered trace).
+    fn shifts(&self, before: Option<&Array2<f64>>) -> Vec<PassShift> {
+        self.pages
+            .iter()
+            .zip(&self.against_first)
+            .filter(|((pass, _), _)| self.index > 0 || *pass != ScanPass::Trace)
+            .map(|((pass, page), first)| {
+                let found = first.map(|shift| (0, shift)).or_else(|| {
+                    let before = before.filter(|_| self.index > 0)?;
+                    Some((self.index - 1, placement::image_shift(before, &page.z)?))
+                });
+                PassShift {
+                    pass: *pass,
+                    against_frame: found.map(|(reference, _)| reference),
+                    shift_px: found.map(|(_, shift)| shift),
+                }
+            })
+            .collect()
+    }
+}
+
+/// Reads frame `index` (`t`) again, registers its images, checks them, writes each as GSF
+/// and measures each against `first_trace` (the first frame's registered trace; `None` for
+/// the first frame itself, whose retrace is measured against its own trace).
+fn register_frame(
+    dir: &Path,
+    session: &Session,
+    config: &CorrectConfig,
+    index: usize,
+    t: &Timed,
+    first_trace: Option<&Array2<f64>>,
+) -> Result<RegisteredFrame> {
+    let pair = t.source.read(config)?;
+    let frame = FrameRegistration {
+        session,
+        geometry: pair.geometry(),
+        start_s: t.start_s,
+    };
+    let grid = &session.grid;
+    let mut done = RegisteredFrame {
+        index,
+        pages: Vec::new(),
+        measured: Vec::new(),
+        unmeasured: Vec::new(),
+        against_first: Vec::new(),
+    };
+    for (pass, image) in pair.images() {
+        let z = frame.register(pass, &image.z, grid)?;
+        if let Some(lattice) = session.lattice {
+            match fft_check(&frame, lattice, pass, &image.z, &z) {
+                Some(c) => done.measured.push(c),
+                None => done.unmeasured.push(pass),
+            }
+        }
+        let name = page_name(index, pass);
+        let channel = ImageChannel::new(format!("{} {name}", image.name), image.unit.clone(), z);
+        write_atomically(&dir.join(format!("registered/{name}.gsf")), |w| {
+            gsf::write_pass(&channel, grid, pass, w)
+        })?;
+        let reference = first_trace.or_else(|| done.trace());
+        let shift = match (index, pass) {
+            (0, ScanPass::Trace) => None,
+            _ => reference.and_then(|r| placement::image_shift(r, &channel.z)),
+        };
+        done.against_first.push(shift);
+        done.pages.push((pass, channel));
+    }
+    Ok(done)
 }
 
 /// What registering one frame needs.
@@ -285,65 +407,6 @@ fn fft_check(
     })
 }
 
-/// Each registered image's shift against the first frame's trace, from the pixels alone
-/// (in parallel), per frame of `frames`; against the frame before's trace where the first
-/// frame's overlaps it too little.
-fn shifts_against_first(
-    pages: &[(usize, ScanPass, ImageChannel)],
-    frames: usize,
-) -> Vec<Vec<PassShift>> {
-    use rayon::prelude::*;
-    let trace_of = |frame: usize| {
-        pages
-            .iter()
-            .find(|(k, pass, _)| *k == frame && *pass == ScanPass::Trace)
-            .map(|(_, _, page)| page)
-    };
-    let found: Vec<(usize, PassShift)> = pages
-        .par_iter()
-        .skip(1)
-        .map(|(frame, pass, page)| {
-            let against = |reference: usize| {
-                let shift = placement::image_shift(&trace_of(reference)?.z, &page.z)?;
-                Some((reference, shift))
-            };
-            let found = against(0).or_else(|| against(frame.checked_sub(1)?));
-            let shift = PassShift {
-                pass: *pass,
-                against_frame: found.map(|(reference, _)| reference),
-                shift_px: found.map(|(_, shift)| shift),
-            };
-            (*frame, shift)
-        })
-        .collect();
-    let mut per_frame = vec![Vec::new(); frames];
-    for (frame, shift) in found {
-        per_frame[frame].push(shift);
-    }
-    per_frame
-}
-
-/// Writes the stack (multi-page TIFF) and the mean (GSF) of `pages`; returns the mean.
-fn write_stack_and_mean(
-    dir: &Path,
-    pages: &[ImageChannel],
-    grid: &dhct_scan::ScanGeometry,
-    written: &mut Vec<String>,
-) -> Result<ImageChannel> {
-    let unit = pages.first().map(|p| p.unit.clone()).unwrap_or_default();
-    let mean = ImageChannel::new("mean of the registered frames", unit, mean_image(pages));
-    write_atomically(&dir.join("registered/mean.gsf"), |w| {
-        gsf::write_pass(&mean, grid, ScanPass::Trace, w)
-    })?;
-    written.push("registered/mean.gsf".into());
-    let refs: Vec<&ImageChannel> = pages.iter().collect();
-    write_atomically(&dir.join("registered/stack.tif"), |w| {
-        tiff_file::write_f32_pages_with_pixel_size(&refs, [grid.pitch_x(), grid.pitch_y()], w)
-    })?;
-    written.push("registered/stack.tif".into());
-    Ok(mean)
-}
-
 /// What [`write_registered`] wrote and measured.
 pub struct Registered {
     /// The files written, relative to the output directory.
@@ -381,21 +444,29 @@ fn own_grid(
     geometry.clone().with_offset(x + d[0], y + d[1]).ok()
 }
 
-/// The mean of `pages` per pixel over the pages that hold a value there (NaN where none),
-/// each page first brought to the first page's height level (less the median of its
-/// difference from it where both hold values): frames differ by a z offset (the z piezo
-/// creeps too), which would otherwise draw each frame's outline into the mean.
-fn mean_image(pages: &[ImageChannel]) -> Array2<f64> {
-    let Some(first) = pages.first() else {
-        return Array2::zeros((0, 0));
-    };
-    let mut sum = Array2::<f64>::zeros(first.z.dim());
-    let mut count = Array2::<f64>::zeros(first.z.dim());
-    for page in pages {
-        let offset = level_against(&first.z, &page.z);
-        ndarray::Zip::from(&mut sum)
-            .and(&mut count)
-            .and(&page.z)
+/// The mean of the registered pages per pixel over the pages that hold a value there (NaN
+/// where none), each page first brought to the first page's height level (less the median
+/// of its difference from it where both hold values): frames differ by a z offset (the z
+/// piezo creeps too), which would otherwise draw each frame's outline into the mean.
+/// Accumulated a page at a time.
+#[derive(Default)]
+struct MeanImage {
+    first: Option<Array2<f64>>,
+    sum: Array2<f64>,
+    count: Array2<f64>,
+}
+
+impl MeanImage {
+    fn add(&mut self, page: &Array2<f64>) {
+        let first = self.first.get_or_insert_with(|| page.clone());
+        let offset = level_against(first, page);
+        if self.sum.dim() != page.dim() {
+            self.sum = Array2::zeros(page.dim());
+            self.count = Array2::zeros(page.dim());
+        }
+        ndarray::Zip::from(&mut self.sum)
+            .and(&mut self.count)
+            .and(page)
             .for_each(|s, n, &v| {
                 if v.is_finite() {
                     *s += v - offset;
@@ -403,10 +474,15 @@ fn mean_image(pages: &[ImageChannel]) -> Array2<f64> {
                 }
             });
     }
-    ndarray::Zip::from(&mut sum).and(&count).for_each(|s, &n| {
-        *s = if n > 0.0 { *s / n } else { f64::NAN };
-    });
-    sum
+
+    fn finish(mut self) -> Array2<f64> {
+        ndarray::Zip::from(&mut self.sum)
+            .and(&self.count)
+            .for_each(|s, &n| {
+                *s = if n > 0.0 { *s / n } else { f64::NAN };
+            });
+        self.sum
+    }
 }
 
 #[cfg(test)]
@@ -425,11 +501,10 @@ mod tests {
                 f64::NAN
             }
         });
-        let pages = [
-            ImageChannel::new("a", "m", first.clone()),
-            ImageChannel::new("b", "m", second),
-        ];
-        let mean = mean_image(&pages);
+        let mut mean = MeanImage::default();
+        mean.add(&first);
+        mean.add(&second);
+        let mean = mean.finish();
         let worst = mean
             .iter()
             .zip(first.iter())

@@ -114,6 +114,7 @@ fn main() {
         "features_fitted": summary.fit.features,
         "interior_knots": summary.fit.drift.basis.interior_knots,
         "worst_frame_start_error_px": worst,
+        "timings_s": summary.timings,
     });
     println!(
         "{frames} frames of {size}²: {seconds:.1} s on {} cpus (load {} -> {}), peak memory {} MiB; \
@@ -125,6 +126,20 @@ fn main() {
         peak.map_or("?".into(), |p| format!("{p:.0}")),
         summary.fit.features,
         summary.fit.drift.basis.interior_knots,
+    );
+    let t = &summary.timings;
+    println!(
+        "  frames analysed {:.1} s (one core: lattice {:.1} s, features {:.1} s, model {:.1} s), \
+         steps {:.1} s, series fit {:.1} s, registered images {:.1} s, report {:.1} s, all {:.1} s",
+        t.frames_s,
+        t.frame_stages.calibration_s,
+        t.frame_stages.features_s,
+        t.frame_stages.model_s,
+        t.steps_s,
+        t.fit_s,
+        t.registered_s,
+        t.report_s,
+        t.total_s
     );
     if let Some(path) = flag(&args, "--json") {
         let text = serde_json::to_string_pretty(&report).unwrap_or_default();

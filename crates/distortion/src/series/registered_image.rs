@@ -4,6 +4,7 @@
 
 use dhct_scan::{ScanGeometry, ScanPass};
 use ndarray::Array2;
+use rayon::prelude::*;
 
 use super::fit::SeriesFit;
 use super::frame::SeriesFeature;
@@ -55,12 +56,24 @@ pub fn register_image(
     grid: &ScanGeometry,
 ) -> Result<Array2<f64>, DistortionError> {
     image_shape(geometry, z)?;
+    let (rows, columns) = z.dim();
+    // Every pixel placed once, lines side by side (the resampling reads each line twice:
+    // for the rows it covers, then for its quads).
+    let mut placed = vec![[0.0f64; 2]; rows * columns];
+    placed
+        .par_chunks_mut(columns.max(1))
+        .enumerate()
+        .for_each(|(r, line)| {
+            for (c, at) in line.iter_mut().enumerate() {
+                let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
+                let q = grid.from_instrument(fit.position_of(&f));
+                *at = [q[0] / grid.pitch_x(), q[1] / grid.pitch_y()];
+            }
+        });
     let place = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
-        for c in 0..xs.len() {
-            let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
-            let q = grid.from_instrument(fit.position_of(&f));
-            xs[c] = q[0] / grid.pitch_x();
-            ys[c] = q[1] / grid.pitch_y();
+        let line = &placed[r * columns..(r + 1) * columns];
+        for ((x, y), at) in xs.iter_mut().zip(ys.iter_mut()).zip(line) {
+            [*x, *y] = *at;
         }
     };
     Ok(resample_onto(&place, z, (grid.rows(), grid.columns())))
