@@ -9,6 +9,8 @@
 //! - [`moments`]: plain moments of point sets.
 //! - [`special`]: the error function and the normal upper tail.
 //! - [`sparse_rows`]: normal equations from a Jacobian given as its non-zeros per row.
+//! - [`envelope`]: a positive-definite solve inside the matrix's envelope, its dense
+//!   parameters last (the LM step of a fit with a spline over a long session).
 //! - [`series`]: `ln(1 + u)` for small `u` in hot loops (the correction of every pixel).
 //!
 //! Why our own LM and not `argmin` or `levenberg-marquardt`: the feature fit needs bound
