@@ -168,7 +168,7 @@ pub(crate) fn parameter(name: &str, value: f64, sigma: f64, unit: &str) -> Param
     }
 }
 
-fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
+pub(crate) fn sigmas(inverse: &Option<DMatrix<f64>>, scale2: f64, n: usize) -> Vec<f64> {
     (0..n)
         .map(|k| {
             inverse
@@ -342,8 +342,9 @@ fn drift_result(
         return Err(DistortionError::FitFailed("drift/creep"));
     }
     let parameters = drift_parameters(&p[..7], &s[..7], t0_map);
-    let diagnostics = drift_diagnostics(&fit.inverse_normal, p[6], t0_map);
-    let correlation = correlations(&fit.inverse_normal, 0, 7);
+    let inverse = fit.inverse_normal();
+    let diagnostics = drift_diagnostics(&inverse, p[6], t0_map);
+    let correlation = correlations(&inverse, 0, 7);
     Ok((drift, parameters, diagnostics, correlation))
 }
 
@@ -403,7 +404,7 @@ pub(crate) fn scaled_sigmas(fit: &ResidualFit, weights: &[f64], n: usize) -> Vec
         .map(|(r, w)| w * r * r)
         .sum();
     let scale2 = chi2 / fit.residuals.len().saturating_sub(n).max(1) as f64;
-    sigmas(&fit.inverse_normal, scale2, n)
+    sigmas(&fit.inverse_normal(), scale2, n)
 }
 
 /// Correlation beyond which two parameters count as nearly degenerate (only a combination
@@ -683,7 +684,7 @@ fn fit_hysteresis_as(
             "hysteresis (the power law left its domain k > 0, n > −1)",
         ));
     }
-    let correlation = correlations(&fit.inverse_normal, 0, n);
+    let correlation = correlations(&fit.inverse_normal(), 0, n);
     let parameters = hysteresis_parameters(choice, p, &sg);
     Ok(HysteresisFit {
         result: (law, parameters, correlation),

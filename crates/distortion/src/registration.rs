@@ -454,13 +454,12 @@ impl<'a> RegistrationProblem<'a> {
             &p[at + 7..],
             &sigma[at + 7..],
         ));
-        let drift_block = fit
-            .inverse_normal
+        let inverse = fit.inverse_normal();
+        let drift_block = inverse
             .as_ref()
             .map(|c| c.view((at, at), (7, 7)).clone_owned());
         model.diagnostics = drift_diagnostics(&drift_block, p[at + 6], self.t0_map);
-        model.parameter_correlation =
-            correlations(&fit.inverse_normal, at, n - at).unwrap_or_default();
+        model.parameter_correlation = correlations(&inverse, at, n - at).unwrap_or_default();
         let m = self.features.len();
         let robust = mad_sigma_about(&fit.residuals[..2 * m], 0.0).unwrap_or(f64::NAN);
         Ok(Registration {

@@ -335,10 +335,21 @@ pub struct ResidualFit {
     pub params: Vec<f64>,
     /// The (unweighted) residuals there.
     pub residuals: Vec<f64>,
-    /// `(JᵀWJ)⁻¹` there (unscaled; see [`crate::linalg::inverse_with_undetermined`]).
-    pub inverse_normal: Option<DMatrix<f64>>,
+    /// `JᵀWJ` there (its inverse, the unscaled covariance, is
+    /// [`ResidualFit::inverse_normal`]).
+    pub normal: DMatrix<f64>,
     /// Accepted steps taken.
     pub iterations: usize,
+}
+
+impl ResidualFit {
+    /// `(JᵀWJ)⁻¹` at the optimum (unscaled; see
+    /// [`crate::linalg::inverse_with_undetermined`]), computed when asked for: a fit whose
+    /// uncertainties are not read (a robust round, a cross-validation fold) does not pay
+    /// for it.
+    pub fn inverse_normal(&self) -> Option<DMatrix<f64>> {
+        crate::linalg::inverse_with_undetermined(&self.normal)
+    }
 }
 
 /// Minimises `Σ wᵢ rᵢ(p)²` of the `m` residuals of `residuals` from `p0`, and returns the
@@ -368,7 +379,7 @@ pub fn fit_residuals_within<R: Residuals + ?Sized>(
     let fit = minimise(&mut problem, p0, options)?;
     let r = problem.residuals_at(&fit.params).to_vec();
     Some(ResidualFit {
-        inverse_normal: crate::linalg::inverse_with_undetermined(&fit.normal.jtwj),
+        normal: fit.normal.jtwj,
         params: fit.params,
         residuals: r,
         iterations: fit.iterations,

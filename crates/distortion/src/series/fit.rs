@@ -17,7 +17,7 @@ use super::session_drift::{MoveCreep, SessionDrift};
 use super::spline::SplineBasis;
 use crate::DistortionError;
 use crate::fit::{
-    FitOptions, LogisticLog, hysteresis_parameters, parameter, position_irls, scaled_sigmas,
+    FitOptions, LogisticLog, hysteresis_parameters, parameter, position_irls, sigmas,
 };
 use crate::model::{HysteresisLaw, Parameter};
 use crate::thinning::thin;
@@ -692,7 +692,8 @@ impl Setup {
     fn result(&self, problem: &SeriesProblem, fit: &ResidualFit, weights: &[f64]) -> SeriesFit {
         let p = &fit.params;
         let n = p.len();
-        let sigma = scaled_sigmas(fit, weights, n);
+        let covariance = scaled_covariance(fit, weights);
+        let sigma = sigmas(&covariance, 1.0, n);
         let drift = problem.drift(p);
         let mut parameters = vec![parameter("gain_y", 1.0 + p[GAIN_AT], sigma[GAIN_AT], "1")];
         let at = problem.creep_at();
@@ -724,7 +725,6 @@ impl Setup {
             &p[h_at..],
             &sigma[h_at..],
         ));
-        let covariance = scaled_covariance(fit, weights);
         let sample = |t: f64| trajectory_point(problem, &drift, covariance.as_ref(), t);
         let trajectory = (0..=200)
             .map(|j| sample(self.end_s * j as f64 / 200.0))
@@ -938,7 +938,7 @@ fn scaled_covariance(fit: &ResidualFit, weights: &[f64]) -> Option<DMatrix<f64>>
         .map(|(r, w)| w * r * r)
         .sum();
     let dof = fit.residuals.len().saturating_sub(fit.params.len()).max(1) as f64;
-    fit.inverse_normal.as_ref().map(|c| c * (chi2 / dof))
+    fit.inverse_normal().map(|c| c * (chi2 / dof))
 }
 
 /// `D(t)` with its 1σ from the covariance of the spline coefficients and creep amplitudes.
