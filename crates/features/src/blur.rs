@@ -1,6 +1,6 @@
 //! A separable Gaussian blur of an image, the kernel renormalised at the edges.
 
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView2};
 
 /// `z` blurred by a Gaussian of `sigma_px` pixels along both axes (kernel cut at 3σ and
 /// renormalised to the pixels inside the image at the edges). `sigma_px` must be positive.
@@ -9,15 +9,14 @@ pub fn gaussian_blur(z: &Array2<f64>, sigma_px: f64) -> Array2<f64> {
     let kernel: Vec<f64> = (0..=2 * radius)
         .map(|k| (-0.5 * ((k as f64 - radius as f64) / sigma_px).powi(2)).exp())
         .collect();
-    let along_rows = blur_lines(&z.as_standard_layout().to_owned(), &kernel);
-    let transposed = along_rows.t().as_standard_layout().to_owned();
-    let both = blur_lines(&transposed, &kernel);
+    let along_rows = blur_lines(z.as_standard_layout().view(), &kernel);
+    let both = blur_lines(along_rows.t().as_standard_layout().view(), &kernel);
     both.t().as_standard_layout().to_owned()
 }
 
 /// Each line (row) of `z` (standard layout) convolved with `kernel` (odd length, centred),
 /// the kernel renormalised to the samples inside the line.
-fn blur_lines(z: &Array2<f64>, kernel: &[f64]) -> Array2<f64> {
+fn blur_lines(z: ArrayView2<f64>, kernel: &[f64]) -> Array2<f64> {
     let (rows, columns) = z.dim();
     let radius = kernel.len() / 2;
     // The kernel's weight inside the line, per column (the same for every line).

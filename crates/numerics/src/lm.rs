@@ -163,11 +163,11 @@ fn downhill_step<P: LmProblem + ?Sized>(
     None
 }
 
-/// Solves `(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀWr` (Cholesky, LU when that fails).
 /// Parameters from which a damped step is solved inside the normal matrix's envelope
 /// ([`crate::envelope`]) instead of by a dense Cholesky factorisation.
 const ENVELOPE_FROM: usize = 64;
 
+/// Solves `(JᵀWJ + λ diag(JᵀWJ)) δ = −JᵀWr` (Cholesky, LU when that fails).
 fn damped_step(normal: &NormalEquations, lambda: f64) -> Option<DVector<f64>> {
     let mut damped = normal.jtwj.clone();
     for k in 0..damped.nrows() {

@@ -216,10 +216,7 @@ pub fn write_registered(
     let mut next = 1;
     loop {
         for frame in in_hand.drain(..) {
-            let shifts = frame.shifts(latest_trace.as_ref());
-            if let Some(trace) = frame.trace() {
-                latest_trace = Some(trace.clone());
-            }
+            checks.shifts.push(frame.shifts(latest_trace.as_ref()));
             for (pass, page) in &frame.pages {
                 stack.push(page)?;
                 mean.add(&page.z);
@@ -228,7 +225,10 @@ pub fn write_registered(
             }
             checks.frames.push(frame.measured);
             checks.unmeasured.push(frame.unmeasured);
-            checks.shifts.push(shifts);
+            // The frame's trace is the next frame's fallback reference; the rest is let go.
+            if let Some((_, trace)) = frame.pages.into_iter().find(|(p, _)| *p == ScanPass::Trace) {
+                latest_trace = Some(trace.z);
+            }
         }
         if next == timed.len() {
             break;

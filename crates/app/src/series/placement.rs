@@ -100,14 +100,14 @@ pub fn overlap(a: &Array2<f64>, b: &Array2<f64>) -> Vec<(usize, usize)> {
 /// edges). Cubic convolution commutes with whole-pixel shifts, so the gradient image
 /// interpolated at a point is exactly the central difference of the interpolated image
 /// there, at a third of the cost.
-struct Reference {
-    z: Array2<f64>,
+struct Reference<'a> {
+    z: &'a Array2<f64>,
     gradient_x: Array2<f64>,
     gradient_y: Array2<f64>,
 }
 
-impl Reference {
-    fn of(z: &Array2<f64>) -> Reference {
+impl<'a> Reference<'a> {
+    fn of(z: &'a Array2<f64>) -> Reference<'a> {
         let (rows, columns) = z.dim();
         let central = |r: usize, c: usize, along_x: bool| {
             let inside = if along_x {
@@ -122,7 +122,7 @@ impl Reference {
             }
         };
         Reference {
-            z: z.clone(),
+            z,
             gradient_x: Array2::from_shape_fn((rows, columns), |(r, c)| central(r, c, true)),
             gradient_y: Array2::from_shape_fn((rows, columns), |(r, c)| central(r, c, false)),
         }
@@ -136,7 +136,7 @@ impl Reference {
         let (wx, wy) = (keys_weights(x - c), keys_weights(y - r));
         let (c, r) = (c as usize, r as usize);
         let mut out = [0.0; 3];
-        for (image, value) in [&self.z, &self.gradient_x, &self.gradient_y]
+        for (image, value) in [self.z, &self.gradient_x, &self.gradient_y]
             .into_iter()
             .zip(&mut out)
         {
@@ -165,7 +165,7 @@ fn keys_weights(t: f64) -> [f64; 4] {
 /// One Gauss–Newton step of the shift from `d`, with the gain, offset and tilt solved
 /// alongside (parameters: `d_x`, `d_y`, gain, offset, tilt along x, tilt along y).
 fn gauss_newton_step(
-    reference: &Reference,
+    reference: &Reference<'_>,
     moving: &Array2<f64>,
     pixels: &[(usize, usize)],
     d: [f64; 2],
