@@ -4,9 +4,10 @@
 //! blocks of time.
 
 use dhct_lattice::Lattice;
+use dhct_numerics::envelope::solve_positive_definite;
 use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
 use dhct_numerics::robust::{finite_median, mad_sigma_about};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -153,13 +154,25 @@ impl SeriesFit {
 
     /// Session position (instrument frame, metres) of `f` under the fit.
     pub fn position_of(&self, f: &SeriesFeature) -> [f64; 2] {
-        let lag = match f.pass {
-            dhct_scan::ScanPass::Trace => self.hysteresis.excess_integral(f.line_time_s),
+        self.position_with_lag(f, self.hysteresis_lag_s(f.pass, f.line_time_s))
+    }
+
+    /// How far the tip trails along the fast axis in `pass`, `line_time_s` seconds into
+    /// the line: the hysteresis law's excess integral, seconds of fast-axis travel. The
+    /// same on every line, so a caller placing many pixels computes it once per column.
+    pub fn hysteresis_lag_s(&self, pass: dhct_scan::ScanPass, line_time_s: f64) -> f64 {
+        match pass {
+            dhct_scan::ScanPass::Trace => self.hysteresis.excess_integral(line_time_s),
             dhct_scan::ScanPass::Retrace => {
                 self.hysteresis.excess_integral(self.line_time_s)
-                    - self.hysteresis.excess_integral(f.line_time_s)
+                    - self.hysteresis.excess_integral(line_time_s)
             }
-        };
+        }
+    }
+
+    /// [`SeriesFit::position_of`] given `f`'s hysteresis lag
+    /// ([`SeriesFit::hysteresis_lag_s`]).
+    pub fn position_with_lag(&self, f: &SeriesFeature, lag: f64) -> [f64; 2] {
         let d = self.drift.displacement(f.time_s);
         let y = f.controller_m[1] + (self.gain_y - 1.0) * (f.controller_m[1] - f.centre_m[1]);
         [
@@ -850,24 +863,37 @@ fn worse_twice(scores: &[KnotScore]) -> bool {
 }
 
 /// Least-squares spline coefficients (the first fixed at 0) through `samples` of
-/// `(time, displacement)`.
+/// `(time, displacement)`. Each sample touches four basis functions, so the normal
+/// equations are banded and solved in their envelope. A ridge of 1e-12 of their largest
+/// diagonal leaves a coefficient no sample reaches (a knot span inside a pause between
+/// frames) at 0, as the minimum-norm solution does; the others move by less than 1e-5 of
+/// the largest (those only partly reached, at a pause's edges; a start value either way).
 fn fit_spline(basis: &SplineBasis, samples: &[(f64, [f64; 2])]) -> Vec<[f64; 2]> {
-    let n = basis.len();
-    let mut a = DMatrix::<f64>::zeros(samples.len(), n - 1);
-    let mut values = vec![0.0; n];
-    for (row, (t, _)) in samples.iter().enumerate() {
-        basis.values(*t, &mut values);
-        for j in 1..n {
-            a[(row, j - 1)] = values[j];
+    let free = basis.len() - 1;
+    let mut normal = DMatrix::<f64>::zeros(free, free);
+    let mut right = [DVector::<f64>::zeros(free), DVector::<f64>::zeros(free)];
+    for (t, d) in samples {
+        let (first, values) = basis.nonzero(*t);
+        // Column j − 1 holds basis function j (function 0 is fixed).
+        let touched = values
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| (first + k).checked_sub(1).map(|j| (j, *v)));
+        for (i, vi) in touched.clone() {
+            right[0][i] += vi * d[0];
+            right[1][i] += vi * d[1];
+            for (j, vj) in touched.clone() {
+                normal[(i, j)] += vi * vj;
+            }
         }
     }
-    let svd = a.svd(true, true);
-    let solve = |axis: usize| {
-        let b = nalgebra::DVector::from_iterator(samples.len(), samples.iter().map(|s| s.1[axis]));
-        svd.solve(&b, 1e-12).ok()
-    };
-    let (x, y) = (solve(0), solve(1));
-    (0..n)
+    let ridge = 1e-12 * normal.diagonal().max().max(f64::MIN_POSITIVE);
+    for i in 0..free {
+        normal[(i, i)] += ridge;
+    }
+    let x = solve_positive_definite(&normal, &right[0]);
+    let y = solve_positive_definite(&normal, &right[1]);
+    (0..=free)
         .map(|j| match (&x, &y) {
             (Some(x), Some(y)) if j > 0 => [x[j - 1], y[j - 1]],
             _ => [0.0; 2],
@@ -996,6 +1022,49 @@ mod tests {
                 held_out_rms_m: v * 1e-12,
             })
             .collect()
+    }
+
+    /// The banded normal equations give the minimum-norm least-squares spline a dense SVD
+    /// gives, also with a pause between the frames that leaves knot spans without samples.
+    #[test]
+    fn the_start_spline_is_the_minimum_norm_least_squares_fit() {
+        let basis = SplineBasis {
+            start_s: 0.0,
+            end_s: 100.0,
+            interior_knots: 24,
+        };
+        // Two "frames" of samples, 0–30 s and 70–100 s: the spans between hold none.
+        let samples: Vec<(f64, [f64; 2])> = (0..=60)
+            .map(|k| {
+                let t = if k <= 30 { k as f64 } else { 40.0 + k as f64 };
+                (t, [1e-9 * (0.05 * t).sin(), 2e-10 * t - 1e-12 * t * t])
+            })
+            .collect();
+        let n = basis.len();
+        let mut a = DMatrix::<f64>::zeros(samples.len(), n - 1);
+        let mut values = vec![0.0; n];
+        for (row, (t, _)) in samples.iter().enumerate() {
+            basis.values(*t, &mut values);
+            for j in 1..n {
+                a[(row, j - 1)] = values[j];
+            }
+        }
+        let svd = a.svd(true, true);
+        let fitted = fit_spline(&basis, &samples);
+        assert_eq!(fitted.len(), n);
+        assert_eq!(fitted[0], [0.0; 2]);
+        for axis in [0, 1] {
+            let b = DVector::from_iterator(samples.len(), samples.iter().map(|s| s.1[axis]));
+            let reference = svd.solve(&b, 1e-12).expect("solved");
+            let scale = reference.amax();
+            for j in 1..n {
+                let error = (fitted[j][axis] - reference[j - 1]).abs();
+                assert!(
+                    error <= 1e-5 * scale,
+                    "axis {axis}, coefficient {j}: {error:e}"
+                );
+            }
+        }
     }
 
     /// The start drift follows each frame's whole displacement (its drift and creep as its

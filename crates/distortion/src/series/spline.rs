@@ -38,8 +38,22 @@ impl SplineBasis {
     /// The four basis functions that may be non-zero at `t` (clamped to the interval):
     /// the index of the first and their values.
     pub fn nonzero(&self, t: f64) -> (usize, [f64; 4]) {
-        let span_s = self.end_s - self.start_s;
         let t = t.clamp(self.start_s, self.end_s);
+        let pieces = self.interior_knots + 1;
+        let at = (t - self.start_s) / (self.end_s - self.start_s) * pieces as f64;
+        let piece = (at as usize).min(pieces - 1);
+        // Away from the clamped ends (the knots piece − 2 ..= piece + 3 all evenly spaced)
+        // the basis is the uniform cubic B-spline's, in closed form.
+        if piece >= 2 && piece + 3 <= pieces {
+            return (piece, uniform_cubic(at - piece as f64));
+        }
+        (piece, self.cox_de_boor(t, piece))
+    }
+
+    /// The four basis functions non-zero on `piece` at `t` (inside the interval), by the
+    /// Cox–de Boor recursion over the clamped knot vector.
+    fn cox_de_boor(&self, t: f64, piece: usize) -> [f64; 4] {
+        let span_s = self.end_s - self.start_s;
         let pieces = self.interior_knots + 1;
         // Knot j of the full vector (start repeated 4 times, end 4 times).
         let knot = |j: isize| -> f64 {
@@ -52,9 +66,8 @@ impl SplineBasis {
                 self.start_s + span_s * inner as f64 / pieces as f64
             }
         };
-        let piece = (((t - self.start_s) / span_s * pieces as f64) as usize).min(pieces - 1);
         let span = (piece + DEGREE) as isize;
-        // Cox–de Boor, triangular: the degree-d functions span−d..=span.
+        // Triangular: the degree-d functions span−d..=span.
         let mut n = [0.0; DEGREE + 1];
         n[0] = 1.0;
         for d in 1..=DEGREE as isize {
@@ -68,8 +81,20 @@ impl SplineBasis {
             }
             n[d as usize] = saved;
         }
-        (piece, n)
+        n
     }
+}
+
+/// The four uniform cubic B-spline functions non-zero on a piece, at `u` ∈ [0, 1] of it.
+fn uniform_cubic(u: f64) -> [f64; 4] {
+    let (u2, u3) = (u * u, u * u * u);
+    let v = 1.0 - u;
+    [
+        v * v * v / 6.0,
+        (3.0 * u3 - 6.0 * u2 + 4.0) / 6.0,
+        (-3.0 * u3 + 3.0 * u2 + 3.0 * u + 1.0) / 6.0,
+        u3 / 6.0,
+    ]
 }
 
 #[cfg(test)]
@@ -107,5 +132,29 @@ mod tests {
         b.values(1.3, &mut v);
         let t: f64 = v.iter().enumerate().map(|(j, x)| j as f64 * x).sum();
         assert!((t - 1.3).abs() < 1e-12);
+    }
+
+    /// The closed form used away from the clamped ends is the recursion's basis.
+    #[test]
+    fn the_uniform_closed_form_equals_the_recursion() {
+        let b = SplineBasis {
+            start_s: 3.0,
+            end_s: 53.0,
+            interior_knots: 9,
+        };
+        let mut interior = 0;
+        for k in 0..=1000 {
+            let t = 3.0 + 0.05 * k as f64;
+            let (piece, fast) = b.nonzero(t);
+            let slow = b.cox_de_boor(t, piece);
+            for (a, r) in fast.iter().zip(slow) {
+                assert!((a - r).abs() < 1e-14, "t {t}: {fast:?} against {slow:?}");
+            }
+            interior += usize::from((2..=7).contains(&piece));
+        }
+        assert!(
+            interior > 500,
+            "{interior} samples on the closed form's pieces"
+        );
     }
 }

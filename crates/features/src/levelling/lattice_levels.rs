@@ -119,11 +119,20 @@ impl AtomTemplate {
         (half, (2 * half + 1) as usize)
     }
 
+    /// The bin nearest `(dx, dy)` px, if inside the grid. (Rounded by truncating the
+    /// offset from the grid's corner, which is then ≥ 0: `f64::round` is a library call on
+    /// the baseline x86-64 target, and this runs for every pixel.)
     fn bin(half: i64, side: usize, (dx, dy): (f64, f64)) -> Option<usize> {
-        let i = (dy / TEMPLATE_STEP_PX).round() as i64 + half;
-        let j = (dx / TEMPLATE_STEP_PX).round() as i64 + half;
-        (i >= 0 && j >= 0 && i < side as i64 && j < side as i64)
-            .then(|| i as usize * side + j as usize)
+        let corner = half as f64 + 0.5;
+        let (u, v) = (
+            dx / TEMPLATE_STEP_PX + corner,
+            dy / TEMPLATE_STEP_PX + corner,
+        );
+        if !(u >= 0.0 && v >= 0.0) {
+            return None;
+        }
+        let (i, j) = (v as usize, u as usize);
+        (i < side && j < side).then_some(i * side + j)
     }
 
     /// Averages the finite pixels of `z` by their offset from the nearest centre.
@@ -170,13 +179,15 @@ impl AtomTemplate {
             dx / TEMPLATE_STEP_PX + self.half as f64,
             dy / TEMPLATE_STEP_PX + self.half as f64,
         );
-        let (j, i) = (u.floor(), v.floor());
-        let last = (self.side - 1) as f64;
-        if !(j >= 0.0 && i >= 0.0 && j < last && i < last) {
+        // Truncation is the floor here (u, v ≥ 0), without a library call.
+        let last = self.side - 1;
+        let inside = u >= 0.0 && v >= 0.0 && (u as usize) < last && (v as usize) < last;
+        if !inside {
             return Self::bin(self.half, self.side, (dx, dy)).map_or(f64::NAN, |k| self.values[k]);
         }
-        let (fu, fv) = (u - j, v - i);
-        let k = i as usize * self.side + j as usize;
+        let (j, i) = (u as usize, v as usize);
+        let (fu, fv) = (u - j as f64, v - i as f64);
+        let k = i * self.side + j;
         let corners = [
             self.values[k],
             self.values[k + 1],
