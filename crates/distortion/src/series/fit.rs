@@ -588,8 +588,11 @@ impl Setup {
         let problem = self.problem(&features, start.basis.clone());
         let law = self.start_law.clone();
         let (low, high) = (2.0 * self.line_time_s, 2.0 * self.frame_duration_s);
-        (0..CREEP_T0_GRID)
-            .filter_map(|j| {
+        // The trials run side by side; the lowest cost is then taken in grid order, so the
+        // choice does not depend on the threads.
+        let trials: Vec<Option<(f64, SessionDrift)>> = (0..CREEP_T0_GRID)
+            .into_par_iter()
+            .map(|j| {
                 let t0 = low * (high / low).powf(j as f64 / (CREEP_T0_GRID - 1) as f64);
                 let mut creeps = start.creeps.clone();
                 for creep in &mut creeps {
@@ -623,6 +626,10 @@ impl Setup {
                     .sum();
                 cost.is_finite().then(|| (cost, problem.drift(&fit.params)))
             })
+            .collect();
+        trials
+            .into_iter()
+            .flatten()
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map_or_else(|| start.clone(), |(_, drift)| drift)
     }
