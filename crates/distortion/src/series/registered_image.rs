@@ -121,11 +121,13 @@ impl LagByPosition {
     /// `f`'s lag: the stored one when `f` lies on a pixel of the line (to rounding), else
     /// computed.
     fn at(&self, fit: &dyn SessionPlacement, f: &SeriesFeature) -> f64 {
-        let k = (f.line_time_s / self.pixel_period_s - 0.5).round();
-        let on_pixel =
-            ((k + 0.5) * self.pixel_period_s - f.line_time_s).abs() <= 1e-9 * self.pixel_period_s;
-        match self.lags.get(k as usize) {
-            Some(&lag) if f.pass == self.pass && k >= 0.0 && on_pixel => lag,
+        // On pixel k the time is (k + ½) periods: truncation finds k, without the library
+        // call `f64::round` is on the baseline x86-64 target.
+        let k = (f.line_time_s / self.pixel_period_s) as usize;
+        let on_pixel = ((k as f64 + 0.5) * self.pixel_period_s - f.line_time_s).abs()
+            <= 1e-9 * self.pixel_period_s;
+        match self.lags.get(k) {
+            Some(&lag) if f.pass == self.pass && on_pixel => lag,
             _ => fit.lag_s(f.pass, f.line_time_s),
         }
     }
@@ -157,6 +159,54 @@ mod tests {
                 f.controller_m[0] + 1e-10 * lag / 3e-3 + 2e-12 * f.time_s,
                 f.controller_m[1] - 1e-12 * f.time_s,
             ]
+        }
+    }
+
+    /// A placement that counts how often its lag is computed.
+    struct Counting(std::sync::atomic::AtomicUsize);
+
+    impl SessionPlacement for Counting {
+        fn lag_s(&self, _pass: ScanPass, line_time_s: f64) -> f64 {
+            self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            line_time_s * line_time_s
+        }
+        fn position_with_lag(&self, f: &SeriesFeature, _lag_s: f64) -> [f64; 2] {
+            f.controller_m
+        }
+    }
+
+    /// Every pixel of every line reads its lag from the store; a time between pixels
+    /// computes it.
+    #[test]
+    fn pixels_read_the_stored_lag_and_other_times_compute_it() {
+        use std::sync::atomic::Ordering::Relaxed;
+        let geometry = ScanGeometry::new(
+            24,
+            16,
+            1e-10,
+            1e-10,
+            3e-4,
+            ScanDirection::Left,
+            ScanDirection::Up,
+        )
+        .unwrap();
+        let fit = Counting(0.into());
+        for pass in [ScanPass::Trace, ScanPass::Retrace] {
+            let lags = LagByPosition::new(&fit, &geometry, pass);
+            fit.0.store(0, Relaxed);
+            for (r, c) in (0..16).flat_map(|r| (0..24).map(move |c| (r, c))) {
+                let f = SeriesFeature::at_pixel(&geometry, 2.0, pass, c as f64, r as f64);
+                assert_eq!(lags.at(&fit, &f), f.line_time_s * f.line_time_s);
+            }
+            assert_eq!(
+                fit.0.load(Relaxed),
+                0,
+                "{pass:?}: every pixel's lag was stored"
+            );
+            let mut between = SeriesFeature::at_pixel(&geometry, 2.0, pass, 3.5, 1.0);
+            between.line_time_s += 0.25 * geometry.pixel_period();
+            lags.at(&fit, &between);
+            assert_eq!(fit.0.load(Relaxed), 1);
         }
     }
 
