@@ -7,7 +7,8 @@ use dhct_lattice::Lattice;
 use dhct_numerics::envelope::solve_positive_definite;
 use dhct_numerics::lm::{Bounds, LmOptions, ResidualFit, fit_residuals_within};
 use dhct_numerics::robust::{finite_median, mad_sigma_about};
-use nalgebra::{DMatrix, DVector};
+use dhct_numerics::sparse_rows::sparse_normal_equations;
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -877,29 +878,27 @@ fn worse_twice(scores: &[KnotScore]) -> bool {
 /// the largest (those only partly reached, at a pause's edges; a start value either way).
 fn fit_spline(basis: &SplineBasis, samples: &[(f64, [f64; 2])]) -> Vec<[f64; 2]> {
     let free = basis.len() - 1;
-    let mut normal = DMatrix::<f64>::zeros(free, free);
-    let mut right = [DVector::<f64>::zeros(free), DVector::<f64>::zeros(free)];
-    for (t, d) in samples {
-        let (first, values) = basis.nonzero(*t);
-        // Column j − 1 holds basis function j (function 0 is fixed).
-        let touched = values
-            .iter()
-            .enumerate()
-            .filter_map(|(k, v)| (first + k).checked_sub(1).map(|j| (j, *v)));
-        for (i, vi) in touched.clone() {
-            right[0][i] += vi * d[0];
-            right[1][i] += vi * d[1];
-            for (j, vj) in touched.clone() {
-                normal[(i, j)] += vi * vj;
-            }
-        }
-    }
-    let ridge = 1e-12 * normal.diagonal().max().max(f64::MIN_POSITIVE);
-    for i in 0..free {
-        normal[(i, i)] += ridge;
-    }
-    let x = solve_positive_definite(&normal, &right[0]);
-    let y = solve_positive_definite(&normal, &right[1]);
+    let weights = vec![1.0; samples.len()];
+    // Column j − 1 holds basis function j (function 0 is fixed).
+    let row = |i: usize, entries: &mut Vec<(usize, f64)>| {
+        let (first, values) = basis.nonzero(samples[i].0);
+        entries.extend(
+            values
+                .iter()
+                .enumerate()
+                .filter_map(|(k, v)| (first + k).checked_sub(1).map(|j| (j, *v))),
+        );
+    };
+    let solve_axis = |axis: usize| {
+        let along: Vec<f64> = samples.iter().map(|(_, d)| d[axis]).collect();
+        let mut normal = sparse_normal_equations(free, &along, &weights, row);
+        let ridge = 1e-12 * normal.jtwj.diagonal().max().max(f64::MIN_POSITIVE);
+        normal
+            .jtwj
+            .set_diagonal(&normal.jtwj.diagonal().add_scalar(ridge));
+        solve_positive_definite(&normal.jtwj, &normal.jtwr)
+    };
+    let (x, y) = (solve_axis(0), solve_axis(1));
     (0..=free)
         .map(|j| match (&x, &y) {
             (Some(x), Some(y)) if j > 0 => [x[j - 1], y[j - 1]],
@@ -1020,6 +1019,7 @@ mod tests {
     use super::*;
     use crate::{DistortionModel, DriftCreep, FitOptions};
     use dhct_scan::ScanGeometry;
+    use nalgebra::DVector;
 
     fn scores(pm: &[f64]) -> Vec<KnotScore> {
         pm.iter()
