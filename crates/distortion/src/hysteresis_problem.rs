@@ -187,8 +187,12 @@ pub(crate) enum Quantity {
 }
 
 /// The gradient of `S(x)` or `I(x)` in the fit parameters of `law` (see the module docs),
-/// written to `out` (one entry per parameter).
+/// written to `out` (one entry per parameter; none under [`HysteresisChoice::None`], whose
+/// law has no fit parameters, whatever its form).
 pub(crate) fn law_gradient(law: &HysteresisLaw, x: f64, quantity: Quantity, out: &mut [f64]) {
+    if out.is_empty() {
+        return;
+    }
     if matches!(quantity, Quantity::ExcessIntegral) && x <= 0.0 {
         out.iter_mut().for_each(|v| *v = 0.0);
         return;

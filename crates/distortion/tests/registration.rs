@@ -6,7 +6,10 @@
 mod common;
 
 use dhct_distortion::registration::{StartQuality, register_from};
-use dhct_distortion::{DhctOptions, DistortionModel, FitOptions, SeedMap, analyse, analyse_seeded};
+use dhct_distortion::{
+    DhctOptions, DistortionModel, FitOptions, HysteresisChoice, HysteresisLaw, SeedMap, analyse,
+    analyse_seeded,
+};
 use dhct_simulate::effects::{EffectConfig, ThermalDrift};
 use dhct_simulate::{LatticeConfig, SimulationConfig, presets};
 
@@ -24,6 +27,16 @@ fn graphite_512() -> SimulationConfig {
 /// corrected positions at the localisation floor, every drift/creep/hysteresis parameter
 /// within 3σ.
 fn registered_matches_truth(run: &mut common::Run, start: DistortionModel, quality: StartQuality) {
+    registered_with_matches_truth(run, start, quality, &FitOptions::default());
+}
+
+/// [`registered_matches_truth`] under the fit `options`.
+fn registered_with_matches_truth(
+    run: &mut common::Run,
+    start: DistortionModel,
+    quality: StartQuality,
+    options: &FitOptions,
+) {
     let geometry = run.output.pair.geometry().clone();
     let inputs = common::pass_inputs(&run.sets);
     let local = common::residuals(run, 20.0);
@@ -33,7 +46,7 @@ fn registered_matches_truth(run: &mut common::Run, start: DistortionModel, quali
         run.lattice.as_ref(),
         &start,
         quality,
-        &FitOptions::default(),
+        options,
     )
     .expect("registers");
     let found: usize = run.sets.iter().map(|s| s.features.len()).sum();
@@ -76,6 +89,28 @@ fn registration_from_the_local_model_matches_the_truth() {
     let mut run = common::run(&graphite_512(), &DhctOptions::default());
     let start = run.result.model.clone();
     registered_matches_truth(&mut run, start, StartQuality::Fitted);
+}
+
+/// A scan without hysteresis registered without a hysteresis law (no law parameters in
+/// the fit: a case that once indexed an empty gradient) matches the truth.
+#[test]
+fn registration_without_a_hysteresis_law_matches_a_scan_without_hysteresis() {
+    let mut config = graphite_512();
+    config.effects.retain(|e| {
+        !matches!(
+            e,
+            EffectConfig::FastHysteresis(_) | EffectConfig::AsymmetricHysteresis(_)
+        )
+    });
+    let mut run = common::run(&config, &DhctOptions::default());
+    let mut start = run.result.model.clone();
+    start.hysteresis = HysteresisLaw::none();
+    let options = FitOptions {
+        hysteresis: HysteresisChoice::None,
+        ..FitOptions::default()
+    };
+    registered_with_matches_truth(&mut run, start, StartQuality::Fitted, &options);
+    assert_eq!(run.result.model.hysteresis, HysteresisLaw::none());
 }
 
 /// The upper-triangular `K` (file per sample metres) of the best linear map from the true
