@@ -74,17 +74,23 @@ pub fn register_image(
     image_shape(geometry, z)?;
     let (rows, columns) = z.dim();
     let lags = LagByPosition::new(fit, geometry, pass);
-    // Every pixel placed once, lines side by side (the resampling reads each line twice:
-    // for the rows it covers, then for its quads).
-    let mut placed = vec![[0.0f64; 2]; rows * columns];
+    let place_pixel = |r: usize, c: usize| {
+        let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
+        let q = grid.from_instrument(fit.position_with_lag(&f, lags.at(fit, &f)));
+        [q[0] / grid.pitch_x(), q[1] / grid.pitch_y()]
+    };
+    let reaching = rows_reaching_grid(&place_pixel, (rows, columns), (grid.rows(), grid.columns()));
+    // Every pixel of a row that can reach the grid placed once, lines side by side (the
+    // resampling reads each line twice: for the rows it covers, then for its quads); the
+    // other rows are NaN, which the resampling leaves out.
+    let mut placed = vec![[f64::NAN; 2]; rows * columns];
     placed
         .par_chunks_mut(columns.max(1))
         .enumerate()
+        .filter(|(r, _)| reaching[*r])
         .for_each(|(r, line)| {
             for (c, at) in line.iter_mut().enumerate() {
-                let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
-                let q = grid.from_instrument(fit.position_with_lag(&f, lags.at(fit, &f)));
-                *at = [q[0] / grid.pitch_x(), q[1] / grid.pitch_y()];
+                *at = place_pixel(r, c);
             }
         });
     let place = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
@@ -94,6 +100,92 @@ pub fn register_image(
         }
     };
     Ok(resample_onto(&place, z, (grid.rows(), grid.columns())))
+}
+
+/// Rows and columns apart of the pixels [`rows_reaching_grid`] places.
+const SAMPLE_STEP: usize = 16;
+
+/// Which rows of an image of `(rows, columns)` pixels, placed by `place_pixel(row, column)`
+/// in output pixels, can reach an output grid of `(out_rows, out_columns)` (a frame the
+/// drift carried away from the first frame's grid covers little or none of it). The
+/// placement is sampled every [`SAMPLE_STEP`] rows and columns and at the last of each; the
+/// rows between two sampled rows reach the grid when the box around both rows' samples,
+/// widened by two sample steps at the largest spacing between neighbouring samples, meets
+/// it (the placement, a scan's smooth drift, bends far less than that within a step). All
+/// rows when a sample is not finite.
+fn rows_reaching_grid(
+    place_pixel: &(dyn Fn(usize, usize) -> [f64; 2] + Sync),
+    (rows, columns): (usize, usize),
+    (out_rows, out_columns): (usize, usize),
+) -> Vec<bool> {
+    let sampled = |n: usize| -> Vec<usize> {
+        let mut at: Vec<usize> = (0..n).step_by(SAMPLE_STEP).collect();
+        if n > 0 && at.last() != Some(&(n - 1)) {
+            at.push(n - 1);
+        }
+        at
+    };
+    let (sample_rows, sample_columns) = (sampled(rows), sampled(columns));
+    let samples: Vec<Vec<[f64; 2]>> = sample_rows
+        .par_iter()
+        .map(|&r| sample_columns.iter().map(|&c| place_pixel(r, c)).collect())
+        .collect();
+    if samples
+        .iter()
+        .flatten()
+        .any(|p| !(p[0].is_finite() && p[1].is_finite()))
+    {
+        return vec![true; rows];
+    }
+    let spacing = largest_sample_spacing(&samples, &sample_rows, &sample_columns);
+    let margin = 2.0 * SAMPLE_STEP as f64 * spacing + 1.0;
+    let mut reaching = vec![false; rows];
+    for (k, pair) in sample_rows.windows(2).enumerate() {
+        let corners = samples[k].iter().chain(&samples[k + 1]);
+        let (lo, hi) = corners.fold(
+            ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+            |(lo, hi), p| {
+                (
+                    [lo[0].min(p[0]), lo[1].min(p[1])],
+                    [hi[0].max(p[0]), hi[1].max(p[1])],
+                )
+            },
+        );
+        let meets = hi[0] + margin >= 0.0
+            && lo[0] - margin <= out_columns as f64
+            && hi[1] + margin >= 0.0
+            && lo[1] - margin <= out_rows as f64;
+        if meets {
+            reaching[pair[0]..=pair[1]].fill(true);
+        }
+    }
+    if sample_rows.len() == 1 {
+        reaching.fill(true);
+    }
+    reaching
+}
+
+/// The largest distance between neighbouring samples (along a sampled row or column),
+/// per pixel of the image between them, in output pixels.
+fn largest_sample_spacing(samples: &[Vec<[f64; 2]>], rows: &[usize], columns: &[usize]) -> f64 {
+    let per_pixel = |a: [f64; 2], b: [f64; 2], pixels: usize| {
+        (a[0] - b[0]).hypot(a[1] - b[1]) / pixels.max(1) as f64
+    };
+    let along_rows = samples.iter().flat_map(|line| {
+        line.windows(2)
+            .zip(columns.windows(2))
+            .map(|(p, c)| per_pixel(p[0], p[1], c[1] - c[0]))
+    });
+    let along_columns = samples
+        .windows(2)
+        .zip(rows.windows(2))
+        .flat_map(|(pair, r)| {
+            pair[0]
+                .iter()
+                .zip(&pair[1])
+                .map(move |(a, b)| per_pixel(*a, *b, r[1] - r[0]))
+        });
+    along_rows.chain(along_columns).fold(0.0, f64::max)
 }
 
 /// A placement's hysteresis lag at every pixel position along a line of one pass, computed
@@ -172,6 +264,94 @@ mod tests {
         }
         fn position_with_lag(&self, f: &SeriesFeature, _lag_s: f64) -> [f64; 2] {
             f.controller_m
+        }
+    }
+
+    /// A frame moved by `shift_m` (instrument frame), drifting in time, with a bump along
+    /// y of height `bump_m` between `bump_s.0` and `bump_s.1` (a sin² in time, zero
+    /// outside): between two sampled rows, what sampling every 16th row cannot see.
+    struct Moved {
+        shift_m: [f64; 2],
+        bump_m: f64,
+        bump_s: (f64, f64),
+    }
+
+    impl SessionPlacement for Moved {
+        fn lag_s(&self, _pass: ScanPass, _line_time_s: f64) -> f64 {
+            0.0
+        }
+        fn position_with_lag(&self, f: &SeriesFeature, _lag_s: f64) -> [f64; 2] {
+            let (from, to) = self.bump_s;
+            let bump = if (from..to).contains(&f.time_s) {
+                self.bump_m
+                    * (std::f64::consts::PI * (f.time_s - from) / (to - from))
+                        .sin()
+                        .powi(2)
+            } else {
+                0.0
+            };
+            [
+                f.controller_m[0] + self.shift_m[0] + 3e-12 * f.time_s,
+                f.controller_m[1] + self.shift_m[1] - 2e-12 * f.time_s + bump,
+            ]
+        }
+    }
+
+    /// Registering places only the rows that can reach the grid; the image is the one
+    /// every row placed gives, for a frame on the grid, partly off it along either axis,
+    /// just off it (within the margin), and far off it (no row placed).
+    #[test]
+    fn rows_that_cannot_reach_the_grid_are_left_out_without_changing_the_image() {
+        let geometry = ScanGeometry::new(
+            80,
+            70,
+            1e-10,
+            1e-10,
+            2e-4,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap();
+        let z = Array2::from_shape_fn((70, 80), |(r, c)| (0.3 * r as f64).sin() + c as f64);
+        let (start_s, pass) = (3.0, ScanPass::Trace);
+        let line_start = |r: f64| SeriesFeature::at_pixel(&geometry, start_s, pass, 0.0, r).time_s;
+        let bump_s = (line_start(48.0), line_start(64.0));
+        for (shift_px, bump_px, reaching_rows) in [
+            ([0.0, 0.0], 0.0, 70..=70),
+            ([0.0, 40.5], 0.0, 1..=69),
+            ([-50.3, 60.0], 0.0, 1..=69),
+            ([0.0, -90.0], 0.0, 0..=69),
+            ([0.0, -140.0], 0.0, 0..=0),
+            ([150.0, 0.0], 0.0, 0..=0),
+            // Only rows between sampled ones (48 and 64) reach the grid: the margin's work.
+            ([0.0, -72.0], 20.0, 1..=69),
+        ] {
+            let fit = Moved {
+                shift_m: [shift_px[0] * 1e-10, shift_px[1] * 1e-10],
+                bump_m: bump_px * 1e-10,
+                bump_s,
+            };
+            let registered = register_image(&fit, &geometry, start_s, pass, &z, &geometry).unwrap();
+            let place_pixel = |r: usize, c: usize| {
+                let f = SeriesFeature::at_pixel(&geometry, start_s, pass, c as f64, r as f64);
+                let q = geometry.from_instrument(fit.position_of(&f));
+                [q[0] / geometry.pitch_x(), q[1] / geometry.pitch_y()]
+            };
+            let every_row = |r: usize, xs: &mut [f64], ys: &mut [f64]| {
+                for (c, (x, y)) in xs.iter_mut().zip(ys.iter_mut()).enumerate() {
+                    [*x, *y] = place_pixel(r, c);
+                }
+            };
+            let reference = resample_onto(&every_row, &z, (70, 80));
+            if bump_px > 0.0 {
+                assert!(reference.iter().any(|v| v.is_finite()), "the bump reaches");
+            }
+            for (a, b) in registered.iter().zip(&reference) {
+                assert!(a == b || (a.is_nan() && b.is_nan()), "{shift_px:?}");
+            }
+            let reaching = rows_reaching_grid(&place_pixel, (70, 80), (70, 80));
+            let count = reaching.iter().filter(|r| **r).count();
+            assert!(reaching_rows.contains(&count), "{shift_px:?}: {count} rows");
         }
     }
 
