@@ -65,10 +65,11 @@ fn draw_scale_bar(out: &mut Canvas, width: usize, height: usize, metres_per_px: 
 
 /// The three tick labels of a colour bar, low to high.
 fn tick_labels(bar: &ColourBar) -> [(f64, String); 3] {
+    let span = bar.high - bar.low;
     [
-        (0.0, tick_label(bar.low, &bar.unit)),
-        (0.5, tick_label(0.5 * (bar.low + bar.high), &bar.unit)),
-        (1.0, tick_label(bar.high, &bar.unit)),
+        (0.0, tick_label(bar.low, &bar.unit, span)),
+        (0.5, tick_label(0.5 * (bar.low + bar.high), &bar.unit, span)),
+        (1.0, tick_label(bar.high, &bar.unit, span)),
     ]
 }
 

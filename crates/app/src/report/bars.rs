@@ -124,7 +124,7 @@ fn colour_bar(width: usize, height: usize, bar: &ColourBar) -> String {
         svg.push_str(&format!(
             "<line x1=\"{x2:.1}\" y1=\"{y:.1}\" x2=\"{x3:.1}\" y2=\"{y:.1}\" stroke=\"#444\"/>\
              <text x=\"{tx:.1}\" y=\"{ty:.1}\" font-size=\"13\">{}</text>",
-            escape(&tick_label(value, &bar.unit)),
+            escape(&tick_label(value, &bar.unit, bar.high - bar.low)),
             x2 = x + 14.0,
             x3 = x + 18.0,
             tx = x + 21.0,
@@ -135,16 +135,29 @@ fn colour_bar(width: usize, height: usize, bar: &ColourBar) -> String {
     svg
 }
 
-/// A value for a colour-bar tick: lengths in pm (or nm), other units with an SI prefix,
-/// dimensionless values with two decimals.
-pub(super) fn tick_label(value: f64, unit: &str) -> String {
+/// A value for a colour-bar tick on a bar spanning `span`: lengths in pm (or nm), other
+/// units with an SI prefix, values without a unit by [`plain_tick`].
+pub(super) fn tick_label(value: f64, unit: &str, span: f64) -> String {
     let text = match unit {
         "m" if value.abs() < 1e-9 => units::picometres(value),
         "m" => units::length(value),
-        "" | "1" => format!("{value:.2}"),
+        "" | "1" => plain_tick(value, span),
         other => units::si(value, other),
     };
     text.replace('-', "−")
+}
+
+/// A value without a unit on a bar spanning `span`: two decimals where they tell the ticks
+/// apart, else in scientific notation with the digits that do (heights saved in metres
+/// without a unit, e.g. an NPY array, span ~1e-9: two decimals printed them all 0.00).
+fn plain_tick(value: f64, span: f64) -> String {
+    let span = span.abs();
+    if (span >= 0.05 && value.abs() < 1e5) || !(span > 0.0 && span.is_finite()) {
+        return format!("{value:.2}");
+    }
+    // Enough significant digits that a tenth of the span shows.
+    let digits = ((value.abs().max(span) / span).log10().floor() + 1.0).clamp(2.0, 8.0) as usize;
+    format!("{value:.digits$e}")
 }
 
 /// A gradient id unique to the bar's appearance (pages hold several SVGs).
@@ -188,5 +201,22 @@ mod tests {
         assert!(svg.contains("−100.0 pm"), "{svg}");
         // No physical size: no scale bar.
         assert!(!picture_svg(&png(b"png"), 40, 30, None, None).contains("scale-bar"));
+    }
+
+    /// Values without a unit keep what tells the ticks apart: heights of an array saved in
+    /// metres (no unit) printed 0.00 at every tick.
+    #[test]
+    fn ticks_without_a_unit_show_what_tells_them_apart() {
+        let (low, high) = (-1.957e-9, 2.469e-9);
+        let labels: Vec<String> = [low, 0.5 * (low + high), high]
+            .iter()
+            .map(|v| tick_label(*v, "", high - low))
+            .collect();
+        assert_eq!(labels, ["−1.96e−9", "2.56e−10", "2.47e−9"]);
+        assert_eq!(tick_label(0.25, "", 1.0), "0.25");
+        assert_eq!(tick_label(-3.5, "1", 10.0), "−3.50");
+        // A small span around a large value: the digits that show a tenth of it.
+        assert_eq!(tick_label(1000.25, "", 0.01), "1.000250e3");
+        assert_eq!(tick_label(1.0, "", 0.0), "1.00");
     }
 }
