@@ -112,7 +112,7 @@ const SAMPLE_STEP: usize = 16;
 /// rows between two sampled rows reach the grid when the box around both rows' samples,
 /// widened by two sample steps at the largest spacing between neighbouring samples, meets
 /// it (the placement, a scan's smooth drift, bends far less than that within a step). All
-/// rows when a sample is not finite.
+/// rows when a sample is not finite or only one row is sampled.
 fn rows_reaching_grid(
     place_pixel: &(dyn Fn(usize, usize) -> [f64; 2] + Sync),
     (rows, columns): (usize, usize),
@@ -126,6 +126,9 @@ fn rows_reaching_grid(
         at
     };
     let (sample_rows, sample_columns) = (sampled(rows), sampled(columns));
+    if sample_rows.len() < 2 {
+        return vec![true; rows];
+    }
     let samples: Vec<Vec<[f64; 2]>> = sample_rows
         .par_iter()
         .map(|&r| sample_columns.iter().map(|&c| place_pixel(r, c)).collect())
@@ -158,9 +161,6 @@ fn rows_reaching_grid(
         if meets {
             reaching[pair[0]..=pair[1]].fill(true);
         }
-    }
-    if sample_rows.len() == 1 {
-        reaching.fill(true);
     }
     reaching
 }
