@@ -215,8 +215,17 @@ pub fn write_registered(
     let mut in_hand = vec![first];
     let mut next = 1;
     loop {
+        // Each frame's shifts, side by side: one that the first frame's trace overlaps too
+        // little is measured against the latest trace before it.
+        let shifts: Vec<Vec<PassShift>> = (0..in_hand.len())
+            .into_par_iter()
+            .map(|j| {
+                let before = in_hand[..j].iter().rev().find_map(RegisteredFrame::trace);
+                in_hand[j].shifts(before.or(latest_trace.as_ref()))
+            })
+            .collect();
+        checks.shifts.extend(shifts);
         for frame in in_hand.drain(..) {
-            checks.shifts.push(frame.shifts(latest_trace.as_ref()));
             for (pass, page) in &frame.pages {
                 stack.push(page)?;
                 mean.add(&page.z);
