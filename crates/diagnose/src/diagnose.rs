@@ -3,7 +3,7 @@
 
 use dhct_distortion::{DhctOptions, DistortionModel, PassInput, RoutePolicy};
 use dhct_lattice::{Lattice, LatticeFitOptions};
-use dhct_scan::ScanGeometry;
+use dhct_scan::{ScanGeometry, ScanPass};
 use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
@@ -18,6 +18,7 @@ use crate::model::base::{
 use crate::model::data::{BaseSource, MIN_FEATURES, Observation, Prepared, prepare};
 use crate::model::fit::{BASE_CREEP, Fitted, fit, fit_profiled};
 use crate::model::global::{GlobalModel, LatticeParams, Term, sim_term};
+use crate::model::terms::{PASS_OFFSET, PassOffset};
 use crate::model::timing_gain::whitened;
 use crate::report::diagnosis::{DiagnosisReport, GreedyRound, ModelSummary};
 use crate::report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRACTION, Shrink};
@@ -364,6 +365,11 @@ fn start_model(prepared: &Prepared, fit_lattice_scale: bool) -> GlobalModel {
         }))
     {
         terms.push(Term::all_free(e, "fast-hysteresis"));
+    }
+    let has = |pass| prepared.observations.iter().any(|o| o.pass == pass);
+    if has(ScanPass::Trace) && has(ScanPass::Retrace) {
+        let offset = Box::new(PassOffset { across_m: 0.0 });
+        terms.push(Term::all_free(offset, PASS_OFFSET));
     }
     let lf = &prepared.lattice_fit;
     GlobalModel {
