@@ -8,7 +8,6 @@ use dhct_simulate::EffectConfig;
 use dhct_simulate::effects::{FastScanHysteresis, LogCreep, ThermalDrift};
 use serde::{Deserialize, Serialize};
 
-use crate::DiagnoseError;
 use crate::evidence::heights::HeightView;
 use crate::evidence::location::locate;
 use crate::evidence::noise::{NoiseFloor, estimate, robust_sigma};
@@ -25,6 +24,7 @@ use crate::report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRAC
 use crate::report::verdict::{VerdictKind, decide};
 use crate::search::candidates::{Candidate, creep_t0_bounds};
 use crate::search::select::{Current, CvScheme, Folds, Scored, SelectionOptions, round};
+use crate::{DiagnoseError, PassOffsetReading};
 
 /// Options of [`diagnose`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -304,6 +304,10 @@ fn diagnose_from(
     } else {
         (greedy.added, Vec::new())
     };
+    let pass_offset = PassOffsetReading::of(&base_summary.parameters, sigma, geometry);
+    if let Some(sentence) = pass_offset.as_ref().and_then(PassOffsetReading::sentence) {
+        verdict.summary = format!("{} {sentence}", verdict.summary);
+    }
     let residuals = feature_residuals(&prepared, &fitted, base, &current);
     let all = &prepared.observations;
     Ok(DiagnosisReport {
@@ -317,6 +321,7 @@ fn diagnose_from(
         outliers: all.len() - observations.len(),
         dhct: GapSummary::of(&prepared.dhct_gap, sigma, 0),
         base: base_summary.clone(),
+        pass_offset,
         location,
         rounds: greedy.rounds,
         shrink: Shrink {

@@ -105,6 +105,7 @@ mod image_view {
 mod report {
     pub(crate) mod diagnosis;
     pub(crate) mod gap;
+    pub(crate) mod pass_offset;
     pub(crate) mod verdict;
     pub(crate) mod with_views;
 }
@@ -133,6 +134,7 @@ pub use model::data::{MIN_FEATURES, Observation};
 pub use model::fit::FittedParameter;
 pub use report::diagnosis::{DiagnosisReport, GreedyRound, ModelSummary};
 pub use report::gap::{AddedEffect, FeatureResidual, GapSummary, NEAR_TIE_FRACTION, Shrink};
+pub use report::pass_offset::{PASS_OFFSET_FLOORS, PassOffsetReading};
 pub use report::verdict::{GAP_THRESHOLD, GapPlace, PlaceKind, Verdict, VerdictKind};
 pub use search::candidates::Candidate;
 pub use search::select::{CandidateScore, CvScheme, SelectionOptions};

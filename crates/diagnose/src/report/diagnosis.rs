@@ -76,6 +76,11 @@ pub struct DiagnosisReport {
     pub dhct: GapSummary,
     /// The position-level base model (drift + creep + hysteresis + lattice).
     pub base: ModelSummary,
+    /// The offset across the lines between the passes that the base model took, and
+    /// whether it is larger than measuring the features makes it (then the verdict's
+    /// summary says what to check). `None` with one pass.
+    #[serde(default)]
+    pub pass_offset: Option<crate::PassOffsetReading>,
     /// Where the base gap lies.
     pub location: Option<GapLocation>,
     /// The greedy rounds.
