@@ -47,6 +47,21 @@ pub fn seconds_from_civil(
     })
 }
 
+/// A day-first date (`"DD.MM.YYYY"`, `"DD-MM-YYYY"`) and a time of day (`"HH:MM:SS"`) as
+/// seconds since 1970; `None` when either is missing or not a date and time.
+pub fn seconds_from_day_first(date: Option<&str>, time: Option<&str>) -> Option<f64> {
+    let parts: Vec<i64> = date?
+        .trim()
+        .split(['.', '-'])
+        .map(|p| p.trim().parse().ok())
+        .collect::<Option<_>>()?;
+    let [day, month, year] = parts.as_slice() else {
+        return None;
+    };
+    let (day, month) = (u32::try_from(*day).ok()?, u32::try_from(*month).ok()?);
+    seconds_from_civil((*year, month, day), parse_time_of_day(time?)?)
+}
+
 /// `"HH:MM:SS"` (seconds may carry a fraction) as `(hour, minute, seconds)`.
 pub fn parse_time_of_day(text: &str) -> Option<(u32, u32, f64)> {
     let parts: Vec<&str> = text.trim().split(':').collect();

@@ -461,27 +461,13 @@ fn build_geometry(
     {
         geometry = geometry.with_offset(x, y).map_err(geometry_error)?;
     }
-    let start = record_start(header.get("REC_DATE"), header.get("REC_TIME"));
+    // REC_DATE "DD.MM.YYYY", REC_TIME "HH:MM:SS".
+    let start =
+        dhct_scan::clock::seconds_from_day_first(header.get("REC_DATE"), header.get("REC_TIME"));
     Ok(geometry
         .with_scale_source(scale_source)
         .with_timing_source(timing_source)
         .with_start_time(start))
-}
-
-/// `REC_DATE` ("DD.MM.YYYY") and `REC_TIME` ("HH:MM:SS") as seconds since 1970
-/// ([`dhct_scan::clock`]).
-fn record_start(date: Option<&str>, time: Option<&str>) -> Option<f64> {
-    let parts: Vec<i64> = date?
-        .trim()
-        .split('.')
-        .map(|p| p.trim().parse().ok())
-        .collect::<Option<_>>()?;
-    let [day, month, year] = parts.as_slice() else {
-        return None;
-    };
-    let (day, month) = (u32::try_from(*day).ok()?, u32::try_from(*month).ok()?);
-    let clock = dhct_scan::clock::parse_time_of_day(time?)?;
-    dhct_scan::clock::seconds_from_civil((*year, month, day), clock)
 }
 
 /// The tagged header: tag → value lines (in file order; the first of repeated tags wins).

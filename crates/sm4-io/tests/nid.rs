@@ -93,6 +93,31 @@ fn rows_are_flipped_to_display_and_the_backward_image_is_kept_left_to_right() {
     }
 }
 
+/// `Date` and `Time` of `[DataSet-Info]` (day first, decimal-comma headers alike) are
+/// the frame's start; without them there is none.
+#[test]
+fn the_header_date_and_time_are_the_frames_start() {
+    let text = String::from_utf8_lossy(&synthetic(4, 2, "Down", 16)).into_owned();
+    let bytes = synthetic(4, 2, "Down", 16);
+    let header_end = text.find("#!").unwrap();
+    let dated = |date: &str| {
+        let mut edited = text[..header_end]
+            .replace("Time/Line=250ms\r\n", &format!("Time/Line=250ms\r\n{date}"))
+            .into_bytes();
+        edited.extend_from_slice(&bytes[header_end..]);
+        read_bytes(&edited).unwrap().pairs[0]
+            .geometry()
+            .start_time()
+    };
+    let start = dated("Date=18-05-2016\r\nTime=10:42:55\r\n").expect("a start");
+    let next = dated("Date=18-05-2016\r\nTime=10:43:22\r\n").expect("a start");
+    assert_eq!(next - start, 27.0);
+    // 2016-05-18 10:42:55 as seconds since 1970 (the clock dhct keeps, zone ignored).
+    assert_eq!(start, 1_463_568_175.0);
+    assert_eq!(dated(""), None);
+    assert_eq!(dated("Date=yesterday\r\nTime=10:42:55\r\n"), None);
+}
+
 #[test]
 fn a_missing_scan_direction_or_time_is_an_assumption() {
     let text = String::from_utf8_lossy(&synthetic(4, 2, "Down", 16)).into_owned();

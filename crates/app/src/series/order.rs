@@ -6,8 +6,10 @@ use dhct_scan::ScanGeometry;
 
 use super::FrameSource;
 
-/// Start times a file rounds to the second may make back-to-back frames overlap by up to
-/// this much (seconds); the later frame is then taken to start when the earlier ended.
+/// Start times a file rounds to the second may make back-to-back frames overlap, or seem
+/// to pause, by up to this much (seconds); the later frame is then taken to start when the
+/// earlier ended. (Where the drift runs at 100 pm/s, a second of pause that is not there
+/// carries the drift 100 pm, a third of a graphite period, into the next frame.)
 const ROUNDING_OVERLAP_S: f64 = 1.5;
 
 /// One frame's place on the session clock.
@@ -87,7 +89,21 @@ pub fn order(frames: &[(FrameSource, &ScanGeometry)]) -> Result<(Vec<Timed>, Vec
                     frames[before.input].1.frame_duration()
                 );
             }
-            if start_s < end {
+            let rounded = |t: Option<f64>| t.is_some_and(|t| t.fract() == 0.0);
+            let seeming_pause = start_s > end
+                && start_s < end + ROUNDING_OVERLAP_S
+                && rounded(stated[i])
+                && rounded(stated[before.input]);
+            if seeming_pause {
+                notes.push(format!(
+                    "{} starts {:.1} s after {} ended by the start times the files record, \
+                     which are rounded to the second: taken to follow it directly",
+                    frames[i].0,
+                    start_s - end,
+                    before.source
+                ));
+            }
+            if start_s < end || seeming_pause {
                 start_s = end;
             }
         }
@@ -149,6 +165,25 @@ mod tests {
         let starts: Vec<(usize, f64)> = timed.iter().map(|t| (t.input, t.start_s)).collect();
         assert_eq!(starts, [(1, 0.0), (2, 20.0), (0, 50.0)]);
         assert!(notes[0].contains("recorded start times"), "{notes:?}");
+        // Whole seconds a second past the frame before's end: taken as back to back (the
+        // Nanosurf frames of 26.5 s by their headers, 25.5 s by their line times); two
+        // seconds, or a time with a fraction, is a pause.
+        let g = [
+            geometry(Some(100.0)),
+            geometry(Some(121.0)),
+            geometry(Some(143.0)),
+            geometry(Some(163.5)),
+        ];
+        let frames: Vec<(FrameSource, &ScanGeometry)> =
+            g.iter().enumerate().map(|(k, g)| (source(k), g)).collect();
+        let (timed, notes) = order(&frames).unwrap();
+        let starts: Vec<f64> = timed.iter().map(|t| t.start_s).collect();
+        assert_eq!(starts, [0.0, 20.0, 43.0, 63.5]);
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("taken to follow it directly"),
+            "{notes:?}"
+        );
         let g = [geometry(Some(100.0)), geometry(None)];
         let frames: Vec<(FrameSource, &ScanGeometry)> =
             g.iter().enumerate().map(|(k, g)| (source(k), g)).collect();

@@ -35,7 +35,9 @@
 //! that / `Points`, no turnaround. `Rotation` (degrees) is the scan angle. Without a timing
 //! or a scan direction the placeholder [`ASSUMED_PIXEL_PERIOD`] or slow direction down is
 //! used and the timing marked [`ValueSource::Assumed`], reason under
-//! [`ASSUMED_TIMING_KEY`]. Spectroscopy data sets are skipped (their bytes are counted).
+//! [`ASSUMED_TIMING_KEY`]. `Date` (`DD-MM-YYYY`) and `Time` (`HH:MM:SS`) of `[DataSet-Info]`
+//! are the frame's start ([`ScanGeometry::start_time`]: frames of a series are ordered by
+//! it). Spectroscopy data sets are skipped (their bytes are counted).
 
 pub mod ini;
 
@@ -120,6 +122,8 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     let mut metadata = metadata(&ini);
     let (slow, line_time) = scan_timing(&ini, &mut metadata)?;
     let angle = scan_angle(&ini)?;
+    let start =
+        dhct_scan::clock::seconds_from_day_first(ini.get(INFO, "Date"), ini.get(INFO, "Time"));
     let mut pairs = Vec::new();
     let mut used = vec![false; images.len()];
     for i in 0..images.len() {
@@ -143,7 +147,7 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
             (_, j) => (Some(images[i]), j.map(|j| images[j])),
         };
         let first = trace.or(retrace).expect("one of the two is set");
-        let geometry = geometry(first, slow, line_time, angle)?;
+        let geometry = geometry(first, slow, line_time, angle)?.with_start_time(start);
         let decode = |set: Option<&DataSet>| set.map(|s| decode(bytes, s)).transpose();
         pairs.push(
             ScanPair::from_parts(geometry, decode(trace)?, decode(retrace)?)
