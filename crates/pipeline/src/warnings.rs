@@ -261,9 +261,10 @@ pub(crate) fn assumption_warnings(geometry: &ScanGeometry) -> Vec<Warning> {
             Warning::new(
                 WarningCode::AssumedTiming,
                 format!(
-                    "the scan timing was not read from the file but assumed ({:.4} ms per pixel): \
-                 drift velocities, accelerations and times are in assumed units (the \
-                 correction itself does not depend on them)",
+                    "the file does not state all of the scan timing (its pixel period, \
+                 turnaround or a scan direction was assumed, as the file's notes say; {:.4} ms \
+                 per pixel used): drift velocities, accelerations and times are in assumed \
+                 units (the correction itself does not depend on them)",
                     geometry.pixel_period() * 1e3
                 ),
                 "give the real line time or pixel period",
