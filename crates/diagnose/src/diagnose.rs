@@ -305,8 +305,8 @@ fn diagnose_from(
         (greedy.added, Vec::new())
     };
     let pass_offset = PassOffsetReading::of(&base_summary.parameters, sigma, geometry);
-    if let Some(sentence) = pass_offset.as_ref().and_then(PassOffsetReading::sentence) {
-        verdict.summary = format!("{} {sentence}", verdict.summary);
+    if let Some(reading) = &pass_offset {
+        reading.apply_to(&mut verdict);
     }
     let residuals = feature_residuals(&prepared, &fitted, base, &current);
     let all = &prepared.observations;

@@ -6,12 +6,16 @@
 //! for that. Tens of picometres or more are something else: the slow axis stepping during
 //! the turnaround, scan directions or a turnaround time the timing does not follow. The
 //! correction leaves such an offset in its images (trace and retrace disagree), so it is
-//! reported with what to check, whatever the verdict.
+//! reported with what to check, and the verdict cannot be that the correction's model
+//! explains the scan: `no_gap` becomes `unexplained` (no effect of the library makes the
+//! offset), `explained` becomes `partly_explained`.
 
 use dhct_scan::{Axis, ScanGeometry};
 use serde::{Deserialize, Serialize};
 
+use crate::VerdictKind;
 use crate::model::fit::FittedParameter;
+use crate::report::verdict::Verdict;
 
 /// An offset at least this many times the noise floor across the lines is a finding
 /// (levelled simulated scans leave at most about 1.1 floors).
@@ -54,15 +58,29 @@ impl PassOffsetReading {
         })
     }
 
+    /// `verdict` with the offset taken into account: when it is a finding, the summary
+    /// gains [`Self::sentence`] and a verdict that the model explains the scan is lowered.
+    pub(crate) fn apply_to(&self, verdict: &mut Verdict) {
+        let Some(sentence) = self.sentence() else {
+            return;
+        };
+        verdict.kind = match verdict.kind {
+            VerdictKind::NoGap => VerdictKind::Unexplained,
+            VerdictKind::Explained => VerdictKind::PartlyExplained,
+            kind => kind,
+        };
+        verdict.summary = format!("{} {sentence}", verdict.summary);
+    }
+
     /// The sentence the verdict's summary gains when the offset is a finding.
     pub fn sentence(&self) -> Option<String> {
         self.finding.then(|| {
             format!(
-                "Trace and retrace sit {:.1} ± {:.1} pm apart across the lines ({:.1} × the \
-                 floor), the same everywhere: no tip motion does this, and the correction \
-                 leaves it in its images; the base model took it. Check the scan's timing at \
-                 the turnaround (a slow axis that steps while the retrace runs), the scan \
-                 directions and the turnaround time.",
+                "But trace and retrace sit {:.1} ± {:.1} pm apart across the lines ({:.1} × \
+                 the floor), the same everywhere: no tip motion does this, and the correction \
+                 leaves it in its images (the gap above is with the offset taken out). Check \
+                 the scan's timing at the turnaround (a slow axis that steps while the retrace \
+                 runs), the scan directions and the turnaround time.",
                 self.across_m * 1e12,
                 self.sigma_m * 1e12,
                 self.over_floor
