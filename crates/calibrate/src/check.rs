@@ -33,9 +33,10 @@ pub struct CheckOptions {
     /// tan 25° ≈ 47 % of the slow-scan speed). Default 25.
     pub max_shear_deg: f64,
     /// Largest power ratio between reflections that the lattice's symmetry makes
-    /// equivalent when the match also needs a stretch above [`STRETCHED_MATCH`] (a square
-    /// lattice read on a drift-stretched hexagonal image gives 10–1000). Unequal power alone
-    /// (a tip, drift, line jumps: 10–60× in real images) is reported, never refused.
+    /// equivalent when the match also needs a stretch above [`STRETCHED_MATCH`] and a
+    /// lattice of another shape fits with markedly less (a square lattice read on a
+    /// drift-stretched hexagonal image gives 10–1000). Unequal power alone (a tip, drift,
+    /// line jumps: 10–60× in real images) is reported, never refused.
     pub max_shell_spread: f64,
 }
 
@@ -85,9 +86,10 @@ pub const MAX_PITCH_TOLERANCE: f64 = 100.0;
 pub const SLOW_AXIS_SLACK: f64 = 2.0;
 
 /// A match needing more stretch than this is a contradiction when equivalent reflections
-/// also differ more than [`CheckOptions::max_shell_spread`] in power: a hexagonal image
-/// read as square (or the reverse) needs √3 ≈ 1.73, or from about 1.55 when drift has
-/// already stretched it the right way.
+/// also differ more than [`CheckOptions::max_shell_spread`] in power and a plain lattice
+/// of another shape explains the image with at most this stretch: a hexagonal image read
+/// as square (or the reverse) needs √3 ≈ 1.73, or from about 1.55 when drift has already
+/// stretched it the right way.
 pub const STRETCHED_MATCH: f64 = 1.55;
 
 impl CheckOptions {
