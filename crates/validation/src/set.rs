@@ -271,7 +271,7 @@ mod tests {
     #[test]
     fn shipped_sets_parse_with_unique_names_and_ranges_expanded() {
         let catalogue = Catalogue::parse(SHIPPED).expect("parses");
-        assert_eq!(catalogue.sets.len(), 14);
+        assert_eq!(catalogue.sets.len(), 15);
         let held_out = catalogue.named("held-out").expect("exists");
         assert_eq!(held_out.null_seeds.len(), 40);
         assert_eq!(held_out.null_seeds[0], 12101);
