@@ -90,6 +90,12 @@ impl ModelTerm for QuadraticField {
     }
 }
 
+/// Label (and name) of the base model's [`PassOffset`] term.
+pub(crate) const PASS_OFFSET: &str = "pass-offset";
+
+/// The name of [`PassOffset`]'s one parameter (what the report reads it back by).
+pub(crate) const ACROSS_LINES_PARAMETER: &str = "across_lines_m";
+
 /// An offset across the scan lines between the two passes: the retrace's features sit
 /// `offset` further along the slow axis than the trace's (half of it each way), the same
 /// everywhere. No motion of the tip does this (drift, creep and hysteresis move both passes
@@ -98,9 +104,6 @@ impl ModelTerm for QuadraticField {
 /// levels, and the two passes, sheared apart by the fast-scan hysteresis, take it up with
 /// opposite signs (±0.4–1.1 pm on levelled `tilted` scans). Part of the base model, so
 /// that no effect is named for it.
-/// Label of the base model's [`PassOffset`] term.
-pub(crate) const PASS_OFFSET: &str = "pass-offset";
-
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct PassOffset {
     /// The retrace's offset from the trace across the lines (along the slow axis), metres.
@@ -109,7 +112,7 @@ pub(crate) struct PassOffset {
 
 impl ModelTerm for PassOffset {
     fn name(&self) -> &'static str {
-        "pass-offset"
+        PASS_OFFSET
     }
     fn displacement(&self, at: &AcquisitionContext) -> Vector2<f64> {
         // A feature seen further along the slow axis sits where the tip was displaced the
@@ -124,7 +127,7 @@ impl ModelTerm for PassOffset {
         }
     }
     fn parameter_names(&self) -> Vec<&'static str> {
-        vec!["across_lines_m"]
+        vec![ACROSS_LINES_PARAMETER]
     }
     fn parameters(&self) -> Vec<f64> {
         vec![self.across_m]

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::VerdictKind;
 use crate::model::fit::FittedParameter;
+use crate::model::terms::ACROSS_LINES_PARAMETER;
 use crate::report::verdict::Verdict;
 
 /// An offset at least this many times the noise floor across the lines is a finding
@@ -42,7 +43,9 @@ impl PassOffsetReading {
         sigma_m: [f64; 2],
         geometry: &ScanGeometry,
     ) -> Option<PassOffsetReading> {
-        let p = parameters.iter().find(|p| p.name == "across_lines_m")?;
+        let p = parameters
+            .iter()
+            .find(|p| p.name == ACROSS_LINES_PARAMETER)?;
         let floor = match geometry.fast_axis() {
             Axis::Horizontal => sigma_m[1],
             Axis::Vertical => sigma_m[0],
@@ -97,7 +100,7 @@ mod tests {
     fn parameter(value: f64, sigma: f64) -> FittedParameter {
         FittedParameter {
             effect: "pass-offset".into(),
-            name: "across_lines_m".into(),
+            name: ACROSS_LINES_PARAMETER.into(),
             value,
             sigma: Some(sigma),
         }
