@@ -92,13 +92,22 @@ pub struct SetSummary {
     pub effect_cases: usize,
     /// Of which top-1 correct.
     pub top1_correct: usize,
+    /// Of the top-1 correct, those whose effect was named only below the floor (verdict
+    /// `no_gap`): not a finding for the user, who reads `effects` and `added`.
+    #[serde(default)]
+    pub top1_below_floor_only: usize,
     /// Of which top-1 correct when a second creep and an exponential creep count as one
     /// family (the issue lists them as one item: both model a creep event after an onset).
     pub top1_family_correct: usize,
     /// Effect-free cases.
     pub null_cases: usize,
-    /// Of which with any effect added.
+    /// Of which with any effect added, or listed below the floor (the strict count).
     pub false_alarms: usize,
+    /// Of the false alarms, those only listing an effect below the floor (verdict
+    /// `no_gap`, nothing under `effects` or `added`): the issue's point 3 keeps such a
+    /// listing apart from the findings, so it is no alarm by the issue's definition.
+    #[serde(default)]
+    pub below_floor_only_alarms: usize,
     /// Mixture cases.
     pub mixture_cases: usize,
     /// Of which both effects found.
@@ -166,6 +175,7 @@ impl SetSummary {
         SetSummary {
             effect_cases: single.len(),
             top1_correct: correct.len(),
+            top1_below_floor_only: correct.iter().filter(|c| c.below_floor).count(),
             top1_family_correct: single
                 .iter()
                 .filter(|c| {
@@ -176,6 +186,10 @@ impl SetSummary {
                 .count(),
             null_cases: null.len(),
             false_alarms: null.iter().filter(|c| !c.correct).count(),
+            below_floor_only_alarms: null
+                .iter()
+                .filter(|c| !c.correct && c.below_floor && c.verdict == Some(VerdictKind::NoGap))
+                .count(),
             mixture_cases: mix.len(),
             mixtures_correct: mix.iter().filter(|c| c.correct).count(),
             foreign_cases: foreign.len(),
@@ -197,6 +211,19 @@ impl SetSummary {
     /// False-alarm rate over effect-free cases.
     pub fn false_alarm_rate(&self) -> f64 {
         self.false_alarms as f64 / self.null_cases.max(1) as f64
+    }
+
+    /// Effect-free cases with a finding: a verdict other than `no_gap`, or an effect
+    /// under `effects` or `added` (the false alarms less those only listing an effect
+    /// below the floor).
+    pub fn named_false_alarms(&self) -> usize {
+        self.false_alarms - self.below_floor_only_alarms
+    }
+
+    /// Single-effect cases whose effect was named as a finding first (top-1 correct less
+    /// those named only below the floor).
+    pub fn top1_named(&self) -> usize {
+        self.top1_correct - self.top1_below_floor_only
     }
 
     /// Share of out-of-library cases answered `unexplained` (or `partly_explained`,
@@ -336,15 +363,17 @@ impl fmt::Display for SetSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}), false alarms {}/{} ({:.0} %), mixtures {}/{}, out of library unexplained {}/{}, absorbed by the base {} (none or the truth named {}), gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
+            "top-1 {}/{} ({:.0} %; creeps as one family {}/{}; named as a finding {}), false alarms {}/{} ({:.0} %; with a finding {}), mixtures {}/{}, out of library unexplained {}/{}, absorbed by the base {} (none or the truth named {}), gap/noise before {:.2} → after {:.2} (worst {:.2}; ≤ 1.2 in {}/{}) — {}",
             self.top1_correct,
             self.effect_cases,
             100.0 * self.top1_rate(),
             self.top1_family_correct,
             self.effect_cases,
+            self.top1_named(),
             self.false_alarms,
             self.null_cases,
             100.0 * self.false_alarm_rate(),
+            self.named_false_alarms(),
             self.mixtures_correct,
             self.mixture_cases,
             self.foreign_correct,
@@ -416,5 +445,65 @@ impl fmt::Display for ValidationReport {
             writeln!(f, "{:<9} {}{note}", format!("{}:", set.set), set.summary)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn case(
+        kind: CaseKind,
+        identified: &[Candidate],
+        below_floor: bool,
+        correct: bool,
+    ) -> CaseResult {
+        CaseResult {
+            name: "case".into(),
+            kind,
+            truth: match kind {
+                CaseKind::Single => vec![Candidate::LineDrift],
+                _ => Vec::new(),
+            },
+            set: "set".into(),
+            path: "images".into(),
+            foreign: Vec::new(),
+            identified: identified.to_vec(),
+            below_floor,
+            verdict: Some(if below_floor || identified.is_empty() {
+                VerdictKind::NoGap
+            } else {
+                VerdictKind::Explained
+            }),
+            remaining: Vec::new(),
+            correct,
+            gap_before: 1.5,
+            visibility: None,
+            gap_after_top: Some(1.0),
+            gap_after: 1.0,
+            noise_floor_m: [1e-12; 2],
+            features: 100,
+            error: None,
+        }
+    }
+
+    /// An effect listed only below the floor is told apart from a finding, on an
+    /// effect-free scan (an alarm by the strict count only) and on a single-effect scan
+    /// (top-1 by the strict count only).
+    #[test]
+    fn listings_below_the_floor_are_counted_apart_from_findings() {
+        let drift = [Candidate::LineDrift];
+        let cases = [
+            case(CaseKind::EffectFree, &[], false, true),
+            case(CaseKind::EffectFree, &drift, true, false),
+            case(CaseKind::EffectFree, &drift, false, false),
+            case(CaseKind::Single, &drift, false, true),
+            case(CaseKind::Single, &drift, true, true),
+        ];
+        let summary = SetSummary::of(&cases.iter().collect::<Vec<_>>());
+        assert_eq!((summary.null_cases, summary.false_alarms), (3, 2));
+        assert_eq!(summary.named_false_alarms(), 1);
+        assert_eq!((summary.effect_cases, summary.top1_correct), (2, 2));
+        assert_eq!(summary.top1_named(), 1);
     }
 }

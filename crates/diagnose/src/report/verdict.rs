@@ -101,8 +101,10 @@ pub struct Verdict {
     /// The named effects, in the order they were added (none when the verdict is
     /// `no_gap`).
     pub effects: Vec<Candidate>,
-    /// With `no_gap`: effects still found significant, whose model stays within the noise
-    /// floor either way. Not findings: the positions do not need them.
+    /// With a gap within the floor (`no_gap`, or `unexplained` lowered from it by a pass
+    /// offset: [`crate::PassOffsetReading`]): effects still found significant,
+    /// whose model stays within the noise floor either way. Not findings: the positions do
+    /// not need them.
     #[serde(default)]
     pub below_floor: Vec<Candidate>,
     /// Where the remaining gap lies (after the named effects), largest share first.
