@@ -59,7 +59,7 @@ mod noise_correlation;
 mod options;
 mod watershed;
 
-pub use blur::gaussian_blur;
+pub use blur::{gaussian_blur, gaussian_blur_sampled};
 pub use correlate::{Correlator, RealSpectrum, correlate_same};
 pub use error::FeatureError;
 pub use feature::{

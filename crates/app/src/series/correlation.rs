@@ -175,9 +175,7 @@ fn smoothed(z: &Array2<f64>, sigma_px: f64, factor: usize) -> Array2<f64> {
         let mean = finite_mean(column.iter());
         column.mapv_inplace(|v| if v.is_finite() { v - mean } else { 0.0 });
     }
-    let blurred = dhct_features::gaussian_blur(&out, sigma_px)
-        .slice(ndarray::s![..;factor, ..;factor])
-        .to_owned();
+    let blurred = dhct_features::gaussian_blur_sampled(&out, sigma_px, factor);
     let mean = blurred.mean().unwrap_or(0.0);
     blurred.mapv(|v| v - mean)
 }

@@ -7,8 +7,9 @@ use std::io::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use dhct_calibrate::MIN_BINNED_NN_PX;
 use dhct_distortion::series::{
-    SeriesFeature, SessionDrift, SessionPlacement, TrajectoryPoint, register_image,
+    SeriesFeature, SessionDrift, SessionPlacement, TrajectoryPoint, register_image_sampled,
 };
 use dhct_pipeline::{CorrectedImageCheck, check_corrected_images};
 use dhct_scan::{ImageChannel, ScanPass};
@@ -347,7 +348,7 @@ fn register_frame(
         against_first: Vec::new(),
     };
     for (pass, image) in pair.images() {
-        let z = frame.register(pass, &image.z, grid)?;
+        let z = frame.register(pass, &image.z, grid, 1)?;
         if let Some(lattice) = session.lattice {
             match fft_check(&frame, lattice, pass, &image.z, &z) {
                 Some(c) => done.measured.push(c),
@@ -378,27 +379,32 @@ struct FrameRegistration<'a> {
 }
 
 impl FrameRegistration<'_> {
-    /// `z` (an image of `pass`) resampled onto `grid` in the session frame.
+    /// `z` (an image of `pass`) resampled onto `grid` in the session frame, from every
+    /// `step`-th pixel and line of `z` ([`register_image_sampled`]).
     fn register(
         &self,
         pass: ScanPass,
         z: &Array2<f64>,
         grid: &dhct_scan::ScanGeometry,
+        step: usize,
     ) -> Result<Array2<f64>> {
-        Ok(register_image(
+        Ok(register_image_sampled(
             self.session.placement,
             self.geometry,
             self.start_s,
             pass,
             z,
             grid,
+            step,
         )?)
     }
 }
 
 /// The lattice of a registered image (`registered`, of raw image `raw`) measured by FFT:
 /// on the first frame's grid, or, where the frame covers too little of it, on the frame's
-/// own grid moved with the sample.
+/// own grid moved with the sample (registered again there, from every second pixel and
+/// line where the lattice keeps [`MIN_BINNED_NN_PX`] px a neighbour distance so: the FFT's
+/// measurement then bins the image that far anyway on large frames).
 fn fft_check(
     frame: &FrameRegistration,
     lattice: &dyn dhct_lattice::Lattice,
@@ -410,8 +416,15 @@ fn fft_check(
         check_corrected_images(&[(pass, z)], grid, lattice).pop()
     };
     on(registered, &frame.session.grid).or_else(|| {
-        let grid = own_grid(frame.session.drift, frame.geometry, frame.start_s)?;
-        let z = frame.register(pass, raw, &grid).ok()?;
+        let g = frame.geometry;
+        let nn_px = lattice.nearest_neighbour_distance() / g.pitch_x().max(g.pitch_y());
+        let step = if nn_px / 2.0 >= MIN_BINNED_NN_PX {
+            2
+        } else {
+            1
+        };
+        let grid = own_grid(frame.session.drift, g, frame.start_s, step)?;
+        let z = frame.register(pass, raw, &grid, step).ok()?;
         on(&z, &grid)
     })
 }
@@ -442,15 +455,30 @@ fn level_against(reference: &Array2<f64>, page: &Array2<f64>) -> f64 {
 }
 
 /// The frame's own grid moved with the sample to where the frame scanned it (by the
-/// session's drift at its start): its registered image there covers nearly all of it.
+/// session's drift at its start), with `step` times its pitch (a `step`-th of its pixels
+/// a side, over the same area): its registered image there covers nearly all of it.
 fn own_grid(
     drift: &SessionDrift,
     geometry: &dhct_scan::ScanGeometry,
     start_s: f64,
+    step: usize,
 ) -> Option<dhct_scan::ScanGeometry> {
     let d = drift.displacement(start_s);
     let (x, y) = geometry.offset();
-    geometry.clone().with_offset(x + d[0], y + d[1]).ok()
+    let step = step.max(1);
+    let f = step as f64;
+    dhct_scan::ScanGeometry::new(
+        (geometry.columns() / step).max(1),
+        (geometry.rows() / step).max(1),
+        geometry.pitch_x() * f,
+        geometry.pitch_y() * f,
+        geometry.pixel_period() * f,
+        geometry.trace_fast(),
+        geometry.slow_direction(),
+    )
+    .and_then(|g| g.with_scan_angle(geometry.scan_angle()))
+    .and_then(|g| g.with_offset(x + d[0], y + d[1]))
+    .ok()
 }
 
 /// The mean of the registered pages per pixel over the pages that hold a value there (NaN

@@ -39,22 +39,28 @@ const MIN_OVERLAP: usize = 400;
 /// [`SHIFT_PIXELS`] (every second row and column of a 512² frame): the shift's precision
 /// then stays far below a thousandth of a pixel, at a fraction of the cost.
 pub fn image_shift(reference: &Array2<f64>, moving: &Array2<f64>) -> Option<[f64; 2]> {
+    let usable = Usable::of(reference, moving);
     image_shift_over(
         reference,
         moving,
-        &evenly_thinned(overlap(reference, moving)),
+        &usable.thinned(thinning_stride(usable.count())),
     )
 }
 
 /// Most pixels [`image_shift`] fits a shift over.
 const SHIFT_PIXELS: usize = 1 << 16;
 
-/// `pixels` (`(row, column)`) kept on every `s`-th row and column, `s` the smallest stride
-/// that leaves at most [`SHIFT_PIXELS`] of them (all when they are that few already).
+/// The smallest stride `s` such that every `s`-th row and column of `count` pixels leaves
+/// at most [`SHIFT_PIXELS`] of them (1 when they are that few already).
+fn thinning_stride(count: usize) -> usize {
+    (1..).find(|s| count <= SHIFT_PIXELS * s * s).unwrap_or(1)
+}
+
+/// `pixels` (`(row, column)`) kept on every `s`-th row and column, `s` the
+/// [`thinning_stride`] of their number.
+#[cfg(test)]
 fn evenly_thinned(pixels: Vec<(usize, usize)>) -> Vec<(usize, usize)> {
-    let stride = (1..)
-        .find(|s| pixels.len() <= SHIFT_PIXELS * s * s)
-        .unwrap_or(1);
+    let stride = thinning_stride(pixels.len());
     if stride == 1 {
         return pixels;
     }
@@ -91,34 +97,86 @@ pub fn image_shift_over(
 
 /// The pixels where both images, and every neighbour within [`MARGIN`], hold values.
 pub fn overlap(a: &Array2<f64>, b: &Array2<f64>) -> Vec<(usize, usize)> {
-    let (rows, columns) = a.dim();
-    if b.dim() != (rows, columns) || rows <= 2 * MARGIN || columns <= 2 * MARGIN {
-        return Vec::new();
-    }
-    // Whether a pixel lacks a value in either image, then whether any within MARGIN along
-    // its line does, then whether any within MARGIN along its column does (prefix counts).
-    let missing = ndarray::Zip::from(a)
-        .and(b)
-        .map_collect(|x, y| usize::from(!(x.is_finite() && y.is_finite())));
-    let near_along = |counts: &Array2<usize>, lanes: ndarray::Axis| {
-        let mut out = Array2::<usize>::zeros((rows, columns));
-        for (lane, mut near) in counts.lanes(lanes).into_iter().zip(out.lanes_mut(lanes)) {
-            let mut prefix = vec![0usize; lane.len() + 1];
-            for (k, v) in lane.iter().enumerate() {
-                prefix[k + 1] = prefix[k] + v;
+    Usable::of(a, b).thinned(1)
+}
+
+/// Which pixels of two images of one grid [`overlap`] keeps.
+struct Usable {
+    /// Per pixel, whether it and every pixel within [`MARGIN`] along both axes hold values
+    /// in both images (false within [`MARGIN`] of the edge; empty for images of different
+    /// sizes or too small).
+    free: Array2<bool>,
+}
+
+impl Usable {
+    fn of(a: &Array2<f64>, b: &Array2<f64>) -> Usable {
+        let (rows, columns) = a.dim();
+        if b.dim() != (rows, columns) || rows <= 2 * MARGIN || columns <= 2 * MARGIN {
+            return Usable {
+                free: Array2::from_elem((0, 0), false),
+            };
+        }
+        // Per line, how many pixels within MARGIN along it lack a value in either image
+        // (prefix counts along the line); then, line by line, the sum of those over the
+        // lines within MARGIN (a running sum of whole lines: contiguous memory throughout).
+        let mut along = Array2::<u32>::zeros((rows, columns));
+        let mut prefix = vec![0u32; columns + 1];
+        for ((ra, rb), mut out) in a.rows().into_iter().zip(b.rows()).zip(along.rows_mut()) {
+            for (k, (x, y)) in ra.iter().zip(rb.iter()).enumerate() {
+                prefix[k + 1] = prefix[k] + u32::from(!(x.is_finite() && y.is_finite()));
             }
-            for (k, n) in near.iter_mut().enumerate() {
-                let (from, to) = (k.saturating_sub(MARGIN), (k + MARGIN + 1).min(lane.len()));
+            for (k, n) in out.iter_mut().enumerate() {
+                let (from, to) = (k.saturating_sub(MARGIN), (k + MARGIN + 1).min(columns));
                 *n = prefix[to] - prefix[from];
             }
         }
-        out
-    };
-    let near = near_along(&near_along(&missing, ndarray::Axis(1)), ndarray::Axis(0));
-    (MARGIN..rows - MARGIN)
-        .flat_map(|r| (MARGIN..columns - MARGIN).map(move |c| (r, c)))
-        .filter(|&(r, c)| near[[r, c]] == 0)
-        .collect()
+        let mut free = Array2::from_elem((rows, columns), false);
+        let mut window = vec![0u32; columns];
+        for r in 0..rows.min(MARGIN) {
+            add_line(&mut window, along.row(r), true);
+        }
+        for r in 0..rows {
+            if r + MARGIN < rows {
+                add_line(&mut window, along.row(r + MARGIN), true);
+            }
+            if r > MARGIN {
+                add_line(&mut window, along.row(r - MARGIN - 1), false);
+            }
+            if (MARGIN..rows - MARGIN).contains(&r) {
+                let mut line = free.row_mut(r);
+                for c in MARGIN..columns - MARGIN {
+                    line[c] = window[c] == 0;
+                }
+            }
+        }
+        Usable { free }
+    }
+
+    /// How many pixels are usable.
+    fn count(&self) -> usize {
+        self.free.iter().filter(|f| **f).count()
+    }
+
+    /// The usable pixels (`(row, column)`, row by row) on every `stride`-th row and column.
+    fn thinned(&self, stride: usize) -> Vec<(usize, usize)> {
+        let stride = stride.max(1);
+        self.free
+            .indexed_iter()
+            .filter(|&((r, c), f)| *f && r % stride == 0 && c % stride == 0)
+            .map(|(p, _)| p)
+            .collect()
+    }
+}
+
+/// `window += line` (`add`) or `window −= line`.
+fn add_line(window: &mut [u32], line: ndarray::ArrayView1<u32>, add: bool) {
+    for (w, n) in window.iter_mut().zip(line.iter()) {
+        if add {
+            *w += n;
+        } else {
+            *w -= n;
+        }
+    }
 }
 
 /// The reference image with its gradient (central differences, per pixel; NaN at the
@@ -272,6 +330,9 @@ mod tests {
         let thinned = evenly_thinned(every.clone());
         assert!(every.len() > SHIFT_PIXELS && thinned.len() <= SHIFT_PIXELS);
         assert!(thinned.len() > SHIFT_PIXELS / 4, "{}", thinned.len());
+        let usable = Usable::of(&reference, &moving);
+        assert_eq!(usable.count(), every.len());
+        assert_eq!(usable.thinned(thinning_stride(usable.count())), thinned);
         let small = overlap(
             &reference.slice(ndarray::s![..100, ..100]).to_owned(),
             &reference.slice(ndarray::s![..100, ..100]).to_owned(),

@@ -39,6 +39,6 @@ pub use frame::{ObservedStep, SeriesFeature, SeriesFrame};
 pub use image_drift::{
     DifferenceDriftFit, DriftDifference, ImageRegistration, MoveTiming, fit_drift_differences,
 };
-pub use registered_image::{SessionPlacement, register_image};
+pub use registered_image::{SessionPlacement, register_image, register_image_sampled};
 pub use session_drift::{MoveCreep, SessionDrift};
 pub use spline::SplineBasis;

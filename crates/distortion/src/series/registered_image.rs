@@ -71,11 +71,36 @@ pub fn register_image(
     z: &Array2<f64>,
     grid: &ScanGeometry,
 ) -> Result<Array2<f64>, DistortionError> {
+    register_image_sampled(fit, geometry, start_s, pass, z, grid, 1)
+}
+
+/// [`register_image`] from every `step`-th pixel of every `step`-th line of `z` only (each
+/// placed where the fit puts that pixel): for a coarser `grid`, at about `1/step²` of the
+/// cost. Content finer than `2·step` pixels of `z` folds into coarser content (no
+/// smoothing), so keep features wider than that. `step` ≥ 1.
+pub fn register_image_sampled(
+    fit: &dyn SessionPlacement,
+    geometry: &ScanGeometry,
+    start_s: f64,
+    pass: ScanPass,
+    z: &Array2<f64>,
+    grid: &ScanGeometry,
+    step: usize,
+) -> Result<Array2<f64>, DistortionError> {
     image_shape(geometry, z)?;
+    let step = step.max(1);
+    let sampled;
+    let z = if step == 1 {
+        z
+    } else {
+        sampled = z.slice(ndarray::s![..;step, ..;step]).to_owned();
+        &sampled
+    };
     let (rows, columns) = z.dim();
     let lags = LagByPosition::new(fit, geometry, pass);
     let place_pixel = |r: usize, c: usize| {
-        let f = SeriesFeature::at_pixel(geometry, start_s, pass, c as f64, r as f64);
+        let (x, y) = ((step * c) as f64, (step * r) as f64);
+        let f = SeriesFeature::at_pixel(geometry, start_s, pass, x, y);
         let q = grid.from_instrument(fit.position_with_lag(&f, lags.at(fit, &f)));
         [q[0] / grid.pitch_x(), q[1] / grid.pitch_y()]
     };
@@ -294,6 +319,63 @@ mod tests {
                 f.controller_m[0] + self.shift_m[0] + 3e-12 * f.time_s,
                 f.controller_m[1] + self.shift_m[1] - 2e-12 * f.time_s + bump,
             ]
+        }
+    }
+
+    /// A placement without drift or lag: the controller's position.
+    struct Still;
+
+    impl SessionPlacement for Still {
+        fn lag_s(&self, _pass: ScanPass, _line_time_s: f64) -> f64 {
+            0.0
+        }
+        fn position_with_lag(&self, f: &SeriesFeature, _lag_s: f64) -> [f64; 2] {
+            f.controller_m
+        }
+    }
+
+    /// From every second pixel and line onto a grid of twice the pitch over the same area,
+    /// a plane registers as the plane: each coarse pixel holds the value at its place.
+    #[test]
+    fn a_sampled_registration_onto_a_coarser_grid_reads_each_pixel_at_its_place() {
+        let fine = ScanGeometry::new(
+            64,
+            48,
+            1e-10,
+            1e-10,
+            2e-4,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap();
+        let coarse = ScanGeometry::new(
+            32,
+            24,
+            2e-10,
+            2e-10,
+            4e-4,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap();
+        let plane = |x: f64, y: f64| 0.3 * x - 0.7 * y + 2.0;
+        let z = Array2::from_shape_fn((48, 64), |(r, c)| plane(c as f64, r as f64));
+        for pass in [ScanPass::Trace, ScanPass::Retrace] {
+            let registered =
+                register_image_sampled(&Still, &fine, 1.0, pass, &z, &coarse, 2).unwrap();
+            assert_eq!(registered.dim(), (24, 32));
+            let mut finite = 0;
+            for ((r, c), v) in registered.indexed_iter().filter(|(_, v)| v.is_finite()) {
+                let q = coarse.to_instrument([c as f64 * 2e-10, r as f64 * 2e-10]);
+                let p = fine.from_instrument(q);
+                let expected = plane(p[0] / 1e-10, p[1] / 1e-10);
+                assert!(
+                    (v - expected).abs() < 1e-9,
+                    "{pass:?} ({r}, {c}): {v} {expected}"
+                );
+                finite += 1;
+            }
+            assert!(finite >= 22 * 30, "{pass:?}: {finite} pixels");
         }
     }
 
