@@ -6,6 +6,7 @@
 //! inside costs `O(n·w²)` for the banded part plus `O(d·n·w + d²·n)` for `d` dense
 //! parameters, against `O(n³/3)` dense.
 
+use crate::dot::dot;
 use nalgebra::{DMatrix, DVector};
 
 /// A parameter whose column has more than this fraction of non-zeros is moved last.
@@ -123,10 +124,6 @@ impl Envelope {
         }
         x
     }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 #[cfg(test)]

@@ -35,6 +35,7 @@
 
 pub mod banded;
 pub mod crlb;
+pub mod dot;
 pub mod envelope;
 pub mod linalg;
 pub mod lm;

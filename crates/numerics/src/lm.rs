@@ -5,6 +5,7 @@
 //! as residuals use [`ResidualProblem`] (forward-difference or analytic Jacobian); a hot loop
 //! may form `JᵀWJ`, `JᵀWr` and the cost in one pass and implement [`LmProblem`] directly.
 
+use crate::dot::dot;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -438,9 +439,9 @@ fn column_wise_products(j: &DMatrix<f64>, r: &[f64], w: &[f64]) -> (DMatrix<f64>
         for ((out, &ja), &wi) in weighted.iter_mut().zip(column(a)).zip(w) {
             *out = ja * wi;
         }
-        jtwr[a] = weighted.iter().zip(r).map(|(x, ri)| x * ri).sum();
+        jtwr[a] = dot(&weighted, r);
         for b in 0..=a {
-            let value: f64 = weighted.iter().zip(column(b)).map(|(x, y)| x * y).sum();
+            let value = dot(&weighted, column(b));
             jtwj[(a, b)] = value;
             jtwj[(b, a)] = value;
         }
