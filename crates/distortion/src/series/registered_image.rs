@@ -322,6 +322,21 @@ mod tests {
         }
     }
 
+    /// A scan of `columns × rows` px of `pitch_m` (both axes), `period_s` a pixel, the fast
+    /// axis to the right and the slow axis down.
+    fn right_then_down(columns: usize, rows: usize, pitch_m: f64, period_s: f64) -> ScanGeometry {
+        ScanGeometry::new(
+            columns,
+            rows,
+            pitch_m,
+            pitch_m,
+            period_s,
+            ScanDirection::Right,
+            ScanDirection::Down,
+        )
+        .unwrap()
+    }
+
     /// A placement without drift or lag: the controller's position.
     struct Still;
 
@@ -338,26 +353,8 @@ mod tests {
     /// a plane registers as the plane: each coarse pixel holds the value at its place.
     #[test]
     fn a_sampled_registration_onto_a_coarser_grid_reads_each_pixel_at_its_place() {
-        let fine = ScanGeometry::new(
-            64,
-            48,
-            1e-10,
-            1e-10,
-            2e-4,
-            ScanDirection::Right,
-            ScanDirection::Down,
-        )
-        .unwrap();
-        let coarse = ScanGeometry::new(
-            32,
-            24,
-            2e-10,
-            2e-10,
-            4e-4,
-            ScanDirection::Right,
-            ScanDirection::Down,
-        )
-        .unwrap();
+        let fine = right_then_down(64, 48, 1e-10, 2e-4);
+        let coarse = right_then_down(32, 24, 2e-10, 4e-4);
         let plane = |x: f64, y: f64| 0.3 * x - 0.7 * y + 2.0;
         let z = Array2::from_shape_fn((48, 64), |(r, c)| plane(c as f64, r as f64));
         for pass in [ScanPass::Trace, ScanPass::Retrace] {
@@ -384,16 +381,7 @@ mod tests {
     /// just off it (within the margin), and far off it (no row placed).
     #[test]
     fn rows_that_cannot_reach_the_grid_are_left_out_without_changing_the_image() {
-        let geometry = ScanGeometry::new(
-            80,
-            70,
-            1e-10,
-            1e-10,
-            2e-4,
-            ScanDirection::Right,
-            ScanDirection::Down,
-        )
-        .unwrap();
+        let geometry = right_then_down(80, 70, 1e-10, 2e-4);
         let z = Array2::from_shape_fn((70, 80), |(r, c)| (0.3 * r as f64).sin() + c as f64);
         let (start_s, pass) = (3.0, ScanPass::Trace);
         let line_start = |r: f64| SeriesFeature::at_pixel(&geometry, start_s, pass, 0.0, r).time_s;
