@@ -63,20 +63,12 @@ pub fn measure_lattice_binned(
             f64::NAN
         }
     });
-    let pitch = |p: f64| p * factor as f64;
-    let binned_geometry = ScanGeometry::new(
-        columns,
-        rows,
-        pitch(geometry.pitch_x()),
-        pitch(geometry.pitch_y()),
-        geometry.pixel_period() * factor as f64,
-        geometry.trace_fast(),
-        geometry.slow_direction(),
-    )
-    .map_err(|_| CalibrationError::BadPitch {
-        pitch_x: geometry.pitch_x(),
-        pitch_y: geometry.pitch_y(),
-    })?;
+    let binned_geometry = geometry
+        .binned(factor)
+        .map_err(|_| CalibrationError::BadPitch {
+            pitch_x: geometry.pitch_x(),
+            pitch_y: geometry.pitch_y(),
+        })?;
     measure_lattice(binned.view(), &binned_geometry, None)
 }
 

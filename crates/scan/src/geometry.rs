@@ -147,6 +147,25 @@ impl ScanGeometry {
         Ok(self)
     }
 
+    /// The same area sampled at every `factor`-th pixel along both axes (`factor` ≥ 1): a
+    /// `factor`-th of the columns and rows (rounded down), `factor` times the pitch and the
+    /// pixel period (a line of a length divisible by `factor` takes as long); angle, offset,
+    /// turnaround and sources are kept. An error when fewer than `factor` columns or rows are left to bin.
+    pub fn binned(&self, factor: usize) -> Result<ScanGeometry, GeometryError> {
+        let factor = factor.max(1);
+        let f = factor as f64;
+        let binned = ScanGeometry {
+            columns: self.columns / factor,
+            rows: self.rows / factor,
+            pitch_x: self.pitch_x * f,
+            pitch_y: self.pitch_y * f,
+            pixel_period: self.pixel_period * f,
+            ..self.clone()
+        };
+        binned.validate()?;
+        Ok(binned)
+    }
+
     /// Sets the scan angle (radians, counter-clockwise, scan frame relative to the instrument).
     pub fn with_scan_angle(mut self, scan_angle: f64) -> Result<ScanGeometry, GeometryError> {
         finite("scan angle", scan_angle)?;
@@ -584,6 +603,41 @@ impl From<ScanGeometry> for RawScanGeometry {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Binned, a scan covers the same area (the odd column left out) with fewer, larger
+    /// pixels, its lines (20 px, divisible) taking as long; everything else is kept, and too
+    /// few pixels to bin are an error.
+    #[test]
+    fn a_binned_scan_keeps_its_area_line_time_and_placement() {
+        let g = ScanGeometry::new(
+            11,
+            20,
+            1.0,
+            2.0,
+            1e-3,
+            ScanDirection::Down,
+            ScanDirection::Left,
+        )
+        .unwrap()
+        .with_turnaround(0.25)
+        .unwrap()
+        .with_scan_angle(0.3)
+        .unwrap()
+        .with_offset(100.0, 200.0)
+        .unwrap();
+        let b = g.binned(2).unwrap();
+        assert_eq!((b.columns(), b.rows()), (5, 10));
+        assert_eq!((b.pitch_x(), b.pitch_y()), (2.0, 4.0));
+        assert_eq!(b.line_scan_time(), g.line_scan_time());
+        assert_eq!(b.turnaround_time(), g.turnaround_time());
+        assert_eq!((b.scan_angle(), b.offset()), (g.scan_angle(), g.offset()));
+        assert_eq!(
+            (b.trace_fast(), b.slow_direction()),
+            (g.trace_fast(), g.slow_direction())
+        );
+        assert_eq!(g.binned(1).unwrap(), g);
+        assert!(g.binned(12).is_err());
+    }
 
     #[test]
     fn instrument_frame_round_trips_and_turns_counter_clockwise_on_screen() {

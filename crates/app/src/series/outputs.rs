@@ -465,20 +465,10 @@ fn own_grid(
 ) -> Option<dhct_scan::ScanGeometry> {
     let d = drift.displacement(start_s);
     let (x, y) = geometry.offset();
-    let step = step.max(1);
-    let f = step as f64;
-    dhct_scan::ScanGeometry::new(
-        (geometry.columns() / step).max(1),
-        (geometry.rows() / step).max(1),
-        geometry.pitch_x() * f,
-        geometry.pitch_y() * f,
-        geometry.pixel_period() * f,
-        geometry.trace_fast(),
-        geometry.slow_direction(),
-    )
-    .and_then(|g| g.with_scan_angle(geometry.scan_angle()))
-    .and_then(|g| g.with_offset(x + d[0], y + d[1]))
-    .ok()
+    geometry
+        .binned(step)
+        .and_then(|g| g.with_offset(x + d[0], y + d[1]))
+        .ok()
 }
 
 /// The mean of the registered pages per pixel over the pages that hold a value there (NaN
