@@ -1,5 +1,6 @@
 //! A separable Gaussian blur of an image, the kernel renormalised at the edges.
 
+use dhct_numerics::dot::dot;
 use ndarray::{Array2, ArrayView2};
 
 /// `z` blurred by a Gaussian of `sigma_px` pixels along both axes (kernel cut at 3σ and
@@ -37,23 +38,23 @@ fn gaussian_kernel(sigma_px: f64) -> Vec<f64> {
 fn blur_lines_sampled(z: ArrayView2<f64>, kernel: &[f64], step: usize) -> Array2<f64> {
     let (rows, columns) = z.dim();
     let radius = kernel.len() / 2;
-    let kept: Vec<usize> = (0..columns).step_by(step).collect();
-    let mut out = Array2::<f64>::zeros((rows, kept.len()));
+    // Per output column c: the input columns c − radius ..= c + radius inside the line, the
+    // kernel's part over them and its sum (the same for every line).
+    let reads: Vec<(std::ops::RangeInclusive<usize>, &[f64], f64)> = (0..columns)
+        .step_by(step)
+        .map(|c| {
+            let (first, last) = (c.saturating_sub(radius), (c + radius).min(columns - 1));
+            let weights = &kernel[first + radius - c..=last + radius - c];
+            (first..=last, weights, weights.iter().sum())
+        })
+        .collect();
+    let mut out = Array2::<f64>::zeros((rows, reads.len()));
     for (line, mut blurred) in z.rows().into_iter().zip(out.rows_mut()) {
         let Some(line) = line.as_slice() else {
             unreachable!("the input is in standard layout");
         };
-        for (o, &c) in blurred.iter_mut().zip(&kept) {
-            // Input columns c − radius ..= c + radius inside the line, with their weights.
-            let first = c.saturating_sub(radius);
-            let last = (c + radius).min(columns - 1);
-            let weights = &kernel[first + radius - c..=last + radius - c];
-            let sum: f64 = weights
-                .iter()
-                .zip(&line[first..=last])
-                .map(|(w, v)| w * v)
-                .sum();
-            *o = sum / weights.iter().sum::<f64>();
+        for (o, (inside, weights, sum)) in blurred.iter_mut().zip(&reads) {
+            *o = dot(weights, &line[inside.clone()]) / sum;
         }
     }
     out
