@@ -11,6 +11,7 @@
 pub mod accuracy;
 pub mod crlb;
 pub mod determinism;
+pub mod known_lattice;
 pub mod machine;
 pub mod measure;
 pub mod real_corpus;

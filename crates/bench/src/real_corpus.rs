@@ -6,9 +6,12 @@
 //! with it. The corrected
 //! trace and retrace written (GSF, sample units) are then judged without dhct's own fit:
 //!
-//! * **lattice**: the surface's lattice fitted to the corrected image's Fourier peaks must
-//!   have the literature constant within 1.5 % along x and y and a shear within 1°; where
-//!   the constant is not known, only the shape is judged (anisotropy ≤ 1.015, shear ≤ 1°);
+//! * **lattice**: the surface's lattice read from the corrected image's Fourier transform
+//!   (the constant's first-order reflections, [`crate::known_lattice`], else the lattice
+//!   fitted to the blindly measured peaks) must have the literature constant within 1.5 %
+//!   along x and y and a shear within 1°; where the constant is not known, only the shape
+//!   is judged (anisotropy ≤ 1.015, shear ≤ 1°). Below 8 periods across the tolerances
+//!   widen ([`CorpusFile::tolerances`]);
 //! * **regularity**: the non-affine displacement from the Bragg phases
 //!   ([`crate::regularity`]) of the corrected image, against the raw image's (which is what
 //!   any affine correction leaves), both in periods of the first reflection.
@@ -21,12 +24,16 @@ use dhct_lattice::{Hexagonal, Lattice, PlaneGroup, Square};
 use dhct_scan::{ScanPair, ScanPass};
 use serde::Deserialize;
 
+use crate::known_lattice::read_known_lattice;
 use crate::regularity::non_affine_rms_px;
 
 /// The corrected lattice's constant must be within this fraction of the truth.
 pub const SCALE_TOLERANCE: f64 = 0.015;
 /// …and its shear within this, degrees.
 pub const SHEAR_TOLERANCE_DEG: f64 = 1.0;
+/// The tolerances hold for frames this many periods across or more; see
+/// [`CorpusFile::tolerances`].
+pub const FULL_PRECISION_PERIODS: f64 = 8.0;
 
 /// One file of the corpus.
 #[derive(Debug, Clone, Deserialize)]
@@ -53,6 +60,19 @@ pub struct CorpusFile {
     pub judge_a_m: Option<f64>,
     /// About how many lattice periods the frame holds.
     pub periods_across: f64,
+}
+
+impl CorpusFile {
+    /// The judge's tolerances for this file: fraction of the constant, degrees of shear.
+    ///
+    /// A reflection's position is read to about a fixed fraction of a Fourier bin, and the
+    /// first-order ring lies as many bins out as the frame holds periods, so the judge's
+    /// own precision falls as `1/periods`: below [`FULL_PRECISION_PERIODS`] across, both
+    /// tolerances widen by `FULL_PRECISION_PERIODS / periods_across`.
+    pub fn tolerances(&self) -> (f64, f64) {
+        let widen = (FULL_PRECISION_PERIODS / self.periods_across).max(1.0);
+        (SCALE_TOLERANCE * widen, SHEAR_TOLERANCE_DEG * widen)
+    }
 }
 
 /// The translation lattice a corpus file is judged with.
@@ -338,23 +358,79 @@ fn image_of(pair: &ScanPair, pass: ScanPass) -> Option<&dhct_scan::ImageChannel>
         .or_else(|| pair.image(ScanPass::Retrace))
 }
 
-/// The judge's fit of `pair`'s `pass`: near the constant when it is known and `near` (a
-/// corrected image), at any scale otherwise (a raw image, whose pixel size may be off).
-fn fit(
+/// The judge's reading of one image's lattice.
+struct Reading {
+    /// Apparent over true length along x and y, or the principal stretches' ratio and 1
+    /// when only the shape is judged.
+    scale: [f64; 2],
+    /// Shear, degrees.
+    shear_deg: f64,
+    /// The cell in the file, `[a1, a2]`, metres.
+    cell_in_file_m: [[f64; 2]; 2],
+}
+
+/// The judge's reading of `pair`'s `pass`.
+///
+/// With the surface's constant known, a corrected image (`near`) is read from the
+/// constant's first-order reflections ([`read_known_lattice`], within 15 % of it), and
+/// where that ring is too weak, by fitting the lattice to the blindly measured Fourier
+/// peaks within 15 % of the constant; a raw image (whose pixel size may be off) the other
+/// way round, at any scale (the ring within a factor 2). Without the constant, only the
+/// shape: the lattice type fitted at any scale to the blindly measured peaks.
+fn read(file: &CorpusFile, pair: &ScanPair, pass: ScanPass, near: bool) -> Result<Reading, String> {
+    let image = image_of(pair, pass).ok_or("no image")?;
+    let Some(a) = file.judge_a_m else {
+        let matched = fit_blind(file, pair, image, f64::MAX)?;
+        let c = matched.calibration;
+        return Ok(Reading {
+            scale: [c.anisotropy, 1.0],
+            shear_deg: c.shear_deg,
+            cell_in_file_m: matched.cell_in_file_m,
+        });
+    };
+    let blind = |tolerance: f64| {
+        fit_blind(file, pair, image, tolerance).map(|matched| Reading {
+            scale: matched.calibration.scale,
+            shear_deg: matched.calibration.shear_deg,
+            cell_in_file_m: matched.cell_in_file_m,
+        })
+    };
+    let geometry = pair.geometry();
+    let ring = |scale_range: [f64; 2]| {
+        read_known_lattice(
+            image.z.view(),
+            [geometry.pitch_x(), geometry.pitch_y()],
+            file.judge_lattice,
+            a,
+            scale_range,
+        )
+        .map(|read| Reading {
+            scale: read.scale,
+            shear_deg: read.shear_deg,
+            cell_in_file_m: read.cell_in_file_m,
+        })
+    };
+    if near {
+        ring([0.85, 1.15]).or_else(|ring_failed| {
+            blind(0.15).map_err(|blind_failed| format!("{ring_failed}; {blind_failed}"))
+        })
+    } else {
+        blind(f64::MAX).or_else(|_| ring([0.5, 2.0]))
+    }
+}
+
+/// The surface's lattice type fitted to the image's blindly measured Fourier peaks, its
+/// constant within `pitch_tolerance` (a fraction; `f64::MAX`: any scale).
+fn fit_blind(
     file: &CorpusFile,
     pair: &ScanPair,
-    pass: ScanPass,
-    near: bool,
+    image: &dhct_scan::ImageChannel,
+    pitch_tolerance: f64,
 ) -> Result<LatticeMatch, String> {
-    let image = image_of(pair, pass).ok_or("no image")?;
     let measured =
         measure_lattice(image.z.view(), pair.geometry(), None).map_err(|e| e.to_string())?;
     let options = CheckOptions {
-        pitch_tolerance: if near && file.judge_a_m.is_some() {
-            0.15
-        } else {
-            f64::MAX
-        },
+        pitch_tolerance,
         ..CheckOptions::default()
     };
     let mut bounds = options.bounds(pair.geometry().fast_axis());
@@ -370,32 +446,26 @@ fn judge_pass(
     corrected: &ScanPair,
     raw: Option<&ScanPair>,
 ) -> Result<PassJudgement, String> {
-    let matched = fit(file, corrected, pass, true)?;
-    let c = matched.calibration;
-    let scale = if file.judge_a_m.is_some() {
-        c.scale
-    } else {
-        [c.anisotropy, 1.0]
-    };
-    let corrected_non_affine = non_affine_periods(corrected, pass, &matched);
+    let reading = read(file, corrected, pass, true)?;
+    let corrected_non_affine = non_affine_periods(corrected, pass, &reading.cell_in_file_m);
     let raw_non_affine = raw.and_then(|raw| {
-        let matched = fit(file, raw, pass, false).ok()?;
-        non_affine_periods(raw, pass, &matched)
+        let reading = read(file, raw, pass, false).ok()?;
+        non_affine_periods(raw, pass, &reading.cell_in_file_m)
     });
     Ok(PassJudgement {
         pass,
-        scale,
-        shear_deg: c.shear_deg,
+        scale: reading.scale,
+        shear_deg: reading.shear_deg,
         raw_non_affine,
         corrected_non_affine,
     })
 }
 
 /// The non-affine displacement of `pair`'s `pass` for the two cell reflections of
-/// `matched`, in periods of the first.
-fn non_affine_periods(pair: &ScanPair, pass: ScanPass, matched: &LatticeMatch) -> Option<f64> {
+/// `cell` (`[a1, a2]`, metres), in periods of the first.
+fn non_affine_periods(pair: &ScanPair, pass: ScanPass, cell: &[[f64; 2]; 2]) -> Option<f64> {
     let image = image_of(pair, pass)?;
-    let [a1, a2] = matched.cell_in_file_m;
+    let [a1, a2] = *cell;
     let cell = nalgebra::Matrix2::new(a1[0], a2[0], a1[1], a2[1]);
     let reciprocal = cell.try_inverse()?.transpose();
     let (px, py) = (pair.geometry().pitch_x(), pair.geometry().pitch_y());
@@ -406,10 +476,64 @@ fn non_affine_periods(pair: &ScanPair, pass: ScanPass, matched: &LatticeMatch) -
 }
 
 fn judgement_is_right(file: &CorpusFile, j: &PassJudgement) -> bool {
+    let (scale_tolerance, shear_tolerance) = file.tolerances();
     let scales_right = if file.judge_a_m.is_some() {
-        j.scale.iter().all(|k| (k - 1.0).abs() <= SCALE_TOLERANCE)
+        j.scale.iter().all(|k| (k - 1.0).abs() <= scale_tolerance)
     } else {
-        j.scale[0] <= 1.0 + SCALE_TOLERANCE
+        j.scale[0] <= 1.0 + scale_tolerance
     };
-    scales_right && j.shear_deg.abs() <= SHEAR_TOLERANCE_DEG
+    scales_right && j.shear_deg.abs() <= shear_tolerance
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(periods_across: f64) -> CorpusFile {
+        CorpusFile {
+            name: "test".into(),
+            path: "test".into(),
+            real_data: false,
+            args: Vec::new(),
+            surface: "test".into(),
+            vendor: "test".into(),
+            judge_lattice: JudgeLattice::Hexagonal,
+            judge_a_m: Some(2.46e-10),
+            periods_across,
+        }
+    }
+
+    #[test]
+    fn tolerances_widen_only_below_eight_periods() {
+        assert_eq!(
+            file(47.0).tolerances(),
+            (SCALE_TOLERANCE, SHEAR_TOLERANCE_DEG)
+        );
+        assert_eq!(
+            file(8.0).tolerances(),
+            (SCALE_TOLERANCE, SHEAR_TOLERANCE_DEG)
+        );
+        let (scale, shear) = file(4.0).tolerances();
+        assert!((scale - 2.0 * SCALE_TOLERANCE).abs() < 1e-12);
+        assert!((shear - 2.0 * SHEAR_TOLERANCE_DEG).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_judgement_outside_the_tolerances_is_not_right() {
+        let judged = |scale: [f64; 2], shear_deg: f64| PassJudgement {
+            pass: ScanPass::Trace,
+            scale,
+            shear_deg,
+            raw_non_affine: None,
+            corrected_non_affine: None,
+        };
+        let wide = file(47.0);
+        assert!(judgement_is_right(&wide, &judged([1.01, 0.99], 0.5)));
+        assert!(!judgement_is_right(&wide, &judged([1.02, 1.0], 0.0)));
+        assert!(!judgement_is_right(&wide, &judged([1.0, 1.0], 1.2)));
+        // 5.5 periods: 2.2 % and 1.45°.
+        let few = file(5.5);
+        assert!(judgement_is_right(&few, &judged([0.9956, 1.0044], -1.07)));
+        assert!(!judgement_is_right(&few, &judged([1.03, 1.0], 0.0)));
+    }
 }

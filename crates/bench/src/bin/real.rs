@@ -20,7 +20,7 @@
 
 use std::path::PathBuf;
 
-use dhct_bench::real_corpus::{Corpus, FileResult, Verdict, run_file};
+use dhct_bench::real_corpus::{Corpus, CorpusFile, FileResult, SCALE_TOLERANCE, Verdict, run_file};
 use dhct_bench::real_diagnosis::diagnose_file;
 
 fn main() {
@@ -70,7 +70,7 @@ fn main() {
         if matches!(result.verdict, Verdict::Wrong(_)) {
             wrong += 1;
         }
-        print_row(file.name.as_str(), file.periods_across, &result);
+        print_row(file, &result);
         let corrected = !matches!(result.verdict, Verdict::Refused(_) | Verdict::Missing(_));
         if diagnose
             && corrected
@@ -94,7 +94,7 @@ fn main() {
     }
 }
 
-fn print_row(name: &str, periods: f64, r: &FileResult) {
+fn print_row(file: &CorpusFile, r: &FileResult) {
     let verdict = match &r.verdict {
         Verdict::Right => "right".to_string(),
         Verdict::Refused(why) => format!("refused: {why}"),
@@ -102,8 +102,19 @@ fn print_row(name: &str, periods: f64, r: &FileResult) {
         Verdict::Flagged(why) => format!("a pass off or unchecked, flagged by dhct: {why}"),
         Verdict::Missing(why) => format!("missing: {why}"),
     };
+    let (scale_tolerance, shear_tolerance) = file.tolerances();
+    let judged = if scale_tolerance > SCALE_TOLERANCE {
+        format!(
+            ", judged within {:.1} % and {shear_tolerance:.1}° (few periods)",
+            100.0 * scale_tolerance
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "{name} (~{periods:.0} periods; {}): {verdict}",
+        "{} (~{} periods{judged}; {}): {verdict}",
+        file.name,
+        file.periods_across,
         r.args.join(" ")
     );
     if let (Some(correction), Some([model, affine])) = (&r.correction, r.model_vs_affine_m) {
