@@ -21,8 +21,18 @@ use nalgebra::{Matrix2, Vector2};
 use ndarray::{Array2, ArrayView2};
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex;
+use serde::Deserialize;
 
-use crate::real_corpus::JudgeLattice;
+/// The translation lattice a corpus file is judged with.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JudgeLattice {
+    /// Hexagonal (one site per 60° rhombus).
+    #[default]
+    Hexagonal,
+    /// Square.
+    Square,
+}
 
 /// Two independent reflections must stand this many times above the ring's median power
 /// (without the reflections) for a reading.

@@ -24,6 +24,7 @@ use dhct_lattice::{Hexagonal, Lattice, PlaneGroup, Square};
 use dhct_scan::{ScanPair, ScanPass};
 use serde::Deserialize;
 
+pub use crate::known_lattice::JudgeLattice;
 use crate::known_lattice::read_known_lattice;
 use crate::regularity::non_affine_rms_px;
 
@@ -73,17 +74,6 @@ impl CorpusFile {
         let widen = (FULL_PRECISION_PERIODS / self.periods_across).max(1.0);
         (SCALE_TOLERANCE * widen, SHEAR_TOLERANCE_DEG * widen)
     }
-}
-
-/// The translation lattice a corpus file is judged with.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum JudgeLattice {
-    /// Hexagonal (one site per 60° rhombus).
-    #[default]
-    Hexagonal,
-    /// Square.
-    Square,
 }
 
 /// The corpus manifest.
