@@ -73,7 +73,9 @@ pub fn si(value: f64, unit: &str) -> String {
 fn source_note(source: ValueSource) -> &'static str {
     match source {
         ValueSource::Stated => "",
-        ValueSource::Assumed => "  [assumed: not in the file; override with options]",
+        ValueSource::Assumed => {
+            "  [assumed: not in the file or not usable as stated (see above); override with options]"
+        }
     }
 }
 
@@ -162,11 +164,12 @@ fn human(summary: &FileSummary) -> String {
         );
         let _ = writeln!(
             out,
-            "  timing:      {} per pixel, {} per line (incl. {} turnaround), frame {}",
+            "  timing:      {} per pixel, {} per line (incl. {} turnaround), frame {}{}",
             si(g.pixel_period(), "s"),
             si(c.line_period_s, "s"),
             si(g.turnaround_time(), "s"),
-            si(c.frame_duration_s, "s")
+            si(c.frame_duration_s, "s"),
+            source_note(g.timing_source())
         );
         let _ = writeln!(
             out,

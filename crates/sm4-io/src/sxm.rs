@@ -40,7 +40,9 @@
 //! turnaround: Nanonis includes none in the line time); scan angle = `SCAN_ANGLE` in radians,
 //! with the sign as written in the header; offset = `SCAN_OFFSET`. A missing `SCAN_RANGE`
 //! gives the placeholder pitch [`ASSUMED_PITCH`], a missing `SCAN_TIME` the placeholder
-//! pixel period [`ASSUMED_PIXEL_PERIOD`], each marked [`ValueSource::Assumed`].
+//! pixel period [`ASSUMED_PIXEL_PERIOD`], each marked [`ValueSource::Assumed`]. A backward
+//! line time more than 1 % off the forward one (a backward/forward speed ratio) also marks
+//! the timing assumed, with the reason: dhct times both passes with one line time.
 
 use std::collections::BTreeMap;
 
@@ -130,9 +132,13 @@ pub fn read_limited(bytes: &[u8], limits: &ReadLimits) -> Result<ScanFile, ReadE
     let scan_up = header
         .get("SCAN_DIR")
         .is_some_and(|d| d.trim().eq_ignore_ascii_case("up"));
-    let geometry = build_geometry(&header, columns, rows, scan_up)?;
+    let mut geometry = build_geometry(&header, columns, rows, scan_up)?;
     let mut metadata = metadata(&header);
     note_assumptions(&geometry, &mut metadata);
+    if let Some(reason) = unequal_line_times(&header, geometry.timing_source()) {
+        geometry = geometry.with_timing_source(ValueSource::Assumed);
+        note(&mut metadata, ASSUMED_TIMING_KEY, &reason);
+    }
     let stored = StoredImages {
         bytes,
         data_start,
@@ -254,6 +260,40 @@ fn note_assumptions(geometry: &ScanGeometry, metadata: &mut BTreeMap<String, Str
     if geometry.timing_source() == ValueSource::Assumed {
         note(metadata, ASSUMED_TIMING_KEY, "no SCAN_TIME in the header");
     }
+}
+
+/// Backward lines slower or faster than forward ones by more than this fraction cannot be
+/// timed by one line time.
+const UNEQUAL_LINE_TIMES: f64 = 0.01;
+
+/// Why the timing cannot be used as stated when `SCAN_TIME` gives the backward lines
+/// another time than the forward ones (Nanonis' backward/forward speed ratio): dhct's
+/// timing has one line time for both passes ([`ScanGeometry`]), so the forward one is
+/// used, and the time between lines and the retrace's pixel times are then off. `None`
+/// when the times agree, or the timing is assumed already.
+fn unequal_line_times(header: &Header, timing: ValueSource) -> Option<String> {
+    if timing == ValueSource::Assumed {
+        return None;
+    }
+    let mut times = header
+        .get("SCAN_TIME")?
+        .split_whitespace()
+        .map(parse_number);
+    let (forward, backward) = (times.next()??, times.next()??);
+    let unequal = backward.is_finite()
+        && backward > 0.0
+        && (backward / forward - 1.0).abs() > UNEQUAL_LINE_TIMES;
+    unequal.then(|| {
+        format!(
+            "SCAN_TIME gives {forward} s per forward line and {backward} s per backward line, \
+             but dhct times both passes with one line time: with the forward one, the time \
+             between lines is taken as {:.4} s against {:.4} s recorded, and the retrace's \
+             pixel times are {:.2}× what they were",
+            2.0 * forward,
+            forward + backward,
+            forward / backward
+        )
+    })
 }
 
 /// The stored images of a file whose length was checked against all of them.

@@ -18,6 +18,8 @@ struct Synthetic {
     scan_dir: &'static str,
     header_extra: String,
     with_time_and_range: bool,
+    /// `SCAN_TIME`: forward and backward seconds per line.
+    scan_time: &'static str,
     /// (name, unit, direction) rows of DATA_INFO.
     channels: Vec<(&'static str, &'static str, &'static str)>,
 }
@@ -30,6 +32,7 @@ impl Synthetic {
             scan_dir,
             header_extra: String::new(),
             with_time_and_range: true,
+            scan_time: "4.000E-1             4.000E-1",
             channels: vec![("Z", "m", "both"), ("Current", "A", "forward")],
         }
     }
@@ -45,7 +48,7 @@ impl Synthetic {
             self.columns, self.rows
         ));
         if self.with_time_and_range {
-            h.push_str(":SCAN_TIME:\n             4.000E-1             4.000E-1\n");
+            h.push_str(&format!(":SCAN_TIME:\n             {}\n", self.scan_time));
             h.push_str(&format!(
                 ":SCAN_RANGE:\n           {}E-10           {}E-10\n",
                 self.columns * 2,
@@ -213,6 +216,32 @@ fn missing_scan_time_and_range_are_assumed() {
     assert_eq!(g.scale_source(), ValueSource::Assumed);
     assert_eq!(g.pixel_period(), dhct_sm4_io::ASSUMED_PIXEL_PERIOD);
     assert_eq!(g.pitch_x(), dhct_sm4_io::ASSUMED_PITCH);
+}
+
+/// Backward lines at another speed than forward ones (Nanonis' speed ratio) cannot be
+/// timed by one line time: the timing is marked assumed, with the reason, never used as
+/// if it were right.
+#[test]
+fn unequal_forward_and_backward_line_times_are_not_taken_as_stated() {
+    let mut synthetic = Synthetic::new(3, 2, "down");
+    synthetic.scan_time = "2.001E+1             5.002E+0";
+    let file = sxm::read(&synthetic.bytes()).unwrap();
+    let g = file.pairs[0].geometry();
+    assert_eq!(g.timing_source(), ValueSource::Assumed);
+    let reason = &file.metadata[dhct_sm4_io::ASSUMED_TIMING_KEY];
+    assert!(
+        reason.contains("5.002 s per backward line")
+            && reason.contains("40.0200 s against 25.0120 s"),
+        "{reason}"
+    );
+    // Equal to within 1 %: stated.
+    synthetic.scan_time = "4.000E-1             4.020E-1";
+    let file = sxm::read(&synthetic.bytes()).unwrap();
+    assert_eq!(
+        file.pairs[0].geometry().timing_source(),
+        ValueSource::Stated
+    );
+    assert!(!file.metadata.contains_key(dhct_sm4_io::ASSUMED_TIMING_KEY));
 }
 
 #[test]
