@@ -128,7 +128,7 @@ impl Prepared {
         let pitch = (geometry.pitch_x() * geometry.pitch_y()).sqrt();
         let nn_px = d / pitch;
         let (kernel, kernel_sigma_px) = match &options.kernel {
-            KernelChoice::FromNeighbourDistance => {
+            KernelChoice::FromNeighbourDistance {} => {
                 let k = Kernel::for_neighbour_distance(nn_px)?;
                 let s = (nn_px / 2.0).round().max(1.0) / 2.0;
                 (k, s)

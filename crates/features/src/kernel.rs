@@ -5,10 +5,27 @@ use serde::{Deserialize, Serialize};
 
 use crate::FeatureError;
 
-/// A correlation template: odd-sized, centred, in pixels.
+/// A correlation template: odd-sized, centred, in pixels. Read from a config through
+/// [`Kernel::custom`]'s checks, like any user template.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "KernelValues")]
 pub struct Kernel {
     values: Array2<f64>,
+}
+
+/// A kernel as a config writes it, before its checks.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KernelValues {
+    values: Array2<f64>,
+}
+
+impl TryFrom<KernelValues> for Kernel {
+    type Error = FeatureError;
+
+    fn try_from(raw: KernelValues) -> Result<Kernel, FeatureError> {
+        Kernel::custom(raw.values)
+    }
 }
 
 impl Kernel {

@@ -75,12 +75,14 @@ impl LineCorrection {
 }
 
 /// Which correlation template to use.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+///
+/// Every variant holds fields (`{}` where none): serde ignores unknown keys beside the tag
+/// of a unit variant, and a misspelt key must be an error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "kind", deny_unknown_fields)]
 pub enum KernelChoice {
     /// The DHCT kernel sized from the nearest-neighbour distance.
-    #[default]
-    FromNeighbourDistance,
+    FromNeighbourDistance {},
     /// An isotropic Gaussian of a given σ.
     GaussianSigma {
         /// σ, pixels.
@@ -97,6 +99,12 @@ pub enum KernelChoice {
         /// The template.
         kernel: Kernel,
     },
+}
+
+impl Default for KernelChoice {
+    fn default() -> KernelChoice {
+        KernelChoice::FromNeighbourDistance {}
+    }
 }
 
 /// Parameters of feature finding. Only `neighbour_distance` has no default.
@@ -153,7 +161,7 @@ impl Default for FeatureOptions {
             neighbour_distance: f64::NAN,
             polarity: Polarity::Bright,
             threshold: 0.1,
-            kernel: KernelChoice::FromNeighbourDistance,
+            kernel: KernelChoice::FromNeighbourDistance {},
             background: Background::Plane,
             line_correction: LineCorrection::None,
             line_levels_from_fits: false,
@@ -213,5 +221,37 @@ impl FeatureOptions {
             neighbour_distance,
             ..FeatureOptions::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A kernel choice read from a config: a misspelt key beside any variant's tag is an
+    /// error, and a custom template passes [`Kernel::custom`]'s checks.
+    #[test]
+    fn kernel_choices_from_a_config_are_checked() {
+        let read = |json: &str| serde_json::from_str::<KernelChoice>(json);
+        assert_eq!(
+            read(r#"{"kind": "from-neighbour-distance"}"#).unwrap(),
+            KernelChoice::default()
+        );
+        let misspelt = read(r#"{"kind": "from-neighbour-distance", "sigma": 2}"#).unwrap_err();
+        assert!(misspelt.to_string().contains("unknown field"), "{misspelt}");
+        let template = |data: &str| {
+            format!(
+                r#"{{"kind": "custom", "kernel": {{"values": {{"v": 1, "dim": [3, 3], "data": {data}}}}}}}"#
+            )
+        };
+        let good = read(&template("[0, 1, 0, 1, 2, 1, 0, 1, 0]")).unwrap();
+        assert!(matches!(good, KernelChoice::Custom { .. }));
+        let constant = read(&template("[1, 1, 1, 1, 1, 1, 1, 1, 1]")).unwrap_err();
+        assert!(constant.to_string().contains("constant"), "{constant}");
+        let even = read(
+            r#"{"kind": "custom", "kernel": {"values": {"v": 1, "dim": [2, 2], "data": [0, 1, 1, 0]}}}"#,
+        )
+        .unwrap_err();
+        assert!(even.to_string().contains("odd"), "{even}");
     }
 }

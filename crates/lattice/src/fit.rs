@@ -60,6 +60,27 @@ pub enum LatticeFitError {
         /// Per cent of the features in the disc within the deviation limit.
         fraction_ok: f64,
     },
+    /// Too few features near the seed to index: the disc the indexing starts from (a few
+    /// median neighbour distances across) holds fewer than it needs, so the features are
+    /// clustered rather than spread over a lattice.
+    #[error(
+        "within {} of the seed only {found} features lie (at least {needed} are needed), \
+         although the features' median nearest-neighbour distance is {}: they are clustered \
+         (pairs or groups found on one atom), not spread over a lattice. Check the feature \
+         finding (its template and polarity) and that the image is atomically resolved",
+        length(*.radius_m),
+        length(*.median_nn_m)
+    )]
+    SparseSeed {
+        /// Radius of the indexing disc, metres.
+        radius_m: f64,
+        /// Features in the disc.
+        found: usize,
+        /// Features needed.
+        needed: usize,
+        /// The features' median nearest-neighbour distance, metres.
+        median_nn_m: f64,
+    },
     /// The indexing lost the lattice: the features near a site are, together, farther
     /// from one affine lattice than a lattice's are.
     #[error(
@@ -369,7 +390,15 @@ impl Indexing<'_> {
             }
         }
         let fraction = pairs.len() as f64 / included.max(1) as f64;
-        if included < self.needed || fraction < self.options.min_fraction_ok {
+        if included < self.needed {
+            return Err(LatticeFitError::SparseSeed {
+                radius_m: radius,
+                found: included,
+                needed: self.needed,
+                median_nn_m: self.nn,
+            });
+        }
+        if fraction < self.options.min_fraction_ok {
             return Err(diverged(fraction));
         }
         let (origin, b) = fit_affine(self.lattice, &pairs).ok_or(diverged(fraction))?;

@@ -171,6 +171,30 @@ fn the_angular_distribution_finds_the_bond_angle() {
     assert!(peak_bins <= 9, "{peak_bins}");
 }
 
+/// Features found twice on every atom (a template that splits each atom's peak): their
+/// median neighbour distance is the pairs' spacing, so the first indexing disc holds one
+/// pair; the error says the features are clustered, not that the fit diverged.
+#[test]
+fn features_in_pairs_are_named_as_clustered() {
+    let graphite = Hexagonal::graphite();
+    let a = 2.46e-10;
+    let mut points = Vec::new();
+    for n in 0..12 {
+        for m in 0..12 {
+            let x = a * (n as f64 + 0.5 * m as f64);
+            let y = a * 3f64.sqrt() / 2.0 * m as f64;
+            points.push([x, y]);
+            points.push([x + 2e-12, y]);
+        }
+    }
+    let error = fit_lattice(&graphite, &[&points], &LatticeFitOptions::default()).unwrap_err();
+    assert!(
+        matches!(error, LatticeFitError::SparseSeed { found, needed, .. } if found < needed),
+        "{error}"
+    );
+    assert!(error.to_string().contains("clustered"), "{error}");
+}
+
 #[test]
 fn random_points_and_too_few_points_are_clear_errors() {
     let graphite = Hexagonal::graphite();
