@@ -39,6 +39,54 @@ fn run() -> PathBuf {
     .join("out")
 }
 
+/// A frame fitted without local neighbour shells (the global registration: h-BN around a
+/// defect, 96 × 100 px) has no local measurements: its goodness of fit says so (`null` in
+/// model.json, "–" in the report), never "NaN".
+#[test]
+fn a_fit_without_local_measurements_shows_no_nan() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = Command::new(env!("CARGO_BIN_EXE_dhct"))
+        .args([
+            "correct",
+            "--quiet",
+            "--lattice",
+            "hexagonal",
+            "--nn",
+            "2.504A",
+        ])
+        .args(["--polarity", "dark"])
+        .arg(workspace_file("data/real/hbn_defect_nanonis_2nm.sxm"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
+    let goodness = &model["goodness"];
+    assert_eq!(goodness["local_measurements"], 0, "{goodness}");
+    assert!(goodness["rms_scale_residual"].is_null(), "{goodness}");
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    // The text a reader sees, without the embedded pictures' base64.
+    let text: String = report
+        .split("data:")
+        .enumerate()
+        .map(|(i, part)| {
+            if i == 0 {
+                part
+            } else {
+                part.split_once(['"', '\'']).map_or("", |(_, rest)| rest)
+            }
+        })
+        .collect();
+    assert!(!text.contains("NaN"), "the report shows NaN");
+}
+
 #[test]
 fn features_csv_has_no_two_identical_columns() {
     let mut reader = csv::Reader::from_path(run().join("features.csv")).unwrap();

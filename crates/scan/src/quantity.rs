@@ -1,6 +1,7 @@
 //! Physical quantities formatted for people, in one place for every crate: the report, the
 //! figures, the terminal and the warnings' messages show a value the same way. Proper
-//! symbols (Å, nm, µm, °, σ, ±), SI prefixes, no ASCII stand-ins.
+//! symbols (Å, nm, µm, °, σ, ±), SI prefixes, no ASCII stand-ins. A value that was not
+//! measured (NaN, or infinite) is shown as [`NOT_MEASURED`], never as "NaN".
 //!
 //! ```
 //! use dhct_scan::quantity::{si, value_with_sigma};
@@ -9,12 +10,18 @@
 //! assert_eq!(value_with_sigma(-7.75e-15, 1.4e-14, "m/s^2"), "-8 ± 14 fm/s²");
 //! ```
 
+/// How a value that was not measured (not finite) is shown.
+pub const NOT_MEASURED: &str = "–";
+
 /// `value` with an SI prefix and up to four decimals (trailing zeros dropped), e.g.
 /// `si(2.46e-10, "m")` = `"246 pm"`; units that take no prefix are shown as
 /// [`unit_symbol`] gives them.
 pub fn si(value: f64, unit: &str) -> String {
+    if !value.is_finite() {
+        return NOT_MEASURED.into();
+    }
     let unit = unit_symbol(unit);
-    if value == 0.0 || !value.is_finite() || unit.is_empty() || unit == "°" || unit == "Å" {
+    if value == 0.0 || unit.is_empty() || unit == "°" || unit == "Å" {
         return join(&format!("{value}"), &unit);
     }
     let (scale, prefix) = si_prefix(value);
@@ -39,22 +46,34 @@ pub fn si_significant(value: f64, unit: &str, digits: usize) -> String {
 
 /// A length in ångström with `decimals` decimals: `"2.461 Å"`.
 pub fn angstrom(metres: f64, decimals: usize) -> String {
+    if !metres.is_finite() {
+        return NOT_MEASURED.into();
+    }
     format!("{:.decimals$} Å", metres * 1e10)
 }
 
 /// A length in picometres with one decimal: `"12.3 pm"`.
 pub fn picometres(metres: f64) -> String {
+    if !metres.is_finite() {
+        return NOT_MEASURED.into();
+    }
     format!("{:.1} pm", metres * 1e12)
 }
 
 /// An angle in degrees: `"60.02°"`.
 pub fn degrees(degrees: f64, decimals: usize) -> String {
+    if !degrees.is_finite() {
+        return NOT_MEASURED.into();
+    }
     format!("{degrees:.decimals$}°")
 }
 
 /// A length for scale bars and captions: pm below 1 nm, nm below 1 µm, else µm; up to three
 /// significant decimals (`"2 nm"`, `"500 pm"`, `"1.5 µm"`).
 pub fn length(metres: f64) -> String {
+    if !metres.is_finite() {
+        return NOT_MEASURED.into();
+    }
     let (value, unit) = match metres.abs() {
         m if m < 1e-9 => (metres * 1e12, "pm"),
         m if m < 1e-6 => (metres * 1e9, "nm"),
@@ -87,6 +106,9 @@ pub fn unit_symbol(unit: &str) -> String {
 /// A value ± its 1σ uncertainty: an SI prefix for lengths, times and velocities, the value
 /// rounded to the uncertainty's second significant digit; `(fixed)` without uncertainty.
 pub fn value_with_sigma(value: f64, sigma: f64, unit: &str) -> String {
+    if !value.is_finite() {
+        return NOT_MEASURED.into();
+    }
     let symbol = unit_symbol(unit);
     let (scale, shown) = if prefixable(&symbol) && value.is_finite() && value != 0.0 {
         let (scale, prefix) = si_prefix(value);
@@ -163,5 +185,20 @@ mod tests {
         assert_eq!(si(2e-9, "A"), "2 nA");
         assert_eq!(si_significant(2.585791e-13, "m/s", 3), "259 fm/s");
         assert_eq!(si_significant(7.6999e-12, "m/s", 3), "7.70 pm/s");
+    }
+
+    #[test]
+    fn a_value_not_measured_is_a_dash_in_every_format() {
+        for shown in [
+            si(f64::NAN, "m"),
+            si_significant(f64::NAN, "m/s", 3),
+            angstrom(f64::NAN, 3),
+            picometres(f64::INFINITY),
+            degrees(f64::NAN, 2),
+            length(f64::NAN),
+            value_with_sigma(f64::NAN, 1.0, "m"),
+        ] {
+            assert_eq!(shown, NOT_MEASURED);
+        }
     }
 }

@@ -392,11 +392,14 @@ fn model_section(html: &mut Html, summary: &RunSummary) {
         html.element("p", &format!("Hysteresis: {words}."));
     }
     let gf = &summary.goodness;
+    // Without local measurements (the global registration route) there is nothing to show.
+    let or_none = |v: Option<f64>, show: &dyn Fn(f64) -> String| v.map_or("–".into(), show);
+    let velocity = |v: f64| si_significant(v, "m/s", 3);
     let drift = |k: usize| {
         format!(
             "{} of {}",
-            si_significant(gf.rms_drift_residual_m_per_s[k], "m/s", 3),
-            si_significant(gf.rms_drift_m_per_s[k], "m/s", 3)
+            or_none(gf.rms_drift_residual_m_per_s[k], &velocity),
+            or_none(gf.rms_drift_m_per_s[k], &velocity)
         )
     };
     html.table(
@@ -408,7 +411,7 @@ fn model_section(html: &mut Html, summary: &RunSummary) {
             ],
             vec![
                 "rms S residual".into(),
-                format!("{:.4}", gf.rms_scale_residual),
+                or_none(gf.rms_scale_residual, &|v| format!("{v:.4}")),
             ],
             vec!["rms Dx residual, of rms Dx".into(), drift(0)],
             vec!["rms Dy residual, of rms Dy".into(), drift(1)],

@@ -15,18 +15,20 @@ use dhct_scan::{ScanGeometry, ScanPass};
 use dhct_unitcell::{ConfidenceEllipse, SymmetryResidual};
 use serde::Serialize;
 
-/// How well the fitted model describes the local distortion measurements.
+/// How well the fitted model describes the local distortion measurements. Each RMS is
+/// absent (`null`) when there are none: the global registration fits the model without
+/// local neighbour shells.
 #[derive(Debug, Clone, Serialize)]
 pub struct Goodness {
     /// Local distortion measurements used (trace + retrace).
     pub local_measurements: usize,
     /// RMS of measured − modelled local fast-axis scale S (dimensionless).
-    pub rms_scale_residual: f64,
+    pub rms_scale_residual: Option<f64>,
     /// RMS of measured − modelled drift velocity, x and y, m/s.
-    pub rms_drift_residual_m_per_s: [f64; 2],
+    pub rms_drift_residual_m_per_s: [Option<f64>; 2],
     /// RMS of the measured drift velocity about zero, x and y, m/s (what an identity model
     /// would leave).
-    pub rms_drift_m_per_s: [f64; 2],
+    pub rms_drift_m_per_s: [Option<f64>; 2],
 }
 
 /// Per-image counts.
@@ -340,17 +342,19 @@ pub fn goodness(analysis: &Analysis) -> Goodness {
         .iter()
         .flat_map(|p| p.local.iter())
         .collect();
+    // No local measurements (the global registration route): no RMS, rather than NaN.
+    let measured = |v: f64| v.is_finite().then_some(v);
     Goodness {
         local_measurements: local.len(),
-        rms_scale_residual: rms(local
+        rms_scale_residual: measured(rms(local
             .iter()
-            .map(|l| l.scale - model.hysteresis.scale(l.line_time_s))),
+            .map(|l| l.scale - model.hysteresis.scale(l.line_time_s)))),
         rms_drift_residual_m_per_s: [0, 1].map(|k| {
-            rms(local
+            measured(rms(local
                 .iter()
-                .map(|l| l.drift_m_per_s[k] - model.drift.velocity(l.time_s)[k]))
+                .map(|l| l.drift_m_per_s[k] - model.drift.velocity(l.time_s)[k])))
         }),
-        rms_drift_m_per_s: [0, 1].map(|k| rms(local.iter().map(|l| l.drift_m_per_s[k]))),
+        rms_drift_m_per_s: [0, 1].map(|k| measured(rms(local.iter().map(|l| l.drift_m_per_s[k])))),
     }
 }
 
