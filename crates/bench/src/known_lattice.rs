@@ -556,14 +556,7 @@ fn refine(image: &Array2<f64>, bins: &BinFrame, k: [f64; 2]) -> ([f64; 2], f64) 
     }
     let (i, j) = argmax(&grid);
     let n = 2 * STEPS as usize;
-    let offset = |lo: f64, mid: f64, hi: f64| {
-        let curvature = lo - 2.0 * mid + hi;
-        if curvature < 0.0 {
-            (0.5 * (lo - hi) / curvature).clamp(-0.5, 0.5)
-        } else {
-            0.0
-        }
-    };
+    let offset = dhct_numerics::peak::vertex;
     let log = |i: usize, j: usize| grid[[i, j]].max(f64::MIN_POSITIVE).ln();
     let dv = if i > 0 && i < n {
         offset(log(i - 1, j), log(i, j), log(i + 1, j))

@@ -6,6 +6,8 @@
 //! The browser part runs when chromium is installed; with `DHCT_REQUIRE_BROWSER=1` its
 //! absence is a failure (CI installs it).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -21,13 +23,11 @@ fn run() -> PathBuf {
     static RUN: OnceLock<tempfile::TempDir> = OnceLock::new();
     RUN.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let output = Command::new(env!("CARGO_BIN_EXE_dhct"))
-            .args(["correct", "--quiet"])
-            .arg(workspace_file("data/simulated_graphite.sm4"))
-            .arg("-o")
-            .arg(dir.path().join("out"))
-            .output()
-            .unwrap();
+        let output = common::correct(
+            &workspace_file("data/simulated_graphite.sm4"),
+            &[],
+            &dir.path().join("out"),
+        );
         assert!(
             output.status.success(),
             "{}",
@@ -46,21 +46,18 @@ fn run() -> PathBuf {
 fn a_fit_without_local_measurements_shows_no_nan() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let output = Command::new(env!("CARGO_BIN_EXE_dhct"))
-        .args([
-            "correct",
-            "--quiet",
+    let output = common::correct(
+        &workspace_file("data/real/hbn_defect_nanonis_2nm.sxm"),
+        &[
             "--lattice",
             "hexagonal",
             "--nn",
             "2.504A",
-        ])
-        .args(["--polarity", "dark"])
-        .arg(workspace_file("data/real/hbn_defect_nanonis_2nm.sxm"))
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
+            "--polarity",
+            "dark",
+        ],
+        &out,
+    );
     assert!(
         output.status.success(),
         "{}",

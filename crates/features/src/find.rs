@@ -892,14 +892,7 @@ fn check_found(
 /// through it and its two neighbours along each axis (the peak itself at the border).
 fn subpixel_peak(map: &Array2<f64>, row: usize, col: usize) -> (f64, f64) {
     let (rows, cols) = map.dim();
-    let vertex = |before: f64, centre: f64, after: f64| {
-        let curvature = before - 2.0 * centre + after;
-        if curvature < 0.0 {
-            (0.5 * (before - after) / curvature).clamp(-0.5, 0.5)
-        } else {
-            0.0
-        }
-    };
+    let vertex = dhct_numerics::peak::vertex;
     let dx = if col > 0 && col + 1 < cols {
         vertex(map[[row, col - 1]], map[[row, col]], map[[row, col + 1]])
     } else {

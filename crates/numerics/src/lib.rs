@@ -40,6 +40,7 @@ pub mod envelope;
 pub mod linalg;
 pub mod lm;
 pub mod moments;
+pub mod peak;
 pub mod robust;
 pub mod series;
 pub mod sparse_rows;

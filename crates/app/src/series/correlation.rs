@@ -154,9 +154,7 @@ fn vertex(z: &Array2<f64>, r: usize, c: usize, along_rows: bool) -> f64 {
             .filter(|v| v.is_finite())
     };
     match (at(-1), at(0), at(1)) {
-        (Some(a), Some(b), Some(c)) if a - 2.0 * b + c < 0.0 => {
-            (0.5 * (a - c) / (a - 2.0 * b + c)).clamp(-0.5, 0.5)
-        }
+        (Some(a), Some(b), Some(c)) => dhct_numerics::peak::vertex(a, b, c),
         _ => 0.0,
     }
 }
