@@ -12,7 +12,7 @@
 //! nothing). Fitted: θ, the origins, `v`, `a`, `C` per axis, `t0`, and the hysteresis law's
 //! parameters, by Huber-robust least squares with the analytic Jacobian.
 
-use dhct_lattice::{IndexedPoint, Lattice, LatticeFitOptions, fit_lattice};
+use dhct_lattice::{IndexedPoint, Lattice, LatticeFitOptions, fit_calibrated_lattice};
 use dhct_numerics::lm::{LmOptions, ResidualFit, Residuals, fit_residuals};
 use dhct_numerics::robust::mad_sigma_about;
 use dhct_scan::{ScanGeometry, ScanPass};
@@ -86,7 +86,10 @@ pub struct Registration {
 
 /// Indexes the features of `inputs` (inside each mask) against `lattice`, with positions
 /// corrected by `start` (a model from the local route, or one that undoes the measured
-/// affine map): features within [`MAX_INDEX_DEVIATION`] of their site.
+/// affine map): features within [`MAX_INDEX_DEVIATION`] of their site. Those positions are
+/// at the lattice's scale, so the indexing starts from its constant
+/// ([`fit_calibrated_lattice`]), not from the features' median spacing, which scattered
+/// features make short.
 pub fn index_features(
     inputs: &[PassInput],
     geometry: &ScanGeometry,
@@ -113,7 +116,7 @@ pub fn index_features(
         })
         .collect();
     let sets: Vec<&[[f64; 2]]> = corrected.iter().map(|c| c.as_slice()).collect();
-    let fit = fit_lattice(lattice, &sets, &LatticeFitOptions::default())
+    let fit = fit_calibrated_lattice(lattice, &sets, &LatticeFitOptions::default())
         .map_err(DistortionError::Indexing)?;
     let limit = MAX_INDEX_DEVIATION * lattice.nearest_neighbour_distance();
     let mut features = Vec::new();

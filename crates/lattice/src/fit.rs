@@ -521,6 +521,32 @@ pub fn fit_lattice(
     sets: &[&[[f64; 2]]],
     options: &LatticeFitOptions,
 ) -> Result<LatticeFit, LatticeFitError> {
+    fit_lattice_from(lattice, sets, options, None)
+}
+
+/// [`fit_lattice`] of positions already at the lattice's own scale (corrected into the
+/// sample frame against its constant): the indexing starts from the lattice's
+/// nearest-neighbour distance instead of the features' median one. On noisy positions the
+/// median is short (each feature's nearest of about six noisy neighbours), and an indexing
+/// started short can slip a row over a few cells and settle on a lattice compressed by one
+/// row in eight, as the features of a small noisy frame around a defect did (h-BN, 8
+/// periods: 0.87 of the constant along x, against 1.00 by the atoms' minima).
+pub fn fit_calibrated_lattice(
+    lattice: &dyn Lattice,
+    sets: &[&[[f64; 2]]],
+    options: &LatticeFitOptions,
+) -> Result<LatticeFit, LatticeFitError> {
+    fit_lattice_from(lattice, sets, options, Some(1.0))
+}
+
+/// [`fit_lattice`], starting the indexing at `known_scale` × the lattice's constant when
+/// given, else at the features' median neighbour distance.
+fn fit_lattice_from(
+    lattice: &dyn Lattice,
+    sets: &[&[[f64; 2]]],
+    options: &LatticeFitOptions,
+    known_scale: Option<f64>,
+) -> Result<LatticeFit, LatticeFitError> {
     check_inputs(sets, options)?;
     let seed_set = sets.first().copied().unwrap_or_default();
     let needed = 4 * lattice.motif().len() + 3;
@@ -532,16 +558,17 @@ pub fn fit_lattice(
     }
     let adf = angular_distribution(lattice, seed_set, options.nn_window, 180)?;
     let (seed, farthest) = central_point(seed_set);
+    let scale0 = known_scale.unwrap_or(adf.median_nn_m / lattice.nearest_neighbour_distance());
+    let nn = scale0 * lattice.nearest_neighbour_distance();
     let indexing = Indexing {
         lattice,
         points: seed_set,
         options,
         seed,
         farthest,
-        nn: adf.median_nn_m,
+        nn,
         needed,
     };
-    let scale0 = adf.median_nn_m / lattice.nearest_neighbour_distance();
     let (origin, b) = indexing.best(&adf, scale0)?;
     let diverged = LatticeFitError::Diverged {
         radius_m: farthest,
@@ -562,14 +589,8 @@ pub fn fit_lattice(
                 .collect()
         })
         .collect();
-    let max_deviation = options.max_deviation_fraction * adf.median_nn_m;
-    let fit = refine(
-        lattice,
-        &indexed,
-        (origin, b),
-        max_deviation,
-        adf.median_nn_m,
-    );
+    let max_deviation = options.max_deviation_fraction * nn;
+    let fit = refine(lattice, &indexed, (origin, b), max_deviation, nn);
     reindex(lattice, fit, &indexed).ok_or(LatticeFitError::Diverged {
         radius_m: farthest,
         fraction_ok: 0.0,

@@ -54,7 +54,8 @@ pub use appearance::FeatureAppearance;
 pub use catalogue::{CATALOGUE, CatalogueEntry, CatalogueLattice};
 pub use error::LatticeError;
 pub use fit::{
-    AngularDistribution, LatticeFitError, LatticeFitOptions, angular_distribution, fit_lattice,
+    AngularDistribution, LatticeFitError, LatticeFitOptions, angular_distribution,
+    fit_calibrated_lattice, fit_lattice,
 };
 pub use fit_result::{IndexedPoint, LatticeFit};
 pub use motif::MotifSite;

@@ -2,7 +2,7 @@
 
 use dhct_lattice::{
     Hexagonal, Honeycomb, Lattice, LatticeFitError, LatticeFitOptions, Square,
-    angular_distribution, fit_lattice, lattice_sites,
+    angular_distribution, fit_calibrated_lattice, fit_lattice, lattice_sites,
 };
 use nalgebra::{Matrix2, Vector2};
 
@@ -254,4 +254,28 @@ fn a_lattice_scattered_past_a_quarter_of_its_spacing_is_refused_naming_the_rms()
     // A tenth of that is a lattice.
     let (tight, _) = points(&graphite, 6e-9, 0.3, [1.0, 1.0], [0.0, 0.0], 0.02 * nn);
     assert!(fit_lattice(&graphite, &[&tight], &LatticeFitOptions::default()).is_ok());
+}
+
+#[test]
+fn noisy_positions_at_the_lattice_scale_are_indexed_from_its_constant() {
+    // A small frame (ten periods) whose features scatter by 0.15 of the neighbour
+    // distance per axis, as around a defect: each feature's nearest neighbour is the
+    // shortest of about six noisy bonds, so the features' median nearest-neighbour distance
+    // is about a tenth short, and the indexing started there diverges (measured: from
+    // 0.14 of the distance up, at 8-14 periods; the start at the constant indexes them all).
+    let graphite = Hexagonal::graphite();
+    let nn = graphite.nearest_neighbour_distance();
+    let (pts, truth) = points(&graphite, 10.0 * nn, 0.2, [1.0, 1.0], [0.0, 0.0], 0.15 * nn);
+    let adf = angular_distribution(&graphite, &pts, 0.35, 180).unwrap();
+    assert!(
+        adf.median_nn_m < 0.92 * nn,
+        "median NN {} of {nn}",
+        adf.median_nn_m
+    );
+    let fit = fit_calibrated_lattice(&graphite, &[&pts], &LatticeFitOptions::default()).unwrap();
+    for scale in fit.scale {
+        assert!((scale - 1.0).abs() < 0.02, "scale {:?}", fit.scale);
+    }
+    let fitted: Vec<_> = fit.points[0].iter().map(|p| (p.n, p.m, p.site)).collect();
+    assert_consistent_indices(&fitted, &truth);
 }
