@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::gaussian_fit::{FitLimits, FitShape, GaussianFit, fit_gaussian};
 use crate::levelling::lattice_levels::{
-    lattice_line_levels, levels_as_recorded, replace_line_levels, subtract_line_levels,
+    LineLevels, lattice_line_levels, levels_as_recorded, replace_line_levels, subtract_line_levels,
 };
 use crate::levelling::line_relevel::{WindowPixels, relevel, window_pixels};
 use crate::levelling::preprocess::{correct_lines_in_place, sign_flattened_in_place};
@@ -260,19 +260,23 @@ fn find_prepared(
         // The median-levelled image served the correlation; the fits see another.
         drop(std::mem::take(&mut pre.signed));
         let unlevelled = pre.unlevelled.take().unwrap_or_default();
-        if let Some(levelled) = levelled_across_steps(&unlevelled, geometry, &kept, &ncc, &window) {
-            // Medians across a step level neighbouring lines to different terraces, and
-            // the correlation with them: it is taken again on the lines cut at the steps.
-            ncc = prepared.plan.apply(filled_for_correlation(levelled).view());
-            rejected.clear();
-            (kept, candidates) = segment(&ncc, &unlevelled, &mut rejected);
-        }
+        let first = match levelled_across_steps(&unlevelled, geometry, &kept, &ncc, &window) {
+            AcrossSteps::Levelled(levelled) => {
+                // Medians across a step level neighbouring lines to different terraces, and
+                // the correlation with them: it is taken again on the lines cut at the steps.
+                ncc = prepared.plan.apply(filled_for_correlation(levelled).view());
+                rejected.clear();
+                (kept, candidates) = segment(&ncc, &unlevelled, &mut rejected);
+                None
+            }
+            AcrossSteps::NoStep(first) => Some(first),
+        };
         let fit = RegionFit {
             kept: &kept,
             ncc: &ncc,
             window: &window,
         };
-        let (signed, fits, removed) = level_against_lattice(unlevelled, geometry, &fit);
+        let (signed, fits, removed) = level_against_lattice(unlevelled, geometry, &fit, first);
         pre.signed = signed;
         (fits, removed)
     } else {
@@ -428,25 +432,34 @@ fn filled_for_correlation(mut image: Array2<f64>) -> Array2<f64> {
     image
 }
 
-/// `unlevelled` with the lines levelled against the lattice around the correlation's
-/// peaks of the `kept` regions, if those levels find a height step within some line (and
-/// the lines are to be levelled at all); `None` otherwise.
+/// What the first levels of the lines as recorded found.
+enum AcrossSteps {
+    /// A height step within some line (and line offsets to level): the image with its
+    /// lines levelled, cut at the steps.
+    Levelled(Array2<f64>),
+    /// No step, or no line offsets to level: the levels, which are the first levels
+    /// [`level_against_lattice`] takes (the same image and peaks).
+    NoStep(LineLevels),
+}
+
+/// The lines of `unlevelled` levelled against the lattice around the correlation's peaks
+/// of the `kept` regions.
 fn levelled_across_steps(
     unlevelled: &Array2<f64>,
     geometry: &ScanGeometry,
     kept: &[Region],
     ncc: &Array2<f64>,
     window: &FitWindow,
-) -> Option<Array2<f64>> {
+) -> AcrossSteps {
     let fast_axis = geometry.fast_axis();
     let peaks = correlation_peaks(kept, ncc);
     let first = lattice_line_levels(unlevelled.view(), &peaks, window.nn_px, fast_axis);
     if first.offsets_over_noise < OFFSET_EVIDENCE || first.levels.iter().all(|l| l.steps() == 0) {
-        return None;
+        return AcrossSteps::NoStep(first);
     }
     let mut levelled = unlevelled.clone();
     subtract_line_levels(&mut levelled, &first.levels, fast_axis);
-    Some(levelled)
+    AcrossSteps::Levelled(levelled)
 }
 
 /// The sub-pixel correlation peak `(x, y)` px of each region.
@@ -622,15 +635,20 @@ const OFFSET_EVIDENCE: f64 = 4.0;
 /// [`LEVEL_TOLERANCE`] of the pixel noise (at most [`MAX_LEVEL_ROUNDS`] times;
 /// [`crate::levelling::lattice_levels`]). When the first
 /// levels show no line offsets beyond pixel noise ([`OFFSET_EVIDENCE`]) the lines are
-/// left as recorded. Returns the image the final fits saw and the fits.
+/// left as recorded. `first`: those first levels when already taken (of `signed` around
+/// the same peaks, [`levelled_across_steps`]). Returns the image the final fits saw and
+/// the fits.
 fn level_against_lattice(
     mut signed: Array2<f64>,
     geometry: &ScanGeometry,
     fit: &RegionFit,
+    first: Option<LineLevels>,
 ) -> (Array2<f64>, Vec<RegionFitResult>, RemovedLevels) {
     let (nn_px, fast_axis) = (fit.window.nn_px, geometry.fast_axis());
-    let peaks = correlation_peaks(fit.kept, fit.ncc);
-    let first = lattice_line_levels(signed.view(), &peaks, nn_px, fast_axis);
+    let first = first.unwrap_or_else(|| {
+        let peaks = correlation_peaks(fit.kept, fit.ncc);
+        lattice_line_levels(signed.view(), &peaks, nn_px, fast_axis)
+    });
     if first.offsets_over_noise < OFFSET_EVIDENCE {
         // No line offsets beyond what pixel noise gives: levelling would only add noise
         // shared along each line, so the lines stay as they were recorded.
