@@ -194,7 +194,7 @@ pub fn run(
         warnings: Vec::new(),
         timings,
     };
-    analysis.warnings = collect_warnings(&analysis, geometry, lattice, fit_warnings, model_failure);
+    analysis.warnings = collect_warnings(&analysis, pair, lattice, fit_warnings, model_failure);
     analysis.timings.total_s = start.elapsed().as_secs_f64();
     Ok(analysis)
 }
@@ -657,12 +657,12 @@ fn pass_outputs(
 /// comparison, plausibility of the result, the corrected images' lattices.
 fn collect_warnings(
     analysis: &Analysis,
-    geometry: &ScanGeometry,
+    pair: &ScanPair,
     lattice: &dyn Lattice,
     fit_warnings: Vec<Warning>,
     model_failure: Option<String>,
 ) -> Vec<Warning> {
-    let mut warnings = warnings::input_warnings(&analysis.calibration, geometry);
+    let mut warnings = warnings::input_warnings(&analysis.calibration, pair);
     warnings.extend(fit_warnings);
     warnings.extend(model_failure.map(warnings::model_failure_warning));
     warnings.extend(warnings::affine_warnings(

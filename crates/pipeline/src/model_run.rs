@@ -99,7 +99,7 @@ pub fn run_model(
     let mut timings = stages.timings;
     timings.total_s = start.elapsed().as_secs_f64();
     Ok(ModelRun {
-        input_warnings: warnings::input_warnings(&stages.calibration, pair.geometry()),
+        input_warnings: warnings::input_warnings(&stages.calibration, pair),
         lattice_measured: stages.calibration.is_ok(),
         features: stages.found.into_iter().map(|(set, _)| set).collect(),
         dhct: stages.dhct,

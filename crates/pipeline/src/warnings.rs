@@ -6,7 +6,7 @@ use dhct_calibrate::PairCalibration;
 use dhct_distortion::{DhctResult, Parameter};
 use dhct_lattice::Lattice;
 use dhct_scan::quantity::{si, value_with_sigma};
-use dhct_scan::{ScanGeometry, ScanPass, ValueSource};
+use dhct_scan::{ScanGeometry, ScanPair, ScanPass, ValueSource};
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -78,6 +78,8 @@ pub enum WarningCode {
     /// Two consecutive frames registered by their images matched on few of their bands of
     /// lines: the drift within the later one rests on the spline's smoothness.
     FewComparisons,
+    /// Whole lines of an image hold no data (not recorded: a scan stopped early).
+    MissingLines,
 }
 
 /// An input the user can give to change a result. Each front end spells it its own way
@@ -190,6 +192,7 @@ impl WarningCode {
             WarningCode::FrameNotExplained => "frame_not_explained",
             WarningCode::FramesDisagree => "frames_disagree",
             WarningCode::FewComparisons => "few_comparisons",
+            WarningCode::MissingLines => "missing_lines",
         }
     }
 }
@@ -242,15 +245,50 @@ pub(crate) fn calibration_warnings(found: &Result<PairCalibration, String>) -> V
     ]
 }
 
-/// What stage 0 found about the inputs: the calibration's warnings and the assumptions
-/// taken for what the file did not state.
+/// What stage 0 found about the inputs: the calibration's warnings, the assumptions
+/// taken for what the file did not state, and lines that hold no data.
 pub(crate) fn input_warnings(
     calibration: &Result<PairCalibration, String>,
-    geometry: &ScanGeometry,
+    pair: &ScanPair,
 ) -> Vec<Warning> {
     let mut warnings = calibration_warnings(calibration);
-    warnings.extend(assumption_warnings(geometry));
+    warnings.extend(assumption_warnings(pair.geometry()));
+    warnings.extend(missing_lines_warning(pair));
     warnings
+}
+
+/// Whole lines with no finite value, per image: a scan stopped before its last line (the
+/// readers read lines that repeat one value to the end as not recorded).
+pub(crate) fn missing_lines_warning(pair: &ScanPair) -> Option<Warning> {
+    let geometry = pair.geometry();
+    let lines = geometry.slow_len();
+    let counts: Vec<String> = pair
+        .images()
+        .filter_map(|(pass, image)| {
+            let empty = |line: ndarray::ArrayView1<f64>| line.iter().all(|v| !v.is_finite());
+            let missing = match geometry.fast_axis() {
+                dhct_scan::Axis::Horizontal => {
+                    image.z.rows().into_iter().filter(|l| empty(*l)).count()
+                }
+                dhct_scan::Axis::Vertical => {
+                    image.z.columns().into_iter().filter(|l| empty(*l)).count()
+                }
+            };
+            (missing > 0).then(|| format!("{pass}: {missing} of {lines} lines"))
+        })
+        .collect();
+    (!counts.is_empty()).then(|| {
+        Warning::new(
+            WarningCode::MissingLines,
+            format!(
+                "whole lines hold no data ({}): not recorded (a scan stopped early) or missing \
+                 in the file; the analysis uses the lines that were recorded",
+                counts.join("; ")
+            ),
+            "nothing if the scan was stopped; the lattice, the model and the corrected images \
+             cover the recorded lines only",
+        )
+    })
 }
 
 /// The scan timing or pixel size that the file did not state.
@@ -814,5 +852,35 @@ mod tests {
         let warnings = calibration_warnings(&Err("no peak".into()));
         assert_eq!(codes(&warnings), [WarningCode::LatticeNotMeasured]);
         assert!(warnings[0].message.contains("no peak"));
+    }
+
+    #[test]
+    fn lines_without_data_are_named() {
+        let geometry = ScanGeometry::new(
+            8,
+            6,
+            1e-10,
+            1e-10,
+            1e-3,
+            ScanDirection::Right,
+            ScanDirection::Up,
+        )
+        .unwrap();
+        let mut z = ndarray::Array2::from_elem((6, 8), 1e-10);
+        let trace = dhct_scan::ImageChannel::new("Z", "m", z.clone());
+        let pair = ScanPair::new(geometry.clone(), trace, None).unwrap();
+        assert!(missing_lines_warning(&pair).is_none());
+        z.row_mut(0).fill(f64::NAN);
+        z.row_mut(1).fill(f64::NAN);
+        z[[2, 3]] = f64::NAN;
+        let trace = dhct_scan::ImageChannel::new("Z", "m", z);
+        let pair = ScanPair::new(geometry, trace, None).unwrap();
+        let warning = missing_lines_warning(&pair).expect("two lines hold no data");
+        assert_eq!(warning.code, WarningCode::MissingLines);
+        assert!(
+            warning.message.contains("trace: 2 of 6 lines"),
+            "{}",
+            warning.message
+        );
     }
 }

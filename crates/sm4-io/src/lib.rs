@@ -56,6 +56,7 @@ pub mod png_file;
 pub mod sm4;
 pub mod sxm;
 pub mod tiff_file;
+mod unrecorded;
 pub mod wsxm;
 
 use std::path::Path;
@@ -71,6 +72,8 @@ pub use placeholders::{
     PLAUSIBLE_LINE_TIME_S, PLAUSIBLE_PITCH_M, PLAUSIBLE_PIXEL_PERIOD_S, PLAUSIBLE_SCAN_ANGLE_RAD,
     PLAUSIBLE_TURNAROUND_S, assumption_warnings,
 };
+pub use unrecorded::UNRECORDED_LINES_KEY;
+use unrecorded::mark_unrecorded_lines;
 
 /// Reads a file of any supported format, detected from its content, under the default
 /// [`ReadLimits`]. Only regular files are read (see [`limits::open_regular_file`]).
@@ -84,11 +87,11 @@ pub fn read_path_limited(path: &Path, limits: &ReadLimits) -> Result<ScanFile, R
     let bytes = limits::read_regular_file(path, limits.max_bytes)?;
     if matrix::is_data_file(&bytes) {
         // A MATRIX data file is read with its parameter file from beside it.
-        return matrix::read_files(path, &bytes, limits);
+        return matrix::read_files(path, &bytes, limits).map(mark_unrecorded_lines);
     }
     if detect_format(&bytes) == Some(FileFormat::Npy) {
         // With the JSON sidecar dhct writes beside it, and the other pass, when there.
-        return npy_sidecar::read_with_sidecar(path, &bytes, limits);
+        return npy_sidecar::read_with_sidecar(path, &bytes, limits).map(mark_unrecorded_lines);
     }
     read_bytes_limited(&bytes, limits)
 }
@@ -126,8 +129,18 @@ pub fn read_as(format: FileFormat, bytes: &[u8]) -> Result<ScanFile, ReadError> 
     read_as_limited(format, bytes, &ReadLimits::default())
 }
 
-/// [`read_as`] under `limits`.
+/// [`read_as`] under `limits`. Lines the scan never recorded are read as missing
+/// ([`UNRECORDED_LINES_KEY`]).
 pub fn read_as_limited(
+    format: FileFormat,
+    bytes: &[u8],
+    limits: &ReadLimits,
+) -> Result<ScanFile, ReadError> {
+    read_format(format, bytes, limits).map(mark_unrecorded_lines)
+}
+
+/// `bytes` read as `format`, as the file holds them.
+fn read_format(
     format: FileFormat,
     bytes: &[u8],
     limits: &ReadLimits,
