@@ -8,6 +8,7 @@
 //! hold one repeated value are read as missing (NaN), and the file's metadata says how many
 //! (under [`UNRECORDED_LINES_KEY`]).
 
+use dhct_scan::quantity::si;
 use dhct_scan::{Axis, ImageChannel, ScanDirection, ScanFile, ScanGeometry, ScanPair};
 
 use crate::placeholders::note;
@@ -34,11 +35,11 @@ pub(crate) fn mark_unrecorded_lines(mut file: ScanFile) -> ScanFile {
                 };
                 if let Some((lines, value)) = blank_trailing_lines(image, &geometry) {
                     notes.push(format!(
-                        "{} {pass}: the last {lines} of {} lines hold one value ({value:e} {}) \
-                         and were read as not recorded (the scan stopped early)",
+                        "{} {pass}: the last {lines} of {} lines hold one value ({}) and were \
+                         read as not recorded (the scan stopped early)",
                         image.name,
                         geometry.slow_len(),
-                        image.unit
+                        si(value, &image.unit)
                     ));
                 }
             }
