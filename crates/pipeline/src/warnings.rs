@@ -265,15 +265,12 @@ pub(crate) fn missing_lines_warning(pair: &ScanPair) -> Option<Warning> {
     let counts: Vec<String> = pair
         .images()
         .filter_map(|(pass, image)| {
-            let empty = |line: ndarray::ArrayView1<f64>| line.iter().all(|v| !v.is_finite());
-            let missing = match geometry.fast_axis() {
-                dhct_scan::Axis::Horizontal => {
-                    image.z.rows().into_iter().filter(|l| empty(*l)).count()
-                }
-                dhct_scan::Axis::Vertical => {
-                    image.z.columns().into_iter().filter(|l| empty(*l)).count()
-                }
-            };
+            let missing = (0..lines)
+                .filter(|&k| {
+                    let line = image.line(geometry.fast_axis(), k);
+                    line.iter().all(|v| !v.is_finite())
+                })
+                .count();
             (missing > 0).then(|| format!("{pass}: {missing} of {lines} lines"))
         })
         .collect();

@@ -1,7 +1,7 @@
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView1, ArrayViewMut1};
 use serde::{Deserialize, Serialize};
 
-use crate::GeometryError;
+use crate::{Axis, GeometryError};
 
 /// One 2-D image of a physical quantity, in display orientation (row 0 at the top).
 ///
@@ -63,6 +63,23 @@ impl ImageChannel {
     /// Number of columns (pixels along x).
     pub fn columns(&self) -> usize {
         self.z.ncols()
+    }
+
+    /// Scan line `index` when the fast scan runs along `fast_axis`: row `index` for a
+    /// horizontal fast axis, column `index` for a vertical one (display order along it).
+    pub fn line(&self, fast_axis: Axis, index: usize) -> ArrayView1<'_, f64> {
+        match fast_axis {
+            Axis::Horizontal => self.z.row(index),
+            Axis::Vertical => self.z.column(index),
+        }
+    }
+
+    /// [`ImageChannel::line`], mutable.
+    pub fn line_mut(&mut self, fast_axis: Axis, index: usize) -> ArrayViewMut1<'_, f64> {
+        match fast_axis {
+            Axis::Horizontal => self.z.row_mut(index),
+            Axis::Vertical => self.z.column_mut(index),
+        }
     }
 
     /// Minimum and maximum of the finite values, or `None` if there are none.

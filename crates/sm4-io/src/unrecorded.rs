@@ -9,7 +9,9 @@
 //! (under [`UNRECORDED_LINES_KEY`]).
 
 use dhct_scan::quantity::si;
-use dhct_scan::{Axis, ImageChannel, ScanDirection, ScanFile, ScanGeometry, ScanPair};
+use ndarray::ArrayView1;
+
+use dhct_scan::{ImageChannel, ScanDirection, ScanFile, ScanGeometry, ScanPair};
 
 use crate::placeholders::note;
 
@@ -60,28 +62,31 @@ fn blank_trailing_lines(image: &mut ImageChannel, geometry: &ScanGeometry) -> Op
     if geometry.fast_len() < MIN_LINE_PIXELS {
         return None;
     }
-    let last = line_values(image, geometry, lines - 1);
-    let value = *last.iter().find(|v| v.is_finite())?;
-    let blank =
-        |values: &[f64]| values.iter().all(|v| v.is_nan()) || values.iter().all(|&v| v == value);
-    let trailing = (0..lines)
-        .rev()
-        .take_while(|&k| blank(&line_values(image, geometry, k)))
-        .count();
+    let value = *line(image, geometry, lines - 1)
+        .iter()
+        .find(|v| v.is_finite())?;
+    let blank = |k: usize| {
+        let values = line(image, geometry, k);
+        values.iter().all(|v| v.is_nan()) || values.iter().all(|&v| v == value)
+    };
+    let trailing = (0..lines).rev().take_while(|&k| blank(k)).count();
     let repeated = (lines - trailing..lines)
-        .filter(|&k| {
-            line_values(image, geometry, k)
-                .iter()
-                .any(|v| v.is_finite())
-        })
+        .filter(|&k| line(image, geometry, k).iter().any(|v| v.is_finite()))
         .count();
     if trailing == lines || repeated == 0 {
         return None;
     }
     for k in lines - trailing..lines {
-        set_line(image, geometry, k, f64::NAN);
+        image
+            .line_mut(geometry.fast_axis(), line_index(geometry, k))
+            .fill(f64::NAN);
     }
     Some((repeated, value))
+}
+
+/// Line `k` of `image` in acquisition order (0 = the first line acquired).
+fn line<'a>(image: &'a ImageChannel, geometry: &ScanGeometry, k: usize) -> ArrayView1<'a, f64> {
+    image.line(geometry.fast_axis(), line_index(geometry, k))
 }
 
 /// The display row or column of line `k` (0 = the first line acquired).
@@ -89,23 +94,5 @@ fn line_index(geometry: &ScanGeometry, k: usize) -> usize {
     match geometry.slow_direction() {
         ScanDirection::Down | ScanDirection::Right => k,
         ScanDirection::Up | ScanDirection::Left => geometry.slow_len() - 1 - k,
-    }
-}
-
-/// The values of line `k` (acquisition order of lines; display order along it).
-fn line_values(image: &ImageChannel, geometry: &ScanGeometry, k: usize) -> Vec<f64> {
-    let index = line_index(geometry, k);
-    match geometry.fast_axis() {
-        Axis::Horizontal => image.z.row(index).to_vec(),
-        Axis::Vertical => image.z.column(index).to_vec(),
-    }
-}
-
-/// Sets every pixel of line `k` to `value`.
-fn set_line(image: &mut ImageChannel, geometry: &ScanGeometry, k: usize, value: f64) {
-    let index = line_index(geometry, k);
-    match geometry.fast_axis() {
-        Axis::Horizontal => image.z.row_mut(index).fill(value),
-        Axis::Vertical => image.z.column_mut(index).fill(value),
     }
 }
